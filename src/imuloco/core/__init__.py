@@ -1,0 +1,1 @@
+"""Data types: skeletons, motions, databases of clips and sensor recordings."""

@@ -1,0 +1,5 @@
+"""Reading and writing motion and sensor files. Every parser raises :class:`FormatError`."""
+
+from imuloco.io.errors import FormatError
+
+__all__ = ["FormatError"]

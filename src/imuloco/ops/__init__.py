@@ -1,0 +1,1 @@
+"""Pure array functions shared by every stage: rotations, kinematics, heading frames, filters."""

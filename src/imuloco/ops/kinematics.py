@@ -1,0 +1,44 @@
+"""Forward kinematics, vectorised over any leading (batch, frame) dimensions."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imuloco.ops.rotations import qmul, qrot
+
+
+def fk(
+    rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray, parents: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Global joint rotations and positions.
+
+    Parameters
+    ----------
+    rotations : ndarray, shape (..., J, 4), local joint rotations, quaternions x, y, z, w.
+    root : ndarray, shape (..., 3), world position of joint 0 (metres).
+    offsets : ndarray, shape (J, 3), each joint's position in its parent's frame.
+    parents : ndarray, shape (J,), parent indices, -1 for the root, parents[j] < j.
+
+    Returns
+    -------
+    global_rotations : ndarray, shape (..., J, 4)
+    positions : ndarray, shape (..., J, 3)
+    """
+    rotations = np.asarray(rotations, dtype=np.float64)
+    grot = np.empty_like(rotations)
+    pos = np.empty(rotations.shape[:-1] + (3,))
+    grot[..., 0, :] = rotations[..., 0, :]
+    pos[..., 0, :] = root
+    for j in range(1, len(parents)):  # the tree order is inherently sequential; J is small
+        p = parents[j]
+        grot[..., j, :] = qmul(grot[..., p, :], rotations[..., j, :])
+        pos[..., j, :] = pos[..., p, :] + qrot(grot[..., p, :], offsets[j])
+    return grot, pos
+
+
+def point_on_segment(
+    global_rotations: np.ndarray, positions: np.ndarray, joint: int, offset: np.ndarray
+) -> np.ndarray:
+    """World position of a point fixed to ``joint``'s frame at ``offset`` (J's local frame).
+    global_rotations : (..., J, 4), positions : (..., J, 3) -> (..., 3)."""
+    return positions[..., joint, :] + qrot(global_rotations[..., joint, :], offset)

@@ -1,0 +1,147 @@
+"""Rotation conversions and quaternion algebra that broadcast over leading dimensions.
+
+Quaternions are scipy's order, ``(x, y, z, w)``, unit norm, and act on column vectors
+(``qrot(q, v) = R(q) @ v``). Conversions go through :class:`scipy.spatial.transform.Rotation`,
+which only takes 1-D batches: these wrappers flatten and restore the leading dimensions.
+The products (:func:`qmul`, :func:`qrot`) are written out in numpy because scipy builds a
+``Rotation`` object per call, which costs more than the arithmetic in per-frame loops.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def _apply(fn, x: np.ndarray, tail: int) -> np.ndarray:
+    """Call ``fn`` on ``x`` reshaped to ``(N, *trailing)`` and restore the leading dimensions."""
+    x = np.asarray(x, dtype=np.float64)
+    lead = x.shape[: x.ndim - tail]
+    out = fn(x.reshape((-1,) + x.shape[x.ndim - tail:]))
+    return out.reshape(lead + out.shape[1:])
+
+
+def normalize(q: np.ndarray) -> np.ndarray:
+    """Unit quaternions. q : (..., 4)."""
+    q = np.asarray(q, dtype=np.float64)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a * b`` (apply ``b`` first, then ``a``). a, b : (..., 4) x,y,z,w."""
+    ax, ay, az, aw = np.moveaxis(np.asarray(a, dtype=np.float64), -1, 0)
+    bx, by, bz, bw = np.moveaxis(np.asarray(b, dtype=np.float64), -1, 0)
+    return np.stack([
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    ], axis=-1)
+
+
+def qinv(q: np.ndarray) -> np.ndarray:
+    """Inverse of unit quaternions (the conjugate). q : (..., 4)."""
+    q = np.asarray(q, dtype=np.float64)
+    return q * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def qrot(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors by unit quaternions. q : (..., 4), v : (..., 3) -> (..., 3)."""
+    q = np.asarray(q, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    u, w = q[..., :3], q[..., 3:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def angle(q: np.ndarray) -> np.ndarray:
+    """Rotation angle in radians, in [0, pi]. q : (..., 4) -> (...)."""
+    q = np.asarray(q, dtype=np.float64)
+    return 2.0 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), np.abs(q[..., 3]))
+
+
+def geodesic(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Geodesic distance (radians) between rotations. a, b : (..., 4) -> (...)."""
+    return angle(qmul(qinv(a), b))
+
+
+def continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Flip signs along ``axis`` (time) so consecutive quaternions lie in one hemisphere."""
+    q = np.moveaxis(np.array(q, dtype=np.float64), axis, 0)
+    dots = np.sum(q[1:] * q[:-1], axis=-1)
+    flips = np.cumprod(np.where(dots < 0, -1.0, 1.0), axis=0)
+    q[1:] *= flips[..., None]
+    return np.moveaxis(q, 0, axis)
+
+
+def from_euler(angles: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
+    """Intrinsic Euler angles to quaternions. angles : (..., 3) in the order of ``order``
+    (e.g. ``"ZXY"``: rotate about Z, then the new X, then the new Y, as BVH does)."""
+    return _apply(lambda a: Rotation.from_euler(order.upper(), a, degrees=degrees).as_quat(),
+                  angles, 1)
+
+
+def to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
+    """Quaternions to intrinsic Euler angles in ``order``. q : (..., 4) -> (..., 3)."""
+    def fn(x: np.ndarray) -> np.ndarray:
+        import warnings
+        with warnings.catch_warnings():  # gimbal lock: scipy warns and picks a valid solution
+            warnings.simplefilter("ignore", UserWarning)
+            return Rotation.from_quat(x).as_euler(order.upper(), degrees=degrees)
+    return _apply(fn, q, 1)
+
+
+def to_matrix(q: np.ndarray) -> np.ndarray:
+    """q : (..., 4) -> rotation matrices (..., 3, 3)."""
+    return _apply(lambda x: Rotation.from_quat(x).as_matrix(), q, 1)
+
+
+def from_matrix(m: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) -> q (..., 4)."""
+    return _apply(lambda x: Rotation.from_matrix(x).as_quat(), m, 2)
+
+
+def to_rotvec(q: np.ndarray) -> np.ndarray:
+    """q : (..., 4) -> axis-angle vectors (..., 3), radians."""
+    return _apply(lambda x: Rotation.from_quat(x).as_rotvec(), q, 1)
+
+
+def from_rotvec(r: np.ndarray) -> np.ndarray:
+    """Axis-angle vectors (..., 3), radians -> q (..., 4)."""
+    return _apply(lambda x: Rotation.from_rotvec(x).as_quat(), r, 1)
+
+
+def to_6d(q: np.ndarray) -> np.ndarray:
+    """The continuous 6-D representation (Zhou et al. 2019): the first two columns of the
+    rotation matrix, concatenated. q : (..., 4) -> (..., 6)."""
+    m = to_matrix(q)
+    return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
+
+
+def from_6d(d: np.ndarray) -> np.ndarray:
+    """6-D representation (..., 6) -> q (..., 4), by Gram-Schmidt orthogonalisation."""
+    d = np.asarray(d, dtype=np.float64)
+    a = d[..., :3] / np.linalg.norm(d[..., :3], axis=-1, keepdims=True)
+    b = d[..., 3:] - np.sum(a * d[..., 3:], axis=-1, keepdims=True) * a
+    b = b / np.linalg.norm(b, axis=-1, keepdims=True)
+    return from_matrix(np.stack([a, b, np.cross(a, b)], axis=-1))
+
+
+def about_y(theta: np.ndarray) -> np.ndarray:
+    """Rotations by ``theta`` radians about the vertical (+Y) axis. theta : (...) -> (..., 4)."""
+    theta = np.asarray(theta, dtype=np.float64)
+    z = np.zeros_like(theta)
+    return np.stack([z, np.sin(theta / 2), z, np.cos(theta / 2)], axis=-1)
+
+
+def slerp(q: np.ndarray, times: np.ndarray, new_times: np.ndarray) -> np.ndarray:
+    """Spherical linear interpolation of a time series. q : (T, ..., 4) sampled at ``times``
+    (T,) -> (len(new_times), ..., 4). Each trailing track is interpolated independently."""
+    q = np.asarray(q, dtype=np.float64)
+    t, rest = q.shape[0], q.shape[1:-1]
+    flat = q.reshape(t, -1, 4)
+    out = np.stack([Slerp(times, Rotation.from_quat(flat[:, k]))(new_times).as_quat()
+                    for k in range(flat.shape[1])], axis=1)
+    return out.reshape((len(new_times),) + rest + (4,))
