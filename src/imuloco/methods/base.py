@@ -1,0 +1,165 @@
+"""The interface every reconstruction method implements, its registry and its file format.
+
+A method is an estimator: ``__init__`` stores hyperparameters, :meth:`Method.fit` synthesizes
+sensor signals for a MotionDatabase and learns, :meth:`Method.reconstruct` turns a Recording
+into a Motion, and :meth:`Method.stream` (for online methods) takes one sensor frame at a time.
+Signals reach a method at its model rate (the training motion's frame rate) as rows of
+``6 S`` channels (per sensor acc x,y,z then gyro x,y,z), see :mod:`imuloco.methods.training`.
+
+A new method is one module with one subclass decorated by :func:`register`; importing
+``imuloco.methods`` then makes it available to ``bench``, ``train``, ``reconstruct`` and
+``live``.
+
+Models are saved as one ``.npz`` (no pickle): the learned arrays plus a JSON header with the
+format version, the method name, its hyperparameters and the skeleton.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+import zipfile
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+
+from imuloco.core.motion import Motion, MotionDatabase
+from imuloco.core.recording import Recording
+from imuloco.core.skeleton import Skeleton
+from imuloco.methods.training import Example, synthesize, to_frames
+
+FORMAT_VERSION = 1
+REGISTRY: dict[str, type[Method]] = {}
+M = TypeVar("M", bound="Method")
+
+
+class ModelFileError(ValueError):
+    """A model file that cannot be loaded: corrupted, of another format version or method."""
+
+
+def register(cls: type[M]) -> type[M]:
+    """Class decorator: make a method available under ``cls.name``."""
+    if cls.name in REGISTRY and REGISTRY[cls.name] is not cls:
+        raise ValueError(f"method name {cls.name!r} is registered twice")
+    REGISTRY[cls.name] = cls
+    return cls
+
+
+class Stream(ABC):
+    """Online reconstruction: one sensor frame in, one pose out, causal, bounded state."""
+
+    @abstractmethod
+    def step(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """sample : (6 S,) one frame of signals -> (local rotations (J, 4), root (3,))."""
+
+
+class Method(ABC):
+    """Base class of reconstruction methods (see the module docstring)."""
+
+    name: ClassVar[str]
+    summary: ClassVar[str]  # one line for ``imuloco methods``
+    supports_online: ClassVar[bool] = False
+
+    # ---- learning ---------------------------------------------------------------------------
+    def fit(self: M, db: MotionDatabase, placements: Sequence[str] = ("right_ankle",),
+            noise: str = "phone", seed: int = 0, progress: bool = False) -> M:
+        """Synthesize ``placements`` with ``noise`` on ``db`` and learn from it."""
+        if len(db) == 0:
+            raise ValueError("cannot fit on an empty database")
+        self.placements_ = list(placements)
+        self.noise_ = noise
+        self.skeleton_ = db.skeleton
+        self.fps_ = float(db.clips[0].fps)
+        self.fit_examples(synthesize(db, placements, noise, seed, progress=progress),
+                          progress=progress)
+        return self
+
+    @abstractmethod
+    def fit_examples(self, examples: list[Example], progress: bool = False) -> None:
+        """Learn from clips with their signals at the model rate."""
+
+    # ---- reconstruction ---------------------------------------------------------------------
+    def reconstruct(self, rec: Recording) -> Motion:
+        """Reconstruct a Motion at the model rate from a recording of the fitted placements."""
+        rec = rec.select(self.placements_)
+        frames = int(round((rec.times[-1] - rec.times[0]) * self.fps_)) + 1
+        times = np.arange(frames) / self.fps_
+        return self.reconstruct_signals(to_frames(rec, times, self.fps_))
+
+    @abstractmethod
+    def reconstruct_signals(self, signals: np.ndarray) -> Motion:
+        """signals : (T, 6 S) at the model rate -> Motion of T frames on ``skeleton_``."""
+
+    def stream(self) -> Stream:
+        """A fresh online reconstruction session (online methods only)."""
+        raise NotImplementedError(f"method {self.name!r} has no online mode")
+
+    # ---- persistence ------------------------------------------------------------------------
+    @abstractmethod
+    def get_state(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Learned arrays and JSON-able learned values (besides placements, fps, skeleton)."""
+
+    @abstractmethod
+    def set_state(self, arrays: dict[str, np.ndarray], values: dict[str, Any]) -> None:
+        """Restore what :meth:`get_state` returned."""
+
+    def get_params(self) -> dict[str, Any]:
+        """Hyperparameters: the ``__init__`` arguments, read back from attributes."""
+        sig = inspect.signature(type(self).__init__)
+        return {k: getattr(self, k) for k in sig.parameters if k != "self"}
+
+    def save(self, path: str | Path, overwrite: bool = False) -> Path:
+        """Write the fitted model to one ``.npz`` file."""
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
+        arrays, values = self.get_state()
+        sk = self.skeleton_
+        header = {
+            "format_version": FORMAT_VERSION, "method": self.name, "params": self.get_params(),
+            "placements": self.placements_, "noise": self.noise_, "fps": self.fps_,
+            "skeleton": {"names": sk.names, "body_map": sk.body_map,
+                         "end_sites": {str(k): v.tolist() for k, v in sk.end_sites.items()}},
+            "values": values,
+        }
+        blob = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "wb") as f:
+            np.savez_compressed(f, __header__=blob, __parents__=sk.parents,
+                                __offsets__=sk.offsets, **arrays)
+        return path
+
+
+def load_model(path: str | Path) -> Method:
+    """Load a model saved by :meth:`Method.save`. Never unpickles anything."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+        header = json.loads(bytes(data.pop("__header__")).decode())
+    except FileNotFoundError:
+        raise
+    except (zipfile.BadZipFile, ValueError, KeyError, OSError, EOFError) as e:
+        raise ModelFileError(f"{path}: not an imuloco model file or corrupted ({e})") from None
+    version = header.get("format_version")
+    if version != FORMAT_VERSION:
+        raise ModelFileError(f"{path}: model file format version {version}, this imuloco reads "
+                             f"version {FORMAT_VERSION}; retrain with `imuloco train`")
+    import imuloco.methods  # noqa: F401  (registers the built-in methods)
+
+    name = header.get("method")
+    if name not in REGISTRY:
+        raise ModelFileError(f"{path}: unknown method {name!r}; known: {sorted(REGISTRY)}")
+    method = REGISTRY[name](**header["params"])
+    sk = header["skeleton"]
+    method.skeleton_ = Skeleton(sk["names"], data.pop("__parents__"), data.pop("__offsets__"),
+                                {int(k): np.array(v) for k, v in sk["end_sites"].items()},
+                                sk["body_map"])
+    method.placements_ = header["placements"]
+    method.noise_ = header["noise"]
+    method.fps_ = header["fps"]
+    method.set_state(data, header["values"])
+    return method

@@ -1,0 +1,1 @@
+"""Virtual and real body-worn sensors: placements, simulation, noise, log import, calibration."""
