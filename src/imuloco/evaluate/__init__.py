@@ -1,0 +1,1 @@
+"""Measuring reconstructions: metrics, protocols (splits, noise, placements) and the benchmark."""
