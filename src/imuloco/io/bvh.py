@@ -1,37 +1,48 @@
 """BVH (Biovision Hierarchy) reading and writing.
 
-Any channel layout is read: position and rotation channels on any joint, in any Euler order
-(BVH rotation channels are intrinsic: the first listed is applied first from the parent's side).
-Constant position channels on non-root joints become that joint's offset. A static root whose
-single child carries the translation (as ``joint_Root`` and ``Hips`` in the Bandai-Namco data)
-is folded into that child, so the Motion's root is the pelvis. Files keep their units: the
-reader scales to metres (``unit="auto"`` guesses cm when the legs are longer than 3 units), the
-writer writes centimetres by default.
+Any channel layout is read: position and rotation channels on any joint, in any order and any
+Euler order (BVH rotation channels are intrinsic: the first listed is applied first from the
+parent's side, so ``Zrotation Xrotation Yrotation`` is ``R = Rz Rx Ry``). Position channels
+replace the joint's OFFSET; constant ones on non-root joints (as in files with 6 channels on
+every joint) become that joint's offset, moving ones are refused (only the root translates in a
+:class:`Motion`). A static root whose single child has position channels (``joint_Root`` and
+``Hips`` in the Bandai-Namco data) is folded into that child, so the Motion's root is the pelvis.
+
+Files keep their units: the reader scales to metres and the writer writes centimetres by default.
+``unit="auto"`` guesses from the leg (hip to ankle) when the body map finds one: under 3 units is
+metres, under 30 the CMU unit (1/0.45 inch, the CMU BVH conversions), under 300 centimetres,
+else millimetres; without a leg, centimetres when the four longest bones add up to more than 3
+units, else metres. Inches are never guessed: pass ``unit="in"``.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from imuloco.core.bodymap import resolve_body_map
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.io.errors import FormatError
 from imuloco.ops.rotations import IDENTITY, from_euler, qmul, qrot, to_euler
 
-UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
-_ROT = {"Xrotation": "X", "Yrotation": "Y", "Zrotation": "Z"}
-_POS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
+# Metres per file unit. "cmu": the CMU motion capture unit, (1 / 0.45) inch.
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
+CHANNELS = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
+_CANON = {c.lower(): c for c in CHANNELS}  # "XROTATION" and "XRotation" are seen in the wild
+_MAX_ABS = 1e9  # larger numbers are corrupt data in any unit, and would overflow products
 
 
 @dataclass
 class _Joint:
     name: str
     parent: int
-    offset: np.ndarray
+    line: int
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
     channels: list[str] = field(default_factory=list)
     end_site: np.ndarray | None = None
 
@@ -44,6 +55,9 @@ class _Tokens:
         self.items = [(tok, i + 1) for i, ln in enumerate(lines) for tok in ln.split()]
         self.pos = 0
 
+    def peek(self) -> str | None:
+        return self.items[self.pos][0] if self.pos < len(self.items) else None
+
     def next(self, expected: str) -> tuple[str, int]:
         if self.pos >= len(self.items):
             last = self.items[-1][1] if self.items else 1
@@ -51,6 +65,14 @@ class _Tokens:
         tok = self.items[self.pos]
         self.pos += 1
         return tok
+
+    def rest_of_line(self, line: int) -> list[str]:
+        """The remaining tokens on ``line`` (joint names may contain spaces)."""
+        out = []
+        while self.pos < len(self.items) and self.items[self.pos][1] == line:
+            out.append(self.items[self.pos][0])
+            self.pos += 1
+        return out
 
     def expect(self, word: str) -> int:
         tok, line = self.next(repr(word))
@@ -60,58 +82,93 @@ class _Tokens:
 
     def number(self, what: str) -> float:
         tok, line = self.next(what)
-        try:
-            value = float(tok)
-        except ValueError:
-            raise FormatError(self.path, line, f"expected a number for {what}, found {tok!r}") from None
-        if not math.isfinite(value):
-            raise FormatError(self.path, line, f"expected a finite number for {what}, found {tok}")
-        return value
+        return _number(self.path, line, tok, what)
+
+
+def _number(path: Path, line: int, tok: str, what: str) -> float:
+    try:
+        value = float(tok)
+    except ValueError:
+        raise FormatError(path, line, f"expected a number for {what}, found {tok!r}") from None
+    if not math.isfinite(value):
+        raise FormatError(path, line, f"expected a finite number for {what}, found {tok!r}")
+    if abs(value) > _MAX_ABS:
+        raise FormatError(path, line, f"expected {what} below {_MAX_ABS:g} in size, found {tok}")
+    return value
 
 
 def _parse_hierarchy(tk: _Tokens) -> list[_Joint]:
     joints: list[_Joint] = []
     tk.expect("HIERARCHY")
-    tok, line = tk.next("ROOT")
-    if tok != "ROOT":
-        raise FormatError(tk.path, line, f"expected 'ROOT', found {tok!r}")
+    tk.expect("ROOT")
 
-    def joint(parent: int) -> None:
-        name, line = tk.next("a joint name")
-        tk.expect("{")
-        tk.expect("OFFSET")
-        off = np.array([tk.number("OFFSET x"), tk.number("OFFSET y"), tk.number("OFFSET z")])
-        j = _Joint(name, parent, off)
+    def open_joint(parent: int, keyword_line: int) -> None:
+        words = tk.rest_of_line(keyword_line)
+        brace_on_line = bool(words) and words[-1] == "{"
+        if brace_on_line:
+            words = words[:-1]
+        if not words:
+            raise FormatError(tk.path, keyword_line, "expected a joint name after ROOT/JOINT")
+        name = " ".join(words)
+        if any(j.name == name for j in joints):
+            raise FormatError(tk.path, keyword_line, f"joint name {name!r} is used twice")
+        if not brace_on_line:
+            tk.expect("{")
+        j = _Joint(name, parent, keyword_line)
+        seen_offset = False
+        while tk.peek() in ("OFFSET", "CHANNELS"):
+            tok, line = tk.next("OFFSET or CHANNELS")
+            if tok == "OFFSET":
+                j.offset = np.array([tk.number(f"{name} OFFSET {a}") for a in "xyz"])
+                seen_offset = True
+                continue
+            count, line = tk.next("a channel count")
+            if not (count.isascii() and count.isdigit()):
+                raise FormatError(tk.path, line, f"expected a channel count, found {count!r}")
+            for _ in range(int(count)):
+                ch, line = tk.next(f"a channel name of {name!r}")
+                if ch.lower() not in _CANON:
+                    raise FormatError(tk.path, line, f"unknown channel {ch!r} on joint {name!r}; "
+                                      f"expected one of {list(CHANNELS)}")
+                if _CANON[ch.lower()] in j.channels:
+                    raise FormatError(tk.path, line, f"channel {ch!r} repeats on joint {name!r}")
+                j.channels.append(_CANON[ch.lower()])
+        if not seen_offset:
+            tok, line = tk.next("OFFSET")
+            raise FormatError(tk.path, line, f"expected OFFSET for joint {name!r}, found {tok!r}")
         joints.append(j)
-        me = len(joints) - 1
-        tk.expect("CHANNELS")
-        tok, line = tk.next("a channel count")
-        if not tok.isdigit():
-            raise FormatError(tk.path, line, f"expected a channel count, found {tok!r}")
-        for _ in range(int(tok)):
-            ch, line = tk.next("a channel name")
-            if ch not in _ROT and ch not in _POS:
-                raise FormatError(tk.path, line, f"unknown channel {ch!r} on joint {name!r}; "
-                                  f"expected one of {sorted(_POS) + sorted(_ROT)}")
-            j.channels.append(ch)
-        while True:
-            tok, line = tk.next("JOINT, End Site or '}'")
-            if tok == "JOINT":
-                joint(me)
-            elif tok == "End":
-                tk.expect("Site")
-                tk.expect("{")
-                tk.expect("OFFSET")
-                j.end_site = np.array([tk.number("End Site x"), tk.number("End Site y"),
-                                       tk.number("End Site z")])
-                tk.expect("}")
-            elif tok == "}":
-                return
-            else:
-                raise FormatError(tk.path, line, f"expected JOINT, End Site or '}}', found {tok!r}")
 
-    joint(-1)
+    _, line = tk.items[tk.pos - 1]
+    open_joint(-1, line)
+    stack = [0]  # open joints; a loop, not recursion, so deep nesting cannot overflow the stack
+    while stack:
+        tok, line = tk.next("JOINT, End Site or '}'")
+        if tok == "JOINT":
+            open_joint(stack[-1], line)
+            stack.append(len(joints) - 1)
+        elif tok == "End":
+            tk.expect("Site")
+            tk.expect("{")
+            tk.expect("OFFSET")
+            joints[stack[-1]].end_site = np.array(
+                [tk.number(f"End Site {a}") for a in "xyz"])
+            tk.expect("}")
+        elif tok == "}":
+            stack.pop()
+        else:
+            raise FormatError(tk.path, line, f"expected JOINT, End Site or '}}', found {tok!r}")
+    if tk.peek() is not None:
+        tok, line = tk.next("MOTION")
+        raise FormatError(tk.path, line, f"expected MOTION after the ROOT joint, found {tok!r}")
     return joints
+
+
+def _decode(path: Path) -> str:
+    raw = path.read_bytes()
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")  # old exporters write joint names in Latin-1
 
 
 def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True) -> Motion:
@@ -120,68 +177,89 @@ def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True
     Parameters
     ----------
     path : the .bvh file.
-    unit : the file's length unit, one of ``m, cm, mm, in`` or ``auto``.
-    fold_static_root : fold a root that never moves into its single moving child.
+    unit : the file's length unit, one of ``m, cm, mm, in, cmu`` or ``auto`` (see the module).
+    fold_static_root : fold a root that never moves into its single child with position channels.
 
     Raises
     ------
     FormatError : naming the file, line and what was expected.
     """
     path = Path(path)
-    try:
-        text = path.read_text()
-    except UnicodeDecodeError as e:
-        raise FormatError(path, None, f"not a text BVH file ({e})") from None
-    lines = text.splitlines()
+    if unit != "auto" and unit not in UNITS:
+        raise ValueError(f"unit must be one of {sorted(UNITS)} or 'auto', got {unit!r}")
+    lines = _decode(path).splitlines()
     motion_at = next((i for i, ln in enumerate(lines) if ln.strip() == "MOTION"), None)
     if motion_at is None:
-        raise FormatError(path, len(lines), "expected a MOTION section after the HIERARCHY")
+        raise FormatError(path, max(len(lines), 1), "expected a MOTION line after the HIERARCHY")
     joints = _parse_hierarchy(_Tokens(path, lines[:motion_at]))
-    frames, frame_time, data = _parse_motion(path, lines, motion_at, joints)
-
-    scale = UNITS.get(unit) if unit != "auto" else None
-    if unit != "auto" and scale is None:
-        raise ValueError(f"unit must be one of {sorted(UNITS)} or 'auto', got {unit!r}")
+    frame_time, data = _parse_motion(path, lines, motion_at, joints)
     fps = 1.0 / frame_time
     if abs(fps - round(fps)) < 1e-3:  # "0.0333333" means 30 fps, not 30.00003
         fps = float(round(fps))
-    return _build_motion(path, joints, data, fps, scale, fold_static_root)
+    return _build_motion(path, joints, data, fps, UNITS.get(unit), fold_static_root)
 
 
 def _parse_motion(path: Path, lines: list[str], at: int, joints: list[_Joint]
-                  ) -> tuple[int, float, np.ndarray]:
-    def field_value(i: int, key: str) -> str:
-        if i >= len(lines) or not lines[i].strip().startswith(key):
-            raise FormatError(path, i + 1, f"expected '{key}' line")
-        return lines[i].split(":", 1)[1].strip()
+                  ) -> tuple[float, np.ndarray]:
+    # (line number, text) of the non-blank lines after MOTION
+    body = [(i + 1, ln) for i, ln in enumerate(lines[at + 1:], start=at + 1) if ln.strip()]
 
-    frames_s = field_value(at + 1, "Frames:")
-    ft_s = field_value(at + 2, "Frame Time:")
-    try:
-        frames, frame_time = int(frames_s), float(ft_s)
-    except ValueError:
-        raise FormatError(path, at + 2, "expected an integer frame count and a frame time") from None
-    if frames < 1 or not frame_time > 0:
-        raise FormatError(path, at + 2, "expected at least one frame and a positive frame time")
+    def header(k: int, key: str) -> tuple[str, int]:
+        if k >= len(body):
+            raise FormatError(path, len(lines), f"file ends early: expected a '{key}' line")
+        lineno, text = body[k]
+        m = re.fullmatch(rf"\s*{key}\s*:\s*(\S+)\s*", text)
+        if m is None:
+            raise FormatError(path, lineno, f"expected '{key}: <value>', found {text.strip()!r}")
+        return m.group(1), lineno
+
+    frames_s, frames_line = header(0, "Frames")
+    if not (frames_s.isascii() and frames_s.isdigit()) or int(frames_s) < 1:
+        raise FormatError(path, frames_line, f"expected a frame count of at least 1, "
+                          f"found {frames_s!r}")
+    frames = int(frames_s)
+    ft_s, ft_line = header(1, "Frame Time")
+    frame_time = _number(path, ft_line, ft_s, "Frame Time")
+    if not frame_time > 0:
+        raise FormatError(path, ft_line, f"expected a positive Frame Time, found {ft_s!r}")
     width = sum(len(j.channels) for j in joints)
-    body = [(i + 1, ln) for i, ln in enumerate(lines[at + 3:], start=at + 3) if ln.strip()]
-    if len(body) < frames:
-        last = body[-1][0] if body else at + 3
+    if width == 0:
+        raise FormatError(path, at, "expected channels on at least one joint, found none")
+    rows = body[2:]
+    if len(rows) < frames:
+        last = rows[-1][0] if rows else ft_line
         raise FormatError(path, last, f"truncated MOTION block: header says {frames} frames, "
-                          f"found {len(body)}")
+                          f"found {len(rows)}")
+    if len(rows) > frames:
+        raise FormatError(path, rows[frames][0], f"header says {frames} frames but the MOTION "
+                          f"block goes on ({len(rows)} lines)")
     data = np.empty((frames, width))
-    for row, (lineno, ln) in enumerate(body[:frames]):
+    for r, (lineno, ln) in enumerate(rows):
         parts = ln.split()
         if len(parts) != width:
-            raise FormatError(path, lineno, f"expected {width} channel values, found {len(parts)}")
+            raise FormatError(path, lineno, f"expected {width} channel values (the HIERARCHY's "
+                              f"channel count), found {len(parts)}")
         try:
-            data[row] = [float(p) for p in parts]
+            data[r] = [float(p) for p in parts]
         except ValueError:
-            bad = next(p for p in parts if not _is_float(p))
-            raise FormatError(path, lineno, f"expected a number, found {bad!r}") from None
-        if not np.all(np.isfinite(data[row])):
-            raise FormatError(path, lineno, "expected finite numbers, found NaN or inf")
-    return frames, frame_time, data
+            col = next(c for c, p in enumerate(parts) if not _is_float(p))
+            raise FormatError(path, lineno, f"expected a number for channel {col + 1} "
+                              f"({_channel_name(joints, col)}), found {parts[col]!r}") from None
+        bad = ~np.isfinite(data[r]) | (np.abs(np.nan_to_num(data[r])) > _MAX_ABS)
+        if bad.any():
+            col = int(np.flatnonzero(bad)[0])
+            raise FormatError(path, lineno, f"expected a finite number below {_MAX_ABS:g} in "
+                              f"size for channel {col + 1} ({_channel_name(joints, col)}), "
+                              f"found {parts[col]!r}")
+    return frame_time, data
+
+
+def _channel_name(joints: list[_Joint], col: int) -> str:
+    for j in joints:
+        if col < len(j.channels):
+            return f"{j.name} {j.channels[col]}"
+        col -= len(j.channels)
+    return "?"
 
 
 def _is_float(s: str) -> bool:
@@ -201,80 +279,122 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
     col = 0
     for k, j in enumerate(joints):
         local_pos[:, k] = j.offset
-        rot_order = "".join(_ROT[c] for c in j.channels if c in _ROT)
-        rot_cols = [col + i for i, c in enumerate(j.channels) if c in _ROT]
+        rot = [(i, c[0]) for i, c in enumerate(j.channels) if c.endswith("rotation")]
         for i, c in enumerate(j.channels):
-            if c in _POS:
-                local_pos[:, k, _POS[c]] = data[:, col + i]
-        local_rot[:, k] = (from_euler(data[:, rot_cols], rot_order) if rot_order
-                           else IDENTITY)
+            if c.endswith("position"):
+                local_pos[:, k, "XYZ".index(c[0])] = data[:, col + i]
+        if rot:
+            order = "".join(a for _, a in rot)
+            local_rot[:, k] = from_euler(data[:, [col + i for i, _ in rot]], order)
+        else:
+            local_rot[:, k] = IDENTITY
         col += len(j.channels)
 
     names = [j.name for j in joints]
     parents = np.array([j.parent for j in joints])
+    children_of_root = [k for k, j in enumerate(joints) if j.parent == 0]
     first = 0
-    if (fold_static_root and n > 1 and len([j for j in joints if j.parent == 0]) == 1
-            and np.ptp(local_pos[:, 0], axis=0).max() < 1e-9
-            and np.ptp(local_rot[:, 0], axis=0).max() < 1e-9):
+    if (fold_static_root and len(children_of_root) == 1
+            and any(c.endswith("position") for c in joints[children_of_root[0]].channels)
+            and np.ptp(local_pos[:, 0], axis=0).max() == 0.0
+            and np.ptp(local_rot[:, 0], axis=0).max() == 0.0):
         # The child's world transform is the static root's transform applied to its own.
         local_pos[:, 1] = local_pos[:, 0] + qrot(local_rot[:, 0], local_pos[:, 1])
         local_rot[:, 1] = qmul(local_rot[:, 0], local_rot[:, 1])
         first = 1
     for k in range(first + 1, n):
-        if np.ptp(local_pos[:, k], axis=0).max() > 1e-6 * max(1.0, np.abs(local_pos[:, k]).max()):
-            raise FormatError(path, None, f"joint {names[k]!r} has moving position channels; "
-                              "only the root may translate")
+        size = max(1.0, float(np.abs(local_pos[:, k]).max()))
+        if np.ptp(local_pos[:, k], axis=0).max() > 1e-6 * size:
+            raise FormatError(path, joints[k].line, f"joint {names[k]!r} has moving position "
+                              "channels; expected constant ones (only the root may translate)")
 
-    offsets = local_pos[0].copy()
+    offsets = local_pos[0, first:].copy()
+    offsets[0] = 0.0
+    sk_parents = np.where(parents[first:] >= 0, parents[first:] - first, -1)
     if scale is None:
-        legs = [np.linalg.norm(offsets[k]) for k in range(first + 1, n)]
-        scale = 0.01 if sum(sorted(legs)[-4:]) > 3.0 else 1.0
+        scale = _guess_scale(names[first:], sk_parents, offsets)
     end_sites = {k - first: j.end_site * scale for k, j in enumerate(joints)
                  if j.end_site is not None and k >= first}
-    offsets[first] = 0.0
-    skeleton = Skeleton(names[first:], np.where(parents[first:] >= 0, parents[first:] - first, -1),
-                        offsets[first:] * scale, end_sites)
+    skeleton = Skeleton(names[first:], sk_parents, offsets * scale, end_sites)
     return Motion(skeleton, local_rot[:, first:], local_pos[:, first] * scale, fps, path.stem)
+
+
+def _guess_scale(names: list[str], parents: np.ndarray, offsets: np.ndarray) -> float:
+    """Metres per file unit, from the leg length when the body map finds hip and ankle."""
+    parts = resolve_body_map(names, strict=False)
+    for side in ("right", "left"):
+        if f"{side}_hip" not in parts or f"{side}_ankle" not in parts:
+            continue
+        hip, j = names.index(parts[f"{side}_hip"]), names.index(parts[f"{side}_ankle"])
+        leg = 0.0
+        while j > hip:
+            leg += float(np.linalg.norm(offsets[j]))
+            j = int(parents[j])
+        if j == hip and leg > 0:
+            if leg < 3:
+                return UNITS["m"]
+            return UNITS["cmu"] if leg < 30 else UNITS["cm"] if leg < 300 else UNITS["mm"]
+    bones = sorted(np.linalg.norm(offsets[1:], axis=-1))[-4:]
+    return UNITS["cm"] if sum(bones) > 3.0 else UNITS["m"]
+
+
+def _decimals(unit_scale: float) -> int:
+    """Decimals that resolve 1e-8 m in a unit of ``unit_scale`` metres (at least 6)."""
+    return max(6, math.ceil(-math.log10(1e-8 / unit_scale) - 1e-9))
 
 
 def write_bvh(motion: Motion, path: str | Path, unit: str = "cm", order: str = "ZXY",
               overwrite: bool = False) -> Path:
-    """Write a Motion as BVH: 6 channels on the root, 3 rotation channels elsewhere, Euler
-    ``order`` (intrinsic), lengths in ``unit``. Refuses to replace an existing file unless
-    ``overwrite``. Returns the path written."""
+    """Write a Motion as BVH.
+
+    The root gets 6 channels (position, then rotation), every other joint 3 rotation channels,
+    in the intrinsic Euler ``order`` (a permutation of ``XYZ``); lengths are in ``unit``
+    (``m, cm, mm, in, cmu``), angles in degrees with 6 decimals, lengths with enough decimals
+    for 1e-8 m. Refuses to replace an existing file unless ``overwrite``. Returns the path.
+    """
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
     if unit not in UNITS:
         raise ValueError(f"unit must be one of {sorted(UNITS)}, got {unit!r}")
-    k = 1.0 / UNITS[unit]
-    sk = motion.skeleton
     order = order.upper()
+    if sorted(order) != ["X", "Y", "Z"]:
+        raise ValueError(f"order must be a permutation of 'XYZ' such as 'ZXY', got {order!r}")
+    sk = motion.skeleton
+    for name in sk.names:
+        if not name.strip() or name != name.strip() or any(c in name for c in "{}\r\n\t"):
+            raise ValueError(f"joint name {name!r} cannot be written to BVH")
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
+    k = 1.0 / UNITS[unit]
+    dec = _decimals(UNITS[unit])
     rot_channels = " ".join(f"{a}rotation" for a in order)
     out: list[str] = ["HIERARCHY"]
 
+    def vec(v: np.ndarray) -> str:
+        return " ".join(f"{x:.{dec}f}" for x in v)
+
     def emit(j: int, depth: int) -> None:
         pad = "\t" * depth
-        kind = "ROOT" if j == 0 else "JOINT"
-        out.append(f"{pad}{kind} {sk.names[j]}")
+        out.append(f"{pad}{'ROOT' if j == 0 else 'JOINT'} {sk.names[j]}")
         out.append(f"{pad}{{")
-        out.append(f"{pad}\tOFFSET " + " ".join(f"{v:.6f}" for v in sk.offsets[j] * k))
-        chans = ("Xposition Yposition Zposition " if j == 0 else "") + rot_channels
-        out.append(f"{pad}\tCHANNELS {6 if j == 0 else 3} {chans}")
+        out.append(f"{pad}\tOFFSET {vec(sk.offsets[j] * k)}")
+        if j == 0:
+            out.append(f"{pad}\tCHANNELS 6 Xposition Yposition Zposition {rot_channels}")
+        else:
+            out.append(f"{pad}\tCHANNELS 3 {rot_channels}")
         kids = sk.children(j)
         for c in kids:
             emit(c, depth + 1)
         if not kids or j in sk.end_sites:
-            site = sk.end_sites.get(j, np.zeros(3)) * k
-            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{",
-                        f"{pad}\t\tOFFSET " + " ".join(f"{v:.6f}" for v in site), f"{pad}\t}}"])
+            site = np.asarray(sk.end_sites.get(j, np.zeros(3))) * k
+            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET {vec(site)}",
+                        f"{pad}\t}}"])
         out.append(f"{pad}}}")
 
     emit(0, 0)
     eul = to_euler(motion.rotations, order)  # (T, J, 3)
-    values = np.concatenate([motion.root * k, eul.reshape(motion.num_frames, -1)], axis=1)
-    out += ["MOTION", f"Frames: {motion.num_frames}", f"Frame Time: {1.0 / motion.fps:.8f}"]
-    out += [" ".join(f"{v:.6f}" for v in row) for row in values]
+    out += ["MOTION", f"Frames: {motion.num_frames}", f"Frame Time: {1.0 / motion.fps:.10g}"]
+    for root, angles in zip(motion.root * k, eul.reshape(motion.num_frames, -1)):
+        out.append(vec(root) + " " + " ".join(f"{a:.6f}" for a in angles))
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(out) + "\n")
     return path

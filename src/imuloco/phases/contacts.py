@@ -15,6 +15,7 @@ import numpy as np
 from imuloco.core.motion import Motion
 
 FEET = ("left", "right")
+SPEED_TOL = 0.8  # leg lengths per second (~0.65 m/s for a 0.8 m leg)
 
 
 def floor_height(heights: np.ndarray, percentile: float = 5.0) -> float:
@@ -69,7 +70,7 @@ def part_contacts(
     fps: float,
     leg_length: float,
     height_tol: float = 0.03,
-    speed_tol: float = 0.6,
+    speed_tol: float = SPEED_TOL,
     floor_percentile: float = 5.0,
     max_gap_s: float = 0.07,
     min_length_s: float = 0.05,
@@ -82,8 +83,8 @@ def part_contacts(
     fps : frames per second.
     leg_length : metres (hip to ankle); the tolerances scale with it.
     height_tol : contact when less than ``height_tol * leg_length`` above the floor.
-    speed_tol : and slower than ``speed_tol * leg_length`` per second (3-D speed, central
-        differences).
+    speed_tol : and slower than ``speed_tol * leg_length`` per second (3-D speed, the smaller
+        of the backward and forward differences).
     floor_percentile : percentile of the pooled heights taken as the floor.
     max_gap_s, min_length_s : cleanup, see :func:`clean_mask`.
 
@@ -100,18 +101,28 @@ def part_contacts(
     if positions.shape[0] < 2:
         raise ValueError("part_contacts: need at least 2 frames")
     height = positions[..., 1] - floor_height(positions[..., 1], floor_percentile)
-    speed = np.linalg.norm(np.gradient(positions, axis=0), axis=-1) * fps
+    step = np.linalg.norm(np.diff(positions, axis=0), axis=-1) * fps  # (T-1, F)
+    # still on at least one side: a strike frame is still afterwards, a lift-off frame before
+    speed = np.minimum(np.concatenate([step[:1], step]), np.concatenate([step, step[-1:]]))
     raw = (height < height_tol * leg_length) & (speed < speed_tol * leg_length)
     return clean_mask(raw, int(round(max_gap_s * fps)), int(round(min_length_s * fps)))
 
 
-def foot_contacts(motion: Motion, **tolerances: float) -> dict[str, np.ndarray]:
+def foot_contacts(
+    motion: Motion, heel_height_tol: float = 0.02, toe_height_tol: float = 0.05,
+    **tolerances: float,
+) -> dict[str, np.ndarray]:
     """Heel, toe and foot (either) contacts of both feet of a motion.
 
     Parameters
     ----------
     motion : Motion whose skeleton maps the ``{left,right}_{ankle,toe}`` parts.
-    **tolerances : passed to :func:`part_contacts` (``height_tol``, ``speed_tol``, ...).
+    heel_height_tol, toe_height_tol : ``height_tol`` of :func:`part_contacts` for the ankle and
+        the toe joint, in leg lengths. The heel's is tight so that heel-off (the start of
+        terminal stance) is found when the heel starts to rise, which is slow (the ankle moves
+        at under 0.5 m/s then); the toe joint's is loose because it lifts a few cm while the
+        foot rolls over the toe tips before toe-off.
+    **tolerances : passed to :func:`part_contacts` (``speed_tol``, ...).
 
     Returns
     -------
@@ -120,8 +131,8 @@ def foot_contacts(motion: Motion, **tolerances: float) -> dict[str, np.ndarray]:
     """
     pos = motion.part_positions([f"{s}_{p}" for p in ("ankle", "toe") for s in FEET])
     leg = motion.skeleton.leg_length()
-    heel = part_contacts(pos[:, :2], motion.fps, leg, **tolerances)
-    toe = part_contacts(pos[:, 2:], motion.fps, leg, **tolerances)
+    heel = part_contacts(pos[:, :2], motion.fps, leg, heel_height_tol, **tolerances)
+    toe = part_contacts(pos[:, 2:], motion.fps, leg, toe_height_tol, **tolerances)
     out: dict[str, np.ndarray] = {}
     for k, side in enumerate(FEET):
         out[f"{side}_heel"] = heel[:, k]
