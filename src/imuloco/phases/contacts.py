@@ -105,7 +105,7 @@ def part_contacts(
     # still on at least one side: a strike frame is still afterwards, a lift-off frame before
     speed = np.minimum(np.concatenate([step[:1], step]), np.concatenate([step, step[-1:]]))
     raw = (height < height_tol * leg_length) & (speed < speed_tol * leg_length)
-    return clean_mask(raw, int(round(max_gap_s * fps)), int(round(min_length_s * fps)))
+    return clean_mask(raw, round(max_gap_s * fps), round(min_length_s * fps))
 
 
 def foot_contacts(

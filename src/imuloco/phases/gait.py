@@ -44,8 +44,8 @@ from imuloco.phases.events import (
     crossing_events,
     forward_difference,
     heading_angle,
-    onsets,
     offsets,
+    onsets,
     right_ahead,
 )
 
@@ -163,7 +163,8 @@ class GaitPhases:
     reference : ``"right"`` or ``"left"``, the leg ``phase`` describes.
     eom2014 : ndarray, shape (T,), int into :data:`EOM2014`.
     support : ndarray, shape (T,), int into :data:`SUPPORT`.
-    steps : ``left`` / ``right`` -> frames of foot strikes (contact onsets).
+    steps : ``left`` / ``right`` -> frames of foot strikes: onsets of foot contact (heel or toe,
+        whichever lands first; the heel strike in walking), so forefoot landings count too.
     cadence_spm : steps per minute (NaN with fewer than two strikes).
     """
 
@@ -202,6 +203,23 @@ class GaitPhases:
         """Per-frame label names, length T."""
         labels, names = self.labels(kind)
         return [names[i] for i in labels]
+
+    def to_dict(self) -> dict:
+        """A JSON-ready report: ``fps``, ``frames``, ``reference``, ``contacts`` (0/1 per frame
+        for ``{left,right}_{heel,toe}``), ``phase`` (gait8 names per frame), ``eom2014`` and
+        ``support`` (names per frame), ``steps`` (strike frames per foot), ``cadence_spm``
+        (``None`` when undefined) and ``flight_frames`` (frame indices)."""
+        cad = self.cadence_spm
+        return {
+            "fps": self.fps, "frames": self.num_frames, "reference": self.reference,
+            "contacts": {k: self.contacts[k].astype(int).tolist()
+                         for k in ("left_heel", "left_toe", "right_heel", "right_toe")},
+            "phase": self.names("gait8"), "eom2014": self.names("eom2014"),
+            "support": self.names("support"),
+            "steps": {k: v.tolist() for k, v in self.steps.items()},
+            "cadence_spm": None if np.isnan(cad) else round(cad, 2),
+            "flight_frames": np.flatnonzero(self.flight).tolist(),
+        }
 
     def segments(self, kind: str = "gait8") -> list[tuple[str, int, int]]:
         """Maximal runs of one label as ``(label, start, stop)``, ``stop`` exclusive, in order;
@@ -245,7 +263,7 @@ def gait_phases(
     ref_ahead = ahead if reference == "right" else ~ahead
     raw = gait8_states(contacts[f"{ref}_heel"], contacts[f"{ref}_foot"],
                        contacts[f"{other}_heel"], contacts[f"{other}_foot"], ref_ahead)
-    phase = enforce_cycle(raw, len(GAIT8), max(1, int(round(min_back_s * fps))))
+    phase = enforce_cycle(raw, len(GAIT8), max(1, round(min_back_s * fps)))
 
     left, right = contacts["left_foot"], contacts["right_foot"]
     speed_tol = tolerances.get("speed_tol", SPEED_TOL) * leg  # standing: feet down, pelvis still
