@@ -25,19 +25,26 @@ LOWER_PARTS = tuple(f"{s}_{p}" for s in SIDES for p in ("hip", "knee", "ankle", 
 # "{Side}" the side's word (Left/Right), "{s}" the lower-case letter (l/r).
 _CENTRE_CANDIDATES: dict[str, tuple[str, ...]] = {
     "pelvis": ("Hips", "root", "Pelvis", "Hip"),
-    "spine": ("Spine", "lowerback", "LowerBack", "Spine1"),
+    # CMU: the ASF joint "upperback" (where the lowerback bone ends) is the one the CMU BVH
+    # conversions call "Spine"; "lowerback" sits on the root.
+    "spine": ("Spine", "upperback", "lowerback", "LowerBack", "Spine1"),
     "chest": ("Chest", "thorax", "Spine2", "Spine1", "upperback", "UpperChest"),
     "neck": ("Neck", "lowerneck", "Neck1", "upperneck"),
     "head": ("Head",),
 }
 _LIMB_CANDIDATES: dict[str, tuple[str, ...]] = {
-    "hip": ("UpperLeg_{S}", "{Side}UpLeg", "{s}femur", "{Side}Hip", "{Side}UpperLeg", "{Side}Thigh"),
-    "knee": ("LowerLeg_{S}", "{Side}Leg", "{s}tibia", "{Side}Knee", "{Side}LowerLeg", "{Side}Shin"),
-    "ankle": ("Foot_{S}", "{Side}Foot", "{s}foot", "{Side}Ankle"),
-    "toe": ("Toes_{S}", "{Side}ToeBase", "{s}toes", "{Side}Toe", "{Side}Toes", "{Side}Toe_End"),
-    "shoulder": ("UpperArm_{S}", "{Side}Arm", "{s}humerus", "{Side}UpperArm", "{Side}Shoulder"),
-    "elbow": ("LowerArm_{S}", "{Side}ForeArm", "{s}radius", "{Side}Elbow", "{Side}LowerArm"),
-    "wrist": ("Hand_{S}", "{Side}Hand", "{s}wrist", "{Side}Wrist", "{s}hand"),
+    "hip": ("UpperLeg_{S}", "{Side}UpLeg", "{s}femur", "{Side}Hip", "{Side}UpperLeg", "{Side}Thigh",
+            "{S}_Hip"),
+    "knee": ("LowerLeg_{S}", "{Side}Leg", "{s}tibia", "{Side}Knee", "{Side}LowerLeg", "{Side}Shin",
+             "{S}_Knee"),
+    "ankle": ("Foot_{S}", "{Side}Foot", "{s}foot", "{Side}Ankle", "{S}_Ankle"),
+    "toe": ("Toes_{S}", "{Side}ToeBase", "{s}toes", "{Side}Toe", "{Side}Toes", "{Side}Toe_End",
+            "{S}_Foot"),
+    "shoulder": ("UpperArm_{S}", "{Side}Arm", "{s}humerus", "{Side}UpperArm", "{Side}Shoulder",
+                 "{S}_Shoulder"),
+    "elbow": ("LowerArm_{S}", "{Side}ForeArm", "{s}radius", "{Side}Elbow", "{Side}LowerArm",
+              "{S}_Elbow"),
+    "wrist": ("Hand_{S}", "{Side}Hand", "{s}wrist", "{Side}Wrist", "{s}hand", "{S}_Wrist"),
 }
 
 

@@ -134,8 +134,8 @@ def _parse_hierarchy(tk: _Tokens) -> list[_Joint]:
                     raise FormatError(tk.path, line, f"channel {ch!r} repeats on joint {name!r}")
                 j.channels.append(_CANON[ch.lower()])
         if not seen_offset:
-            tok, line = tk.next("OFFSET")
-            raise FormatError(tk.path, line, f"expected OFFSET for joint {name!r}, found {tok!r}")
+            raise FormatError(tk.path, keyword_line, f"joint {name!r} has no OFFSET; expected "
+                              "'OFFSET x y z' after its '{'")
         joints.append(j)
 
     _, line = tk.items[tk.pos - 1]
@@ -189,8 +189,10 @@ def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True
         raise ValueError(f"unit must be one of {sorted(UNITS)} or 'auto', got {unit!r}")
     lines = _decode(path).splitlines()
     motion_at = next((i for i, ln in enumerate(lines) if ln.strip() == "MOTION"), None)
-    if motion_at is None:
-        raise FormatError(path, max(len(lines), 1), "expected a MOTION line after the HIERARCHY")
+    if motion_at is None:  # parse what there is, to say where MOTION was expected
+        _parse_hierarchy(_Tokens(path, lines))
+        raise FormatError(path, max(len(lines), 1), "file ends early: expected a MOTION line "
+                          "after the HIERARCHY")
     joints = _parse_hierarchy(_Tokens(path, lines[:motion_at]))
     frame_time, data = _parse_motion(path, lines, motion_at, joints)
     fps = 1.0 / frame_time
@@ -220,11 +222,12 @@ def _parse_motion(path: Path, lines: list[str], at: int, joints: list[_Joint]
     frames = int(frames_s)
     ft_s, ft_line = header(1, "Frame Time")
     frame_time = _number(path, ft_line, ft_s, "Frame Time")
-    if not frame_time > 0:
-        raise FormatError(path, ft_line, f"expected a positive Frame Time, found {ft_s!r}")
+    if not frame_time >= 1e-6:
+        raise FormatError(path, ft_line, f"expected a Frame Time of at least 1e-6 s, "
+                          f"found {ft_s!r}")
     width = sum(len(j.channels) for j in joints)
     if width == 0:
-        raise FormatError(path, at, "expected channels on at least one joint, found none")
+        raise FormatError(path, at + 1, "expected channels on at least one joint, found none")
     rows = body[2:]
     if len(rows) < frames:
         last = rows[-1][0] if rows else ft_line
