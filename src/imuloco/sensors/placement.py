@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from imuloco.core.skeleton import Skeleton
 from imuloco.ops.kinematics import fk
@@ -77,17 +78,59 @@ def get_placement(name: str | Placement) -> Placement:
     return PRESETS[name]
 
 
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
 def _body_axes(pos: np.ndarray, sk: Skeleton) -> tuple[np.ndarray, np.ndarray]:
-    """Body up and left directions in the rest pose. pos : (J, 3)."""
-    up = pos[sk.part("neck")] - pos[sk.part("pelvis")]
-    up /= np.linalg.norm(up)
-    left = pos[sk.part("left_hip")] - pos[sk.part("right_hip")]
-    left -= up * (left @ up)
-    return up, left / np.linalg.norm(left)
+    """Body up and left directions. pos : (..., J, 3) -> (..., 3), (..., 3)."""
+    up = _unit(pos[..., sk.part("neck"), :] - pos[..., sk.part("pelvis"), :])
+    left = pos[..., sk.part("left_hip"), :] - pos[..., sk.part("right_hip"), :]
+    left = left - up * np.sum(left * up, axis=-1, keepdims=True)
+    return up, _unit(left)
 
 
-def anatomical_frame(sk: Skeleton, placement: Placement) -> tuple[int, np.ndarray, np.ndarray]:
-    """The sensor's rigid attachment to its joint.
+def _axes(sk: Skeleton, placement: Placement, pos: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """Anatomical-to-world rotation (..., 4) and sensor origin (..., 3) in poses with joint
+    positions ``pos`` (..., J, 3)."""
+    up, left = _body_axes(pos, sk)
+    joint = sk.part(placement.segment)
+    origin = pos[..., joint, :]
+    y = up
+    if placement.toward is not None:
+        end = pos[..., sk.part(placement.toward), :]
+        y = _unit(origin - end)
+        origin = origin + placement.fraction * (end - origin)
+    elif placement.segment.endswith("wrist") or placement.segment.endswith("hand"):
+        elbow = pos[..., sk.part(placement.segment.replace("wrist", "elbow")), :]
+        y = _unit(elbow - origin)
+    forward = np.cross(left, up)
+    z = forward - y * np.sum(forward * y, axis=-1, keepdims=True)
+    # a segment along the facing direction: use the left axis
+    z = np.where(np.linalg.norm(z, axis=-1, keepdims=True) < 1e-6, np.cross(y, left), z)
+    z = _unit(z)
+    return from_matrix(np.stack([np.cross(y, z), y, z], axis=-1)), origin
+
+
+def anatomical_frame(sk: Skeleton, placement: Placement, pose: np.ndarray | None = None
+                     ) -> tuple[int, np.ndarray, np.ndarray]:
+    """The sensor's rigid attachment to its joint, built in the skeleton's rest pose.
+
+    The rest pose fixes the segment's long axis (y) in the joint's frame, but not always its
+    twist: the Bandai-Namco BVH rest pose has the legs in a split, its right leg turned half a
+    turn about its own axis and its chest a quarter turn in every motion frame, so frames built
+    at rest face backwards or sideways during motion. Given ``pose`` (motion frames), the rest
+    frame of a leg or trunk placement is turned about y by the multiple of a quarter turn
+    nearest to the mean twist between it and the frames built in those poses (forward from the
+    hip line, up from pelvis to neck). The result stays the skeleton's (one of four fixed
+    choices, the same for every clip of the sample), not the clip's. Arm placements keep the
+    rest frame: the forearm's twist relative to the body's forward varies too much.
+
+    Parameters
+    ----------
+    pose : ndarray, shape (J, 4) or (T, J, 4), optional local rotations of poses the body
+        takes (x, y, z, w), used only for that half-turn decision.
 
     Returns
     -------
@@ -97,26 +140,19 @@ def anatomical_frame(sk: Skeleton, placement: Placement) -> tuple[int, np.ndarra
     """
     rest_rot = np.tile(IDENTITY, (sk.num_joints, 1))
     grot, pos = fk(rest_rot, np.zeros(3), sk.offsets, sk.parents)
-    up, left = _body_axes(pos, sk)
     joint = sk.part(placement.segment)
-    origin = pos[joint]
-    y = up
-    if placement.toward is not None:
-        end = pos[sk.part(placement.toward)]
-        y = origin - end
-        y /= np.linalg.norm(y)
-        origin = origin + placement.fraction * (end - origin)
-    elif placement.segment.endswith("wrist") or placement.segment.endswith("hand"):
-        elbow = pos[sk.part(placement.segment.replace("wrist", "elbow"))]
-        y = elbow - origin
-        y /= np.linalg.norm(y)
-    forward = np.cross(left, up)
-    z = forward - y * (forward @ y)
-    if np.linalg.norm(z) < 1e-6:  # a segment along the facing direction: use the left axis
-        z = np.cross(y, left)
-    z /= np.linalg.norm(z)
-    x = np.cross(y, z)
-    anat = from_matrix(np.stack([x, y, z], axis=1))  # anatomical -> world, at rest
+    anat, origin = _axes(sk, placement, pos)  # anatomical -> world, at rest
+    arm = any(k in placement.segment for k in ("elbow", "wrist", "hand", "shoulder"))
+    if pose is not None and not arm:
+        pose = np.asarray(pose, dtype=np.float64).reshape(-1, sk.num_joints, 4)
+        pg, pp = fk(pose, np.zeros((len(pose), 3)), sk.offsets, sk.parents)
+        posed, _ = _axes(sk, placement, pp)
+        # the posed frames in the joint's frame, against the rest frame in the joint's frame
+        rel = qmul(qinv(qmul(qinv(grot[joint]), anat)), qmul(qinv(pg[:, joint]), posed))
+        twist = Rotation.from_quat(rel).mean().as_quat()
+        twist = twist if twist[3] >= 0 else -twist
+        quarter = np.round(2 * np.arctan2(twist[1], twist[3]) / (np.pi / 2)) * (np.pi / 2)
+        anat = qmul(anat, np.array([0.0, np.sin(quarter / 2), 0.0, np.cos(quarter / 2)]))
     world_point = origin + qrot(anat, np.asarray(placement.surface))
     joint_inv = qinv(grot[joint])
     offset = qrot(joint_inv, world_point - pos[joint])

@@ -30,7 +30,10 @@ GRAVITY = np.array([0.0, -G, 0.0])  # world is Y up
 def sensor_trajectory(motion: Motion, placement: str | Placement) -> tuple[np.ndarray, np.ndarray]:
     """World position (T, 3) and sensor-to-world orientation (T, 4) of a sensor at the
     motion's frames."""
-    joint, offset, rotation = anatomical_frame(motion.skeleton, get_placement(placement))
+    # the motion's poses settle the segment's twist in a skeleton whose rest pose is not a
+    # standing pose (see anatomical_frame)
+    joint, offset, rotation = anatomical_frame(motion.skeleton, get_placement(placement),
+                                               motion.rotations[::5])
     grot, pos = motion.fk()
     q = grot[:, joint]
     return pos[:, joint] + qrot(q, offset), continuous(qmul(q, rotation))

@@ -1,0 +1,257 @@
+"""Real sensor logs: parsers, cleaning, unit detection, gaps, and the RealWorld shin recording."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from imuloco.core.recording import Recording
+from imuloco.io.errors import FormatError
+from imuloco.io.sensorlog import detect_format, write_generic_csv
+from imuloco.sensors.calibration import still_mask
+from imuloco.sensors.reallog import read_log
+from imuloco.sensors.simulate import simulate
+
+
+@pytest.fixture(scope="module")
+def walk_rec(sample_db) -> Recording:
+    """A phone on the right ankle during a sample walk: irregular timestamps, noise, drops."""
+    return simulate(sample_db.where(content="walk").clips[0], ["right_ankle"], 100.0, "phone", 7)
+
+
+def _shifted(rec: Recording) -> np.ndarray:
+    return rec.times - rec.times[0]
+
+
+def test_generic_round_trip(walk_rec, tmp_path):
+    path = write_generic_csv(walk_rec, tmp_path / "rec.csv")
+    assert path.read_text().splitlines()[0] == "time_s,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z"
+    with pytest.raises(FileExistsError):
+        write_generic_csv(walk_rec, path)
+    back, report = read_log(path, rate=None)
+    assert report.format == "generic" and back.placements == ["right_ankle"]
+    assert (report.acc_unit, report.gyro_unit) == ("m/s^2", "rad/s")
+    assert report.acc_unit_detected and report.gyro_unit_detected
+    np.testing.assert_allclose(back.times, _shifted(walk_rec), atol=2e-6)
+    np.testing.assert_allclose(back.acc, walk_rec.acc, rtol=1e-7, atol=1e-7)
+    np.testing.assert_allclose(back.gyro, walk_rec.gyro, rtol=1e-7, atol=1e-7)
+    # at the model rate: uniform, no NaN, same signal up to the light smoothing
+    uni, _ = read_log(path, rate=100.0)
+    assert uni.is_uniform() and np.isfinite(uni.channels()).all()
+    assert abs(uni.rate - 100.0) < 1e-6
+
+
+def test_multi_sensor_columns(sample_db, tmp_path):
+    rec = simulate(sample_db.clips[0], ["right_ankle", "pelvis"], 100.0, "clean")
+    path = write_generic_csv(rec, tmp_path / "two.csv")
+    assert "pelvis.gyro_z" in path.read_text().splitlines()[0]
+    back, _ = read_log(path, rate=None)
+    assert back.placements == ["right_ankle", "pelvis"]
+    np.testing.assert_allclose(back.acc, rec.acc, rtol=1e-7, atol=1e-7)
+
+
+def test_units_detected_and_overridden(walk_rec, tmp_path):
+    g, deg = 9.80665, np.pi / 180
+    scaled = Recording(walk_rec.times, walk_rec.acc / g, walk_rec.gyro / deg, ["right_ankle"])
+    path = write_generic_csv(scaled, tmp_path / "g_deg.csv")
+    back, report = read_log(path, rate=None)
+    assert (report.acc_unit, report.gyro_unit) == ("g", "deg/s")
+    np.testing.assert_allclose(back.acc, walk_rec.acc, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(back.gyro, walk_rec.gyro, rtol=1e-6, atol=1e-6)
+    forced, report = read_log(path, rate=None, acc_unit="m/s^2", gyro_unit="rad/s")
+    assert not report.acc_unit_detected and not report.gyro_unit_detected
+    np.testing.assert_allclose(forced.acc, scaled.acc, rtol=1e-7, atol=1e-7)
+
+
+def test_gyro_unit_of_a_phone_at_rest(tmp_path):
+    """At rest the noise floor decides: ~0.3 deg/s bias against ~0.01 rad/s."""
+    rng = np.random.default_rng(1)
+    t = np.arange(0, 5, 0.01)
+    acc = np.tile([0.0, 9.81, 0.0], (len(t), 1)) + rng.normal(0, 0.03, (len(t), 3))
+    for unit, bias, noise in (("rad/s", 0.01, 0.005), ("deg/s", 0.3, 0.1)):
+        gyro = bias + rng.normal(0, noise, (len(t), 3))
+        rec = Recording(t, acc[:, None], gyro[:, None], ["right_ankle"])
+        _, report = read_log(write_generic_csv(rec, tmp_path / f"{unit[:3]}.csv"), rate=None)
+        assert report.gyro_unit == unit
+
+
+def test_unsorted_and_duplicate_timestamps(walk_rec, tmp_path):
+    path = write_generic_csv(walk_rec, tmp_path / "rec.csv")
+    lines = path.read_text().splitlines()
+    header, rows = lines[0], lines[1:]
+    rng = np.random.default_rng(0)
+    swaps = rng.choice(len(rows) - 1, 20, replace=False)
+    for i in swaps:
+        rows[i], rows[i + 1] = rows[i + 1], rows[i]
+    dups = rng.choice(len(rows), 15, replace=False)
+    rows = rows + [rows[i] for i in dups]
+    path.write_text("\n".join([header] + rows) + "\n")
+    back, report = read_log(path, rate=None)
+    assert report.duplicates["acc"] == 15 and report.duplicates["gyro"] == 15
+    assert report.unsorted["acc"] > 0
+    assert np.all(np.diff(back.times) > 0)
+    np.testing.assert_allclose(back.times, _shifted(walk_rec), atol=2e-6)
+    np.testing.assert_allclose(back.acc, walk_rec.acc, rtol=1e-7, atol=1e-7)
+
+
+def test_gap_reported_not_hidden(walk_rec, tmp_path):
+    keep = (walk_rec.times < 2.0) | (walk_rec.times > 2.6)
+    holed = Recording(walk_rec.times[keep], walk_rec.acc[keep], walk_rec.gyro[keep],
+                      ["right_ankle"])
+    path = write_generic_csv(holed, tmp_path / "holed.csv")
+    rec, report = read_log(path, max_gap=0.2)
+    assert len(report.gaps) == 1
+    gap = report.gaps[0]
+    t0 = walk_rec.times[0]
+    assert gap.start == pytest.approx(walk_rec.times[walk_rec.times < 2.0][-1] - t0, abs=1e-5)
+    assert gap.stop == pytest.approx(walk_rec.times[walk_rec.times > 2.6][0] - t0, abs=1e-5)
+    assert np.isfinite(rec.channels()).all()
+    with pytest.raises(ValueError, match="gap"):
+        read_log(path, max_gap=0.2, on_gap="raise")
+    _, report = read_log(path, max_gap=1.0)
+    assert report.gaps == []
+
+
+@pytest.mark.parametrize("row, line, expect", [
+    ("0.5,1,2,x3,4,5,6", 4, "acc_z"),
+    ("0.5,1,2,3,4,5", 4, "expected 7 values"),
+    ("0.5,1,2,nan,4,5,6", 4, "finite"),
+])
+def test_malformed_row_names_line_and_column(tmp_path, row, line, expect):
+    path = tmp_path / "bad.csv"
+    path.write_text("time_s,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z\n0.0,0,9.8,0,0,0,0\n"
+                    f"0.01,0,9.8,0,0,0,0\n{row}\n")
+    with pytest.raises(FormatError, match=expect) as err:
+        read_log(path)
+    assert err.value.line == line and err.value.path == str(path)
+
+
+def test_unknown_header_and_missing_gyro(tmp_path):
+    path = tmp_path / "what.csv"
+    path.write_text("a,b,c\n1,2,3\n")
+    with pytest.raises(FormatError, match="unknown sensor log"):
+        read_log(path)
+    path.write_text("time_s,acc_x,acc_y,acc_z\n0,0,9.8,0\n")
+    with pytest.raises(FormatError, match="gyro_x"):
+        read_log(path, fmt="generic")
+
+
+def _phyphox_rows(rec: Recording, sep: str = ",", comma: bool = False) -> tuple[str, str]:
+    def fmt(v: float) -> str:
+        s = f"{v:.9E}"
+        return s.replace(".", ",") if comma else s
+
+    acc = [sep.join(f'"{h}"' for h in ["Time (s)", "Acceleration x (m/s^2)",
+           "Acceleration y (m/s^2)", "Acceleration z (m/s^2)", "Absolute acceleration (m/s^2)"])]
+    gyr = [sep.join(f'"{h}"' for h in ["Time (s)", "Gyroscope x (rad/s)", "Gyroscope y (rad/s)",
+           "Gyroscope z (rad/s)", "Absolute (rad/s)"])]
+    for t, a, w in zip(rec.times, rec.acc[:, 0], rec.gyro[:, 0]):
+        acc.append(sep.join(fmt(v) for v in [t, *a, np.linalg.norm(a)]))
+        gyr.append(sep.join(fmt(v) for v in [t + 0.003, *w, np.linalg.norm(w)]))
+    return "\n".join(acc) + "\n", "\n".join(gyr) + "\n"
+
+
+@pytest.mark.parametrize("sep, comma", [(",", False), ("\t", False), (";", True)])
+def test_phyphox_exports(walk_rec, tmp_path, sep, comma):
+    acc, gyr = _phyphox_rows(walk_rec, sep, comma)
+    (tmp_path / "acc.csv").write_text(acc)
+    (tmp_path / "gyr.csv").write_text(gyr)
+    assert detect_format(tmp_path / "acc.csv") == "phyphox"
+    rec, report = read_log([tmp_path / "acc.csv", tmp_path / "gyr.csv"], rate=None)
+    assert report.format == "phyphox" and not report.acc_unit_detected
+    np.testing.assert_allclose(rec.acc, walk_rec.acc[1:], rtol=1e-6, atol=1e-6)
+    # the gyroscope came 3 ms later: interpolated at the accelerometer's instants
+    assert np.corrcoef(rec.gyro[:, 0, 0], walk_rec.gyro[1:, 0, 0])[0, 1] > 0.99
+
+
+def test_phyphox_combined_table_and_linear_acceleration(walk_rec, tmp_path):
+    acc, gyr = _phyphox_rows(walk_rec)
+    both = [a + "," + g for a, g in zip(acc.splitlines(), gyr.splitlines())]
+    (tmp_path / "both.csv").write_text("\n".join(both) + "\n")
+    rec, _ = read_log(tmp_path / "both.csv", rate=None)
+    np.testing.assert_allclose(rec.acc, walk_rec.acc[1:], rtol=1e-6, atol=1e-6)
+    (tmp_path / "lin.csv").write_text(acc.replace("Acceleration x", "Linear Acceleration x"))
+    with pytest.raises(FormatError, match="without gravity"):
+        read_log(tmp_path / "lin.csv")
+
+
+def _sensor_logger(folder: Path, rec: Recording, total: bool, ios: bool) -> None:
+    folder.mkdir()
+    t0 = 1_700_000_000 * 10**9
+    sign = -1.0 if ios else 1.0
+    gravity = np.tile([0.0, 9.80665, 0.0], (rec.num_samples, 1))  # any split of the total works
+
+    def write(name: str, times: np.ndarray, xyz: np.ndarray) -> None:
+        lines = ["time,seconds_elapsed,z,y,x"]
+        for t, (x, y, z) in zip(times, xyz):
+            lines.append(f"{t0 + round(t * 1e9)},{t:.9f},{z:.9g},{y:.9g},{x:.9g}")
+        (folder / name).write_text("\n".join(lines) + "\n")
+
+    acc = rec.acc[:, 0]
+    if total:
+        write("TotalAcceleration.csv", rec.times, sign * acc)
+    else:
+        write("Accelerometer.csv", rec.times, sign * (acc - gravity))
+        write("Gravity.csv", rec.times, sign * gravity)
+    write("Gyroscope.csv", rec.times + 0.002, rec.gyro[:, 0])
+    (folder / "Metadata.csv").write_text(
+        "version,device name,recording time,platform\n"
+        f"3,test,2024-01-01_00-00-00,{'ios' if ios else 'android'}\n")
+
+
+@pytest.mark.parametrize("total, ios", [(True, False), (False, False), (False, True)])
+def test_sensor_logger_export(walk_rec, tmp_path, total, ios):
+    folder = tmp_path / "sl"
+    _sensor_logger(folder, walk_rec, total, ios)
+    assert detect_format(folder) == "sensorlogger"
+    rec, report = read_log(folder, rate=None)
+    assert report.format == "sensorlogger"
+    np.testing.assert_allclose(rec.acc, walk_rec.acc[1:], rtol=1e-6, atol=1e-5)
+
+
+def test_sensor_logger_without_gravity_refused(walk_rec, tmp_path):
+    folder = tmp_path / "sl"
+    _sensor_logger(folder, walk_rec, total=False, ios=False)
+    (folder / "Gravity.csv").unlink()
+    with pytest.raises(FormatError, match="Gravity.csv"):
+        read_log(folder)
+
+
+@pytest.mark.shared
+def test_realworld_shin_pair(shared_dir):
+    folder = shared_dir.parent / "realworld-shin"
+    rec, report = read_log(folder / "acc_walking_shin.csv")
+    assert report.format == "realworld" and len(report.files) == 2
+    assert (report.acc_unit, report.gyro_unit) == ("m/s^2", "rad/s")
+    assert 45.0 < report.source_rate < 55.0
+    assert np.isfinite(rec.channels()).all() and rec.is_uniform()
+    assert 600 < rec.times[-1] < 660
+    assert report.gaps  # the log has stretches of ~1 s without samples: reported
+    rest = still_mask(rec.acc[:, 0], rec.gyro[:, 0], 100.0)
+    assert rest.sum() > 100  # over a second standing still
+    g = rec.acc[rest, 0].mean(axis=0)
+    assert 9.5 < np.linalg.norm(g) < 10.3
+    assert g[1] > 0.97 * np.linalg.norm(g)  # +y runs up the shin
+
+
+@settings(max_examples=25, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.integers(2, 40), st.integers(1, 3), st.integers(0, 2**31 - 1))
+def test_generic_round_trip_property(tmp_path, n, sensors, seed):
+    rng = np.random.default_rng(seed)
+    times = np.cumsum(rng.uniform(0.001, 0.05, n)) + rng.uniform(0, 1e3)
+    acc = rng.normal(0, 50, (n, sensors, 3))
+    gyro = rng.normal(0, 10, (n, sensors, 3))
+    names = ["right_ankle", "pelvis", "head"][:sensors]
+    rec = Recording(times, acc, gyro, names)
+    path = write_generic_csv(rec, tmp_path / f"p{seed}.csv", overwrite=True)
+    back, _ = read_log(path, rate=None, acc_unit="m/s^2", gyro_unit="rad/s",
+                       max_gap=np.inf)
+    assert back.placements == (names if sensors > 1 else ["right_ankle"])
+    np.testing.assert_allclose(back.times, times - times[0], atol=2e-6)
+    np.testing.assert_allclose(back.acc, acc, rtol=1e-7, atol=1e-6)
+    np.testing.assert_allclose(back.gyro, gyro, rtol=1e-7, atol=1e-6)
