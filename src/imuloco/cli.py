@@ -41,6 +41,401 @@ def info(file: Path, as_json: bool) -> None:
         click.echo(f"{key:>15}: {value}")
 
 
+@cli.command()
+@click.argument("motion_file", metavar="MOTION", type=click.Path(exists=True, dir_okay=False,
+                                                                 path_type=Path))
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
+@click.option("--reference", type=click.Choice(["right", "left"]), default="right",
+              show_default=True, help="Leg whose 8-phase cycle is labelled.")
+def phases(motion_file: Path, as_json: bool, reference: str) -> None:
+    """Per-frame foot contacts and gait phases, and step events, of a MOTION file."""
+    from imuloco.io.motionfile import read_motion
+    from imuloco.phases import gait_phases
+
+    report = gait_phases(read_motion(motion_file), reference=reference).to_dict()
+    if as_json:
+        click.echo(json.dumps(report))
+        return
+    c = report["contacts"]
+    click.echo(f"{'frame':>5} {'time_s':>7}  LH LT RH RT  {'support':<7} {'eom2014':<10} phase")
+    for t in range(report["frames"]):
+        flags = "  ".join(str(c[k][t]) for k in ("left_heel", "left_toe", "right_heel",
+                                                 "right_toe"))
+        click.echo(f"{t:>5} {t / report['fps']:>7.3f}   {flags}  {report['support'][t]:<7} "
+                   f"{report['eom2014'][t]:<10} {report['phase'][t]}")
+    for foot in ("left", "right"):
+        click.echo(f"{foot} strikes: {report['steps'][foot]}")
+    click.echo(f"cadence: {report['cadence_spm']} steps/min; flight frames: "
+               f"{len(report['flight_frames'])}")
+
+
+@cli.command()
+def methods() -> None:
+    """List the reconstruction methods with one line each."""
+    from imuloco.methods import REGISTRY
+
+    width = max(len(n) for n in REGISTRY)
+    for name in sorted(REGISTRY):
+        cls = REGISTRY[name]
+        online = "online" if cls.supports_online else "offline"
+        click.echo(f"{name:<{width}}  [{online:>7}]  {cls.summary}")
+
+
+def _csv(value: str | None) -> list[str]:
+    return [v.strip() for v in (value or "").split(",") if v.strip()]
+
+
+@cli.command()
+@click.option("--method", "method_names", required=True,
+              help="Method name(s), comma separated (see `imuloco methods`).")
+@click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
+              default="random-clips", show_default=True)
+@click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
+              show_default=True)
+@click.option("--placement", default="right_ankle", show_default=True,
+              help="Sensor placement preset(s), comma separated.")
+@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=None, help="Folder of clips [default: the bundled sample].")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="Folder for results.json and results.md.")
+@click.option("--limit", type=int, default=None, help="Read at most N clips (quick runs).")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--speed", is_flag=True,
+              help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
+@click.option("--db-frames", default=None,
+              help="With --speed: database sizes in frames, comma separated.")
+def bench(method_names: str, split_name: str, noise: str, placement: str, data: Path | None,
+          out: Path, limit: int | None, seed: int, speed: bool, db_frames: str | None) -> None:
+    """Train methods, reconstruct every test clip and write results.json and results.md."""
+    names = _csv(method_names)
+    if speed:
+        from imuloco.evaluate.speed import speed_benchmark
+
+        frames = [int(v) for v in _csv(db_frames)] or None
+        speed_benchmark(names, out, data, frames)
+        return
+    from imuloco.evaluate.bench import run_bench
+    from imuloco.evaluate.report import COLUMNS, table
+
+    try:
+        records = run_bench(names, split_name, noise, _csv(placement), data, out, limit, seed,
+                            progress=True)
+    except KeyError as e:
+        raise click.UsageError(str(e.args[0])) from None
+    click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
+    click.echo(f"wrote {out / 'results.json'} and {out / 'results.md'}")
+
+
+@cli.command()
+@click.argument("ground_truth", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("reconstructed", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
+def evaluate(ground_truth: Path, reconstructed: Path, as_json: bool) -> None:
+    """Print the metrics of a RECONSTRUCTED motion against its GROUND_TRUTH (same skeleton;
+    the longer is cut to the shorter's length)."""
+    from imuloco.evaluate.metrics import evaluate_files
+
+    try:
+        values, note = evaluate_files(ground_truth, reconstructed)
+    except ValueError as e:
+        raise click.ClickException(str(e)) from None
+    if note:
+        click.echo(note, err=True)
+    if as_json:
+        click.echo(json.dumps(values, indent=2))
+        return
+    for key, value in values.items():
+        click.echo(f"{key:>20}: {value:.4g}")
+
+
+def _param(items: tuple[str, ...]) -> dict:
+    """``key=value`` pairs; values parsed as JSON when they can be (numbers, true, null)."""
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise click.BadParameter(f"expected key=value, got {item!r}", param_hint="--param")
+        key, value = item.split("=", 1)
+        try:
+            out[key.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key.strip()] = value
+    return out
+
+
+@cli.command()
+@click.option("--method", "method_name", required=True, help="Method name (`imuloco methods`).")
+@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=None, help="Folder of clips [default: the bundled sample].")
+@click.option("--placement", default="right_ankle", show_default=True,
+              help="Sensor placement preset(s), comma separated.")
+@click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
+              show_default=True)
+@click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
+              default=None, help="Train on this split's training part only [default: all].")
+@click.option("--param", "params", multiple=True, metavar="KEY=VALUE",
+              help="A hyperparameter of the method (repeatable), e.g. --param epochs=4.")
+@click.option("--limit", type=int, default=None, help="Read at most N clips (quick runs).")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Model file to write (.npz).")
+@click.option("--force", is_flag=True, help="Overwrite the output file.")
+def train(method_name: str, data: Path | None, placement: str, noise: str,
+          split_name: str | None, params: tuple[str, ...], limit: int | None, seed: int,
+          output: Path, force: bool) -> None:
+    """Fit a method on motion clips with simulated sensors and save the model.
+
+    Writes OUTPUT, and for methods that keep a training history (``learned``) its losses per
+    epoch beside it as OUTPUT.history.json and, with matplotlib, OUTPUT.curves.png.
+    """
+    import datetime
+    import platform
+    import time
+
+    from imuloco.evaluate.protocols import split
+    from imuloco.io.database import load_database, load_sample
+    from imuloco.methods import get_method
+
+    if output.exists() and not force:
+        raise click.UsageError(f"{output} exists; pass --force to replace it")
+    try:
+        method = get_method(method_name, **_param(params))
+    except KeyError as e:
+        raise click.UsageError(str(e.args[0])) from None
+    except TypeError as e:
+        raise click.UsageError(f"--param: {e}") from None
+    db = load_sample() if data is None else load_database(data, limit=limit)
+    if data is None and limit is not None:
+        db = db.subset(list(range(min(limit, len(db)))))
+    if split_name is not None:
+        db = split(db, split_name)[0]
+    placements = _csv(placement)
+    start = time.perf_counter()
+    method.fit(db, placements, noise, seed, progress=True)
+    seconds = time.perf_counter() - start
+    method.protocol_ = {
+        "data": "bundled sample" if data is None else Path(data).name, "clips": len(db),
+        "frames": int(db.num_frames), "split": split_name or "all", "placements": placements,
+        "noise": noise, "seed": seed, "train_seconds": round(seconds, 1),
+        "trained_at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "machine": f"{platform.machine()}, {__import__('os').cpu_count()} CPUs",
+    }
+    method.save(output, overwrite=force)
+    click.echo(f"trained {method_name} on {len(db)} clips ({db.num_frames} frames) in "
+               f"{seconds / 60:.1f} min; wrote {output}")
+    history = getattr(method, "history_", None)
+    if history:
+        hist_path = output.with_name(output.name + ".history.json")
+        hist_path.write_text(json.dumps(history, indent=1))
+        click.echo(f"wrote {hist_path}")
+        from imuloco.methods.learned.train import plot_history
+
+        png = plot_history(history, output.with_name(output.name + ".curves.png"))
+        if png is not None:
+            click.echo(f"wrote {png}")
+
+
+@cli.command("export-onnx")
+@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), required=True,
+              help="A model file written by `imuloco train` (method learned).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="ONNX file to write.")
+@click.option("--force", is_flag=True, help="Overwrite the output file.")
+def export_onnx_command(model_path: Path, output: Path, force: bool) -> None:
+    """Export a learned model to ONNX (per-frame network with its recurrent state)."""
+    from imuloco.methods import load_model
+
+    model = load_model(model_path)
+    if model.name != "learned":
+        raise click.UsageError(f"{model_path}: method {model.name!r} has no ONNX export; "
+                               "only `learned` models do")
+    from imuloco.methods.learned.export import export_onnx
+
+    try:
+        path = export_onnx(model, output, overwrite=force)
+    except FileExistsError as e:
+        raise click.UsageError(str(e)) from None
+    click.echo(f"wrote {path}")
+
+
+@cli.command()
+@click.argument("motion_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--placement", default="right_ankle", show_default=True,
+              help="Sensor placement(s), comma separated (e.g. right_ankle,pelvis).")
+@click.option("--noise", default="phone", show_default=True,
+              help="Noise preset: clean, phone or imu.")
+@click.option("--rate", default=100.0, show_default=True, type=float, help="Sampling rate, Hz.")
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the noise draws.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s).")
+@click.option("--force", is_flag=True, help="Replace OUTPUT if it exists.")
+def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: int,
+             output: Path, force: bool) -> None:
+    """Simulate body-worn phone sensors on MOTION_FILE and write them as generic CSV."""
+    from imuloco.io.motionfile import read_motion
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.sensors.noise import NOISE_PRESETS
+    from imuloco.sensors.placement import PRESETS
+    from imuloco.sensors.simulate import simulate as simulate_sensors
+
+    places = _csv(placement)
+    unknown = [p for p in places if p not in PRESETS]
+    if unknown:
+        raise click.BadParameter(f"unknown placement(s) {unknown}; presets: {sorted(PRESETS)}",
+                                 param_hint="--placement")
+    if noise not in NOISE_PRESETS:
+        raise click.BadParameter(f"unknown noise {noise!r}; presets: {sorted(NOISE_PRESETS)}",
+                                 param_hint="--noise")
+    if output.exists() and not force:
+        raise click.ClickException(f"{output} exists; pass --force to replace it")
+    rec = simulate_sensors(read_motion(motion_file), places, rate=rate, noise=noise, seed=seed)
+    write_generic_csv(rec, output, overwrite=True)
+    click.echo(f"wrote {output}: {rec.num_samples} samples, {len(places)} sensor(s) "
+               f"({', '.join(places)}), {rec.times[-1] - rec.times[0]:.2f} s, noise {noise}")
+
+
+def _refuse_existing(paths: list[Path | None], force: bool) -> None:
+    taken = [str(p) for p in paths if p is not None and p.exists()]
+    if taken and not force:
+        raise click.UsageError(f"{', '.join(taken)} exist(s); pass --force to replace")
+
+
+@cli.command()
+@click.argument("recording", nargs=-1, required=True,
+                type=click.Path(exists=True, path_type=Path))
+@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="Model file from `imuloco train` [default: the shipped pretrained model].")
+@click.option("--method", "method_name", default=None,
+              help="Method to use without --model (its shipped model, or fitted on the "
+                   "bundled sample) [default: learned, else the best available baseline].")
+@click.option("--placement", default="right_ankle", show_default=True,
+              help="Where the phone was worn (placement preset).")
+@click.option("--format", "fmt", default="auto", show_default=True,
+              type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
+              help="Sensor log format.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="BVH file to write (on the model's training skeleton).")
+@click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also render a stick-figure video (.mp4 or .gif).")
+@click.option("--video-seconds", type=float, default=None,
+              help="Render only the first seconds into --video.")
+@click.option("--html", "html_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Also write the interactive HTML viewer.")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
+              default=None, help="Also write the report (gait, checks) as JSON.")
+@click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
+@click.option("--force", is_flag=True, help="Replace existing output files.")
+def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
+                placement: str, fmt: str, output: Path, video: Path | None,
+                video_seconds: float | None, html_path: Path | None,
+                report_path: Path | None, no_calibrate: bool, force: bool) -> None:
+    """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
+
+    RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
+    accelerometer file and a gyroscope file (a RealWorld acc_*.csv finds its gyroscope_*.csv).
+    """
+    from imuloco.io.bvh import write_bvh
+    from imuloco.io.errors import FormatError
+    from imuloco.pipeline import reconstruct_file, render_outputs
+
+    _refuse_existing([output, video, html_path, report_path], force)
+    source = recording[0] if len(recording) == 1 else list(recording)
+    try:
+        motion, report = reconstruct_file(source, model=model_path, method=method_name,
+                                          placement=placement, fmt=fmt,
+                                          calibrate=not no_calibrate, progress=True)
+    except (FormatError, KeyError, ValueError) as e:
+        raise click.ClickException(str(e.args[0] if isinstance(e, KeyError) else e)) from None
+    click.echo(f"model: {report['model']}", err=True)
+    write_bvh(motion, output, overwrite=force)
+    written = [output]
+    if video or html_path:
+        written += render_outputs([motion], [f"{motion.name} ({report['method']})"],
+                                  [video] if video else [], html_path, overwrite=force,
+                                  progress=True, max_seconds=video_seconds)
+    if report_path:
+        report_path.write_text(json.dumps(report, indent=2) + "\n")
+        written.append(report_path)
+    g = report["gait"]
+    click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
+               f"cadence {g['cadence_spm']} steps/min (raw signal: "
+               f"{report['signal_cadence_spm']}), {int(g['steps'] or 0)} steps, speed "
+               f"{g['speed_mps']} m/s")
+    click.echo("wrote " + ", ".join(str(p) for p in written))
+
+
+@cli.command()
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("imuloco-demo"), show_default=True, help="Folder for the outputs.")
+@click.option("--method", "method_name", default=None,
+              help="Method to use [default: learned, else the best available baseline].")
+@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="Model file from `imuloco train`.")
+@click.option("--force", is_flag=True, help="Replace existing output files.")
+def demo(out_dir: Path, method_name: str | None, model_path: Path | None, force: bool) -> None:
+    """Simulate a phone on the right ankle of a bundled walk, reconstruct it and write the
+    BVH, a side-by-side video (MP4, GIF), the HTML viewer, plots and a report."""
+    from imuloco.pipeline import demo as run_demo
+
+    try:
+        report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
+                          progress=True)
+    except FileExistsError as e:
+        raise click.UsageError(str(e)) from None
+    m = report["metrics"]
+    click.echo(f"model: {report['model']}")
+    g, gt = report["gait"], report["gait_ground_truth"]
+    click.echo(f"MPJPE {m['mpjpe_cm']:.1f} cm, joint angle error {m['angle_deg']:.1f} deg; "
+               f"cadence {g['cadence_rhythm_spm']} steps/min from the legs' rhythm, "
+               f"{g['cadence_spm']} from detected strikes (ground truth {gt['cadence_spm']}); "
+               f"{report['seconds']:.0f} s")
+    click.echo(f"wrote {len(report['files'])} files to {out_dir}/ (open demo.html or "
+               f"demo.mp4; report.md)")
+
+
+@cli.command()
+@click.argument("motion_file", metavar="MOTION", type=click.Path(exists=True, dir_okay=False,
+                                                                 path_type=Path))
+@click.option("--ground-truth", "gt_file", type=click.Path(exists=True, dir_okay=False,
+                                                           path_type=Path), default=None,
+              help="A ground-truth motion drawn on the left, side by side.")
+@click.option("-o", "--output", "outputs", multiple=True, required=True,
+              type=click.Path(dir_okay=False, path_type=Path),
+              help="File(s) to write: .mp4, .gif, .html or .png (a strip of frames).")
+@click.option("--seconds", type=float, default=None, help="Only the first seconds (videos).")
+@click.option("--force", is_flag=True, help="Replace existing output files.")
+def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
+           seconds: float | None, force: bool) -> None:
+    """Render a MOTION file (BVH, ...) as stick-figure video, HTML viewer or frame strip."""
+    import numpy as np
+
+    from imuloco.io.motionfile import read_motion
+    from imuloco.pipeline import render_outputs
+    from imuloco.viz.skeleton import frame_strip
+
+    bad = [str(p) for p in outputs if p.suffix.lower() not in (".mp4", ".gif", ".html", ".png")]
+    if bad:
+        raise click.BadParameter(f"unsupported output type(s) {bad}: use .mp4, .gif, .html "
+                                 "or .png", param_hint="--output")
+    _refuse_existing(list(outputs), force)
+    motion = read_motion(motion_file)
+    motions, titles = [motion], [motion.name or motion_file.stem]
+    if gt_file is not None:
+        motions, titles = [read_motion(gt_file), motion], ["ground truth", titles[0]]
+    videos = [p for p in outputs if p.suffix.lower() in (".mp4", ".gif")]
+    html = next((p for p in outputs if p.suffix.lower() == ".html"), None)
+    written = render_outputs(motions, titles, videos, html, overwrite=force, progress=True,
+                             max_seconds=seconds)
+    for p in outputs:
+        if p.suffix.lower() == ".png":
+            span = motion.duration if seconds is None else min(seconds, motion.duration)
+            written.append(frame_strip(motions, np.linspace(0, span, 8), p, titles,
+                                       overwrite=force))
+    click.echo("wrote " + ", ".join(str(p) for p in written))
+
+
 def main() -> None:
     cli()
 

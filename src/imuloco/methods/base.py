@@ -19,6 +19,7 @@ from __future__ import annotations
 import inspect
 import json
 import zipfile
+import zlib
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from pathlib import Path
@@ -137,13 +138,16 @@ def load_model(path: str | Path) -> Method:
     """Load a model saved by :meth:`Method.save`. Never unpickles anything."""
     path = Path(path)
     try:
-        with np.load(path, allow_pickle=False) as z:
+        # open the file here: np.load leaks its own handle when the zip is truncated
+        with open(path, "rb") as f, np.load(f, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
         header = json.loads(bytes(data.pop("__header__")).decode())
     except FileNotFoundError:
         raise
-    except (zipfile.BadZipFile, ValueError, KeyError, OSError, EOFError) as e:
+    except (zipfile.BadZipFile, zlib.error, ValueError, KeyError, OSError, EOFError) as e:
         raise ModelFileError(f"{path}: not an imuloco model file or corrupted ({e})") from None
+    if not isinstance(header, dict):
+        raise ModelFileError(f"{path}: not an imuloco model file (header is not a JSON object)")
     version = header.get("format_version")
     if version != FORMAT_VERSION:
         raise ModelFileError(f"{path}: model file format version {version}, this imuloco reads "
@@ -153,13 +157,18 @@ def load_model(path: str | Path) -> Method:
     name = header.get("method")
     if name not in REGISTRY:
         raise ModelFileError(f"{path}: unknown method {name!r}; known: {sorted(REGISTRY)}")
-    method = REGISTRY[name](**header["params"])
-    sk = header["skeleton"]
-    method.skeleton_ = Skeleton(sk["names"], data.pop("__parents__"), data.pop("__offsets__"),
-                                {int(k): np.array(v) for k, v in sk["end_sites"].items()},
-                                sk["body_map"])
-    method.placements_ = header["placements"]
-    method.noise_ = header["noise"]
-    method.fps_ = header["fps"]
-    method.set_state(data, header["values"])
+    try:  # a header or arrays that do not fit the method: missing keys, wrong shapes
+        method = REGISTRY[name](**header["params"])
+        sk = header["skeleton"]
+        method.skeleton_ = Skeleton(sk["names"], data.pop("__parents__"),
+                                    data.pop("__offsets__"),
+                                    {int(k): np.array(v) for k, v in sk["end_sites"].items()},
+                                    sk["body_map"])
+        method.placements_ = header["placements"]
+        method.noise_ = header["noise"]
+        method.fps_ = header["fps"]
+        method.set_state(data, header["values"])
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        raise ModelFileError(f"{path}: {name} model file is incomplete or corrupted "
+                             f"({type(e).__name__}: {e})") from None
     return method

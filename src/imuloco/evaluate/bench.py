@@ -1,0 +1,205 @@
+"""The benchmark runner: fit methods on a protocol's training clips, reconstruct every test clip
+from freshly simulated sensors, measure, aggregate and report.
+
+Protocol details fixed here (see also :mod:`imuloco.evaluate.protocols`):
+
+- Test recordings: every test clip is simulated with ``seed + TEST_SEED_OFFSET`` (per clip,
+  :func:`imuloco.methods.training.clip_seed`), so they never share noise with training, and
+  resampled onto the clip's frame times (:func:`imuloco.methods.training.to_frames`) so that
+  reconstructed frames align with the ground truth's one to one.
+- Start: a reconstruction's root is turned and moved so that its first frame stands at the
+  ground truth's first root position and faces its first heading
+  (:func:`imuloco.evaluate.metrics.align_heading`); a user would give the start the same way.
+- Aggregation: per motion type and ``all``, each metric is the frame-weighted mean of its
+  per-clip values (for per-frame metrics this is the mean over all test frames; for ``dpv``,
+  a per-clip sum by definition, clips count by their length). ``foot_skate`` ignores clips
+  without ground-truth contact.
+- Cost: ``train_s`` is the wall time of ``fit`` (signal synthesis included);
+  ``offline_fps`` is test frames over the wall time of ``reconstruct_signals`` (simulation and
+  metrics excluded); online latency is the wall time of each ``stream().step`` over the first
+  test clip (at most :data:`LATENCY_FRAMES` frames), median and 99th percentile;
+  ``model_bytes`` the size of the saved model file. Each method runs with one BLAS/OpenMP
+  thread (threadpoolctl), like a single core, so that timings compare across machines'
+  core counts (torch's own thread pool is the method's business).
+
+Everything but the timings is deterministic: the same arguments give the same numbers.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+from tqdm.auto import tqdm
+
+from imuloco.core.motion import MotionDatabase
+from imuloco.evaluate import metrics
+from imuloco.evaluate.protocols import MOTION_TYPES, PROTOCOL_VERSION, split
+from imuloco.methods.training import TEST_SEED_OFFSET, Example, synthesize
+
+LATENCY_FRAMES = 300
+
+
+def load_data(data: str | Path | None, limit: int | None = None, progress: bool = False
+              ) -> MotionDatabase:
+    """The clips of folder ``data``, or the bundled sample when ``data`` is None."""
+    from imuloco.io.database import load_database, load_sample
+
+    if data is None:
+        db = load_sample(progress=progress)
+        return db.subset(list(range(min(limit, len(db))))) if limit else db
+    return load_database(data, limit=limit, progress=progress)
+
+
+def _aggregate(clips: list[dict[str, Any]]) -> dict[str, Any]:
+    """Frame-weighted means of per-clip metrics (nan values ignored)."""
+    out: dict[str, Any] = {"n_clips": len(clips), "n_frames": int(sum(c["n_frames"]
+                                                                      for c in clips))}
+    w = np.array([c["n_frames"] for c in clips], dtype=np.float64)
+    for key in metrics.METRIC_KEYS:
+        v = np.array([c[key] for c in clips], dtype=np.float64)
+        ok = np.isfinite(v)
+        out[key] = float(np.average(v[ok], weights=w[ok])) if ok.any() else None
+    return out
+
+
+def _latency(method, signals: np.ndarray) -> tuple[float | None, float | None]:
+    if not method.supports_online:
+        return None, None
+    stream = method.stream()
+    times = []
+    for sample in signals[:LATENCY_FRAMES]:
+        t0 = time.perf_counter()
+        stream.step(sample)
+        times.append(time.perf_counter() - t0)
+    ms = np.array(times) * 1e3
+    return float(np.percentile(ms, 50)), float(np.percentile(ms, 99))
+
+
+def _model_bytes(method) -> int:
+    with tempfile.TemporaryDirectory() as tmp:
+        return method.save(Path(tmp) / "model.npz").stat().st_size
+
+
+def evaluate_method(
+    name: str,
+    train: MotionDatabase,
+    test: list[Example],
+    placements: Sequence[str],
+    noise: str,
+    seed: int = 0,
+    params: dict[str, Any] | None = None,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Fit one method and measure it on the test examples.
+
+    Returns a dict with ``clips`` (per-clip metric dicts with ``name``, ``motion_type``,
+    ``n_frames``), ``cost`` (train_s, offline_fps, latencies, model_bytes), ``per_joint``
+    (mean heading-frame error per joint, cm, shape (J,)) and ``curves`` (per-frame RMSE, cm,
+    of each test clip by name).
+    """
+    from imuloco.methods import get_method
+
+    method = get_method(name, **(params or {}))
+    t0 = time.perf_counter()
+    method.fit(train, placements, noise, seed, progress=progress)
+    train_s = time.perf_counter() - t0
+    clips, rec_s, joint_sum, frames, curves = [], 0.0, 0.0, 0, {}
+    for ex in tqdm(test, desc=f"{name}: reconstructing", disable=not progress, unit="clip"):
+        gt = ex.motion
+        t0 = time.perf_counter()
+        rec = method.reconstruct_signals(ex.signals)
+        rec_s += time.perf_counter() - t0
+        rec = metrics.align_heading(rec, gt, 0)
+        values = metrics.evaluate(gt, rec)
+        err = metrics.joint_errors(gt, rec) * metrics.CM
+        joint_sum = joint_sum + err.sum(axis=0)
+        frames += gt.num_frames
+        curves[ex.labels["name"]] = np.sqrt((err[:, 1:] ** 2).mean(axis=1))
+        clips.append({"name": ex.labels["name"], "motion_type": ex.labels.get("content"),
+                      "n_frames": gt.num_frames, **values})
+    p50, p99 = _latency(method, test[0].signals)
+    cost = {"train_s": train_s, "offline_fps": frames / rec_s if rec_s > 0 else None,
+            "online_latency_ms_p50": p50, "online_latency_ms_p99": p99,
+            "model_bytes": _model_bytes(method)}
+    return {"clips": clips, "cost": cost, "per_joint": joint_sum / frames, "curves": curves}
+
+
+def run_bench(
+    methods: Sequence[str],
+    split_name: str = "random-clips",
+    noise: str = "phone",
+    placements: Sequence[str] = ("right_ankle",),
+    data: str | Path | None = None,
+    out: str | Path | None = None,
+    limit: int | None = None,
+    seed: int = 0,
+    progress: bool = False,
+) -> list[dict[str, Any]]:
+    """Run the benchmark protocol and return its records (one per method x motion type).
+
+    Parameters
+    ----------
+    methods : registry names.
+    split_name : ``"random-clips"`` or ``"heldout-styles"``.
+    noise : sensor noise preset for training and test signals.
+    placements : sensor placement presets.
+    data : folder of clips (None: the bundled sample).
+    out : folder for ``results.json``, ``per_clip.json`` and ``results.md`` (+ plots); None
+        writes nothing.
+    limit : read at most this many clips (before the split), for quick runs.
+    seed : training seed; test recordings use ``seed + TEST_SEED_OFFSET``.
+    """
+    from imuloco.methods import REGISTRY
+
+    unknown = [m for m in methods if m not in REGISTRY]
+    if unknown:
+        raise KeyError(f"unknown method(s) {unknown}; available: {sorted(REGISTRY)}")
+    placements = list(placements)
+    db = load_data(data, limit, progress)
+    train, test_db = split(db, split_name)
+    test = synthesize(test_db, placements, noise, seed + TEST_SEED_OFFSET, progress=progress)
+    header = {"split": split_name, "noise": noise, "placements": placements,
+              "protocol_version": PROTOCOL_VERSION, "seed": seed,
+              "data": "sample" if data is None else Path(data).name}
+    records, details = [], {}
+    for name in tqdm(methods, desc="methods", disable=not progress or len(methods) < 2):
+        with threadpool_limits(limits=1):
+            res = evaluate_method(name, train, test, placements, noise, seed,
+                                  progress=progress)
+        details[name] = res
+        types = [t for t in MOTION_TYPES if any(c["motion_type"] == t for c in res["clips"])]
+        types += sorted({c["motion_type"] for c in res["clips"]} - set(types) - {None})
+        for mtype in [*types, "all"]:
+            sel = [c for c in res["clips"] if mtype == "all" or c["motion_type"] == mtype]
+            records.append({"method": name, **header, "motion_type": mtype,
+                            **_aggregate(sel), **res["cost"]})
+    if out is not None:
+        write_results(records, details, test, Path(out))
+    return records
+
+
+def write_results(records: list[dict[str, Any]], details: dict[str, dict[str, Any]],
+                  test: list[Example], out: Path) -> None:
+    """``results.json`` (the records), ``per_clip.json`` and ``results.md`` with its plots."""
+    from imuloco.evaluate.report import write_report
+
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "results.json").write_text(json.dumps(records, indent=1) + "\n")
+    per_clip = [{"method": m, **{k: (None if isinstance(v, float) and not np.isfinite(v) else v)
+                                  for k, v in c.items()}}
+                for m, d in details.items() for c in d["clips"]]
+    (out / "per_clip.json").write_text(json.dumps(per_clip, indent=1) + "\n")
+    skeleton = test[0].motion.skeleton
+    clip = test[0].labels["name"]
+    write_report(records, out,
+                 per_joint={m: d["per_joint"] for m, d in details.items()},
+                 joint_names=skeleton.names,
+                 curves={m: d["curves"][clip] for m, d in details.items()},
+                 curve_clip=clip, fps=test[0].motion.fps)

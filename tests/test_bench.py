@@ -1,0 +1,145 @@
+"""The benchmark runner, its report and the bench / evaluate / methods commands (sample only)."""
+
+from __future__ import annotations
+
+import json
+from typing import Any, ClassVar
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from imuloco.cli import cli
+from imuloco.evaluate.bench import run_bench
+from imuloco.evaluate.protocols import PROTOCOL_VERSION
+from imuloco.methods import REGISTRY
+from imuloco.methods.baselines import MeanPose
+
+REQUIRED = ("method", "split", "noise", "placements", "motion_type", "mpjpe_cm", "rmse_cm",
+            "upper_cm", "lower_cm", "angle_deg", "dpv", "jitter", "foot_skate_cm_s", "train_s",
+            "offline_fps", "online_latency_ms_p50", "online_latency_ms_p99", "model_bytes",
+            "root_speed_err_cm_s", "path_err_cm", "protocol_version", "n_clips", "n_frames")
+TIMINGS = ("train_s", "offline_fps", "online_latency_ms_p50", "online_latency_ms_p99")
+# 8 sample clips (run and walk-turn-left, 4 styles each): heldout-styles tests 4 of them
+QUICK: dict[str, Any] = {"split_name": "heldout-styles", "noise": "phone",
+                         "placements": ["right_ankle"], "data": None, "limit": 8, "seed": 0}
+
+
+class OfflineMean(MeanPose):
+    """The mean pose without an online mode, to check the null latencies."""
+
+    name = "test-offline-mean"
+    summary = "test only"
+    supports_online: ClassVar[bool] = False
+
+    def stream(self) -> Any:
+        raise NotImplementedError
+
+
+@pytest.fixture(scope="module")
+def records(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    return run_bench(["mean", "ridge"], out=out, **QUICK), out
+
+
+def test_records_have_the_promised_keys(records):
+    recs, _ = records
+    assert [(r["method"], r["motion_type"]) for r in recs] == [
+        (m, t) for m in ("mean", "ridge") for t in ("walk-turn-left", "run", "all")]
+    for r in recs:
+        assert set(REQUIRED) <= set(r)
+        assert r["split"] == "heldout-styles" and r["noise"] == "phone"
+        assert r["placements"] == ["right_ankle"]
+        assert r["protocol_version"] == PROTOCOL_VERSION
+        assert r["model_bytes"] > 0 and r["offline_fps"] > 0
+        assert r["online_latency_ms_p99"] >= r["online_latency_ms_p50"] > 0
+    assert {r["n_clips"] for r in recs if r["motion_type"] == "all"} == {4}
+
+
+def test_all_row_is_the_frame_weighted_mean(records):
+    recs, _ = records
+    for m in ("mean", "ridge"):
+        rows = [r for r in recs if r["method"] == m and r["motion_type"] != "all"]
+        total = next(r for r in recs if r["method"] == m and r["motion_type"] == "all")
+        assert total["n_frames"] == sum(r["n_frames"] for r in rows)
+        for key in ("mpjpe_cm", "dpv", "path_err_cm"):
+            w = np.average([r[key] for r in rows], weights=[r["n_frames"] for r in rows])
+            assert total[key] == pytest.approx(w, rel=1e-12)
+
+
+def test_ridge_beats_the_mean_pose(records):
+    recs, _ = records
+    total = {r["method"]: r for r in recs if r["motion_type"] == "all"}
+    assert total["ridge"]["mpjpe_cm"] < total["mean"]["mpjpe_cm"]
+    # one pose at a constant speed and yaw rate: a circle, whose jerk v w^2 is tiny
+    assert total["mean"]["jitter"] < 1.0 < total["ridge"]["jitter"]
+
+
+def test_files_written(records):
+    recs, out = records
+    assert json.loads((out / "results.json").read_text()) == json.loads(json.dumps(recs))
+    per_clip = json.loads((out / "per_clip.json").read_text())
+    assert len(per_clip) == 2 * 4
+    md = (out / "results.md").read_text()
+    assert "| mean |" in md and "| ridge |" in md and "walk-turn-left" in md
+    pytest.importorskip("matplotlib")
+    assert (out / "error_per_joint.png").stat().st_size > 1000
+    assert (out / "error_over_time.png").stat().st_size > 1000
+
+
+def test_same_command_twice_gives_the_same_numbers(records):
+    again = run_bench(["mean", "ridge"], out=None, **QUICK)
+    first, _ = records
+    strip = [{k: v for k, v in r.items() if k not in TIMINGS} for r in first]
+    assert strip == [{k: v for k, v in r.items() if k not in TIMINGS} for r in again]
+
+
+def test_offline_method_has_null_latency(monkeypatch):
+    monkeypatch.setitem(REGISTRY, OfflineMean.name, OfflineMean)
+    recs = run_bench([OfflineMean.name], out=None, **QUICK)
+    assert all(r["online_latency_ms_p50"] is None and r["online_latency_ms_p99"] is None
+               for r in recs)
+
+
+def test_unknown_method_fails_before_work():
+    with pytest.raises(KeyError, match="available"):
+        run_bench(["no-such-method"], out=None, **QUICK)
+
+
+def test_cli_methods_and_bench(tmp_path):
+    runner = CliRunner()
+    res = runner.invoke(cli, ["methods"])
+    assert res.exit_code == 0
+    for name in ("mean", "ridge", "knn"):
+        assert any(line.startswith(name + " ") for line in res.output.splitlines())
+    res = runner.invoke(cli, ["bench", "--method", "mean", "--split", "heldout-styles",
+                              "--limit", "8", "--out", str(tmp_path / "b")])
+    assert res.exit_code == 0, res.output
+    recs = json.loads((tmp_path / "b" / "results.json").read_text())
+    assert recs[-1]["method"] == "mean" and recs[-1]["motion_type"] == "all"
+    res = runner.invoke(cli, ["bench", "--method", "nope", "--out", str(tmp_path / "c")])
+    assert res.exit_code != 0 and "unknown method" in res.output
+
+
+def test_cli_evaluate(tmp_path, sample_db):
+    from imuloco.io.bvh import write_bvh
+
+    a, b = sample_db.clips[0], sample_db.clips[3]  # two run clips, same skeleton
+    write_bvh(a, tmp_path / "a.bvh")
+    write_bvh(b, tmp_path / "b.bvh")
+    res = CliRunner().invoke(cli, ["evaluate", str(tmp_path / "a.bvh"), str(tmp_path / "a.bvh"),
+                                   "--json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.output)["mpjpe_cm"] == pytest.approx(0.0, abs=1e-6)
+    res = CliRunner().invoke(cli, ["evaluate", str(tmp_path / "a.bvh"), str(tmp_path / "b.bvh")])
+    assert res.exit_code == 0, res.output
+    assert "mpjpe_cm" in res.output
+
+
+def test_cli_evaluate_rejects_other_skeletons(tmp_path, sample_db, spinning_motion):
+    from imuloco.io.bvh import write_bvh
+
+    write_bvh(sample_db.clips[0], tmp_path / "a.bvh")
+    write_bvh(spinning_motion, tmp_path / "s.bvh")
+    res = CliRunner().invoke(cli, ["evaluate", str(tmp_path / "a.bvh"), str(tmp_path / "s.bvh")])
+    assert res.exit_code != 0 and "skeleton" in res.output
