@@ -359,9 +359,9 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         written.append(report_path)
     g = report["gait"]
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
-               f"cadence {g['cadence_spm']} steps/min (raw signal: "
-               f"{report['signal_cadence_spm']}), {int(g['steps'] or 0)} steps, speed "
-               f"{g['speed_mps']} m/s")
+               f"cadence {g['cadence_rhythm_spm']} steps/min from the legs' rhythm (raw "
+               f"signal: {report['signal_cadence_spm']}), {g['cadence_spm']} from "
+               f"{int(g['steps'] or 0)} detected strikes; speed {g['speed_mps']} m/s")
     click.echo("wrote " + ", ".join(str(p) for p in written))
 
 
@@ -434,6 +434,125 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
             written.append(frame_strip(motions, np.linspace(0, span, 8), p, titles,
                                        overwrite=force))
     click.echo("wrote " + ", ".join(str(p) for p in written))
+
+
+@cli.command()
+@click.argument("recordings", nargs=-1, type=click.Path(exists=True, path_type=Path))
+@click.option("--glob", "patterns", multiple=True, metavar="PATTERN",
+              help="Recordings matching a glob pattern, e.g. 'logs/*.csv' (repeatable).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              required=True, help="Folder for NAME.bvh, NAME.json and summary.csv/.json.")
+@click.option("-j", "--jobs", type=int, default=1, show_default=True,
+              help="Worker processes (-1: one per CPU; needs joblib, the [dist] extra).")
+@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="Model file from `imuloco train` [default: the shipped pretrained model].")
+@click.option("--method", "method_name", default=None,
+              help="Method to use without --model [default: learned, else a baseline].")
+@click.option("--placement", default="right_ankle", show_default=True,
+              help="Where the phones were worn (placement preset).")
+@click.option("--format", "fmt", default="auto", show_default=True,
+              type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
+              help="Sensor log format.")
+@click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
+@click.option("--force", is_flag=True, help="Replace existing output files.")
+def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path, jobs: int,
+          model_path: Path | None, method_name: str | None, placement: str, fmt: str,
+          no_calibrate: bool, force: bool) -> None:
+    """Reconstruct many RECORDINGS (one walker each) in parallel: a BVH and a gait report
+    per recording, and a summary.csv / summary.json of cadence, speed and step length."""
+    from imuloco.batch import find_recordings, run_batch
+
+    paths = find_recordings(recordings, patterns)
+    if not paths:
+        raise click.UsageError("no recordings: give files or --glob PATTERN")
+    try:
+        summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
+                            calibrate=not no_calibrate, overwrite=force, progress=True)
+    except (FileExistsError, KeyError, ValueError) as e:
+        raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
+    click.echo(f"model: {summary['model']}", err=True)
+    click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
+    def fmt_v(v: float | None, digits: int) -> str:
+        return "–" if v is None else f"{v:.{digits}f}"
+
+    for r in summary["recordings"]:
+        click.echo(f"{r['name'][:28]:<28} {fmt_v(r['cadence_spm'], 1):>8} "
+                   f"{fmt_v(r['speed_mps'], 2):>6} {fmt_v(r['step_length_m'], 2):>6}  "
+                   f"{r['status'] if r['status'] == 'ok' else r['error']}")
+    rate = len(paths) / max(summary["seconds"], 1e-9) * 60
+    click.echo(f"{summary['ok']} of {len(paths)} reconstructed in {summary['seconds']:.1f} s "
+               f"({rate:.1f} recordings/min, {summary['frames'] / summary['seconds']:.0f} "
+               f"frames/s, {jobs} job(s)); wrote {out_dir}/summary.csv and summary.json")
+    if summary["failed"]:
+        raise click.ClickException(f"{summary['failed']} recording(s) failed; see "
+                                   f"{out_dir / 'summary.csv'}")
+
+
+@cli.command()
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="Interface to listen on (0.0.0.0 lets a phone on the network connect).")
+@click.option("--port", default=8765, show_default=True, type=int)
+@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="Model file from `imuloco train` (an online method).")
+@click.option("--method", "method_name", default=None,
+              help="Online method to use without --model [default: learned, else a baseline].")
+@click.option("--placement", default="right_ankle", show_default=True,
+              help="Where the phone is worn (placement preset).")
+@click.option("--calibrate-seconds", type=float, default=5.0, show_default=True,
+              help="Seconds of samples to calibrate the phone on the leg (0: none).")
+@click.option("--replay", type=click.Path(exists=True, path_type=Path), default=None,
+              help="Stream this recorded log at real time instead of waiting for a phone.")
+@click.option("--format", "fmt", default="auto", show_default=True,
+              type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
+              help="Format of the --replay log.")
+@click.option("--speed", type=float, default=1.0, show_default=True,
+              help="Replay speed factor.")
+@click.option("--loop", is_flag=True, help="Replay the recording over and over.")
+@click.option("--cert", "certfile", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="TLS certificate (PEM): serve HTTPS, which phones need for motion sensors.")
+@click.option("--key", "keyfile", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Private key of --cert.")
+def live(host: str, port: int, model_path: Path | None, method_name: str | None,
+         placement: str, calibrate_seconds: float, replay: Path | None, fmt: str, speed: float,
+         loop: bool, certfile: str | None, keyfile: str | None) -> None:
+    """Watch a walker live: a phone on the leg streams its sensors (open /phone on it), a
+    browser shows the reconstruction as it walks (open /live). Ctrl-C stops."""
+    import asyncio
+
+    try:
+        from imuloco.live.server import LiveServer, run, ssl_context
+    except ImportError as e:
+        raise click.ClickException(f"live mode needs websockets: pip install imuloco[live] "
+                                   f"({e})") from None
+    from imuloco.pipeline import choose_method
+
+    try:
+        fitted, note = choose_method(method_name, model_path, placement, progress=True)
+        server = LiveServer(fitted, calibrate_seconds, note)
+    except (KeyError, ValueError) as e:
+        raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
+    ssl = ssl_context(certfile, keyfile) if certfile else None
+    scheme = "https" if ssl else "http"
+    shown = "localhost" if host in ("127.0.0.1", "0.0.0.0", "::") else host
+
+    def started(srv: LiveServer) -> None:
+        click.echo(f"model: {note}", err=True)
+        base = f"{scheme}://{shown}:{srv.port}"
+        click.echo(f"viewer: {base}/live    phone: {base}/phone" +
+                   ("" if host != "127.0.0.1" else "  (--host 0.0.0.0 for a phone on the "
+                                                   "network)"))
+        if not ssl and host != "127.0.0.1":
+            click.echo("phones only give motion sensors to https pages: pass --cert and --key",
+                       err=True)
+
+    replay_args = None if replay is None else {"path": replay, "placement": placement,
+                                               "fmt": fmt, "speed": speed, "loop": loop}
+    try:
+        asyncio.run(run(server, host, port, ssl, replay_args, on_start=started))
+    except KeyboardInterrupt:
+        click.echo("stopped")
 
 
 def main() -> None:

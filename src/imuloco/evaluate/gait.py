@@ -1,0 +1,230 @@
+"""Spatio-temporal gait parameters of one motion, as a gait laboratory reports them.
+
+From the foot strikes and contacts that :func:`imuloco.phases.gait_phases` detects:
+
+- ``cadence_spm``: steps per minute (both feet).
+- ``cadence_rhythm_spm``: cadence from the stride frequency of the ankles' alternation
+  (:func:`motion_cadence`), robust to spurious strikes in jittery reconstructions.
+- ``steps``: number of foot strikes (left + right).
+- ``step_length_m``: at each strike, the distance along the heading between the striking ankle
+  and the other ankle (the usual "heel to heel" step length, with the ankle joint for the heel);
+  the median over strikes.
+- ``stride_length_m``: horizontal distance the striking ankle travelled between two strikes of
+  the same foot; the median over strides.
+- ``speed_mps``: walking speed, the horizontal distance the pelvis travelled from the first to
+  the last strike divided by that time (so standing at the start or end does not count).
+- ``stance_pct`` / ``swing_pct``: per foot, the share of the frames between that foot's first
+  and last strike (whole gait cycles) spent in contact / in the air; ``stance_swing_ratio`` is
+  stance over swing (about 60/40 = 1.5 in normal walking, Perry and Burnfield 2010).
+- ``double_support_pct``: share of the frames between the first and the last strike with both
+  feet down.
+
+Lengths are in metres, so they depend on the skeleton's size (the training skeleton's for a
+reconstruction). Values that need more strikes than the motion has are NaN (``None`` in JSON).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from imuloco.core.motion import Motion
+from imuloco.phases import gait_phases
+from imuloco.phases.events import forward_difference, heading_angle
+from imuloco.phases.gait import GaitPhases
+
+FEET = ("left", "right")
+
+
+def _median(values: list[float] | np.ndarray) -> float:
+    values = np.asarray(values, dtype=np.float64)
+    return float(np.median(values)) if values.size else math.nan
+
+
+def _cycle_share(mask: np.ndarray, strikes: np.ndarray) -> float:
+    """Fraction of True frames of ``mask`` (T,) over whole cycles, first to last strike."""
+    if len(strikes) < 2:
+        return math.nan
+    return float(np.mean(mask[strikes[0]:strikes[-1]]))
+
+
+def gait_parameters(motion: Motion, phases: GaitPhases | None = None) -> dict[str, float]:
+    """Spatio-temporal gait parameters of ``motion`` (see the module docstring).
+
+    Parameters
+    ----------
+    motion : a walking (or running) Motion whose skeleton maps pelvis, hips and ankles.
+    phases : its :func:`imuloco.phases.gait_phases` when already computed.
+
+    Returns
+    -------
+    dict of floats (NaN where undefined): ``duration_s``, ``steps``, ``cadence_spm``,
+    ``cadence_rhythm_spm``, ``step_length_m``, ``stride_length_m``, ``speed_mps``, ``{left,right}_stance_pct``,
+    ``stance_pct``, ``swing_pct``, ``stance_swing_ratio``, ``double_support_pct``.
+    """
+    ph = gait_phases(motion) if phases is None else phases
+    fps = motion.fps
+    pos = motion.part_positions(["pelvis", "left_hip", "right_hip", "left_ankle", "right_ankle"])
+    theta = heading_angle(pos[:, 1], pos[:, 2], 0.1 * fps)
+    ahead = forward_difference(pos[:, 4], pos[:, 3], pos[:, 0], theta)  # right minus left, m
+    ankle = {"left": pos[:, 3], "right": pos[:, 4]}
+
+    step_lengths, stride_lengths = [], []
+    for foot in FEET:
+        strikes = ph.steps[foot]
+        sign = 1.0 if foot == "right" else -1.0
+        step_lengths += list(sign * ahead[strikes])
+        horiz = ankle[foot][strikes][:, [0, 2]]
+        stride_lengths += list(np.linalg.norm(np.diff(horiz, axis=0), axis=-1))
+
+    all_strikes = np.sort(np.concatenate([ph.steps[f] for f in FEET]))
+    if len(all_strikes) >= 2 and all_strikes[-1] > all_strikes[0]:
+        a, b = all_strikes[0], all_strikes[-1]
+        path = np.linalg.norm(np.diff(pos[a:b + 1, 0, :][:, [0, 2]], axis=0), axis=-1).sum()
+        speed = float(path / ((b - a) / fps))
+        both = ph.contacts["left_foot"] & ph.contacts["right_foot"]
+        double = float(np.mean(both[a:b]))
+    else:
+        speed = double = math.nan
+
+    stance = {f: _cycle_share(ph.contacts[f"{f}_foot"], ph.steps[f]) for f in FEET}
+    known = [v for v in stance.values() if not math.isnan(v)]
+    mean_stance = float(np.mean(known)) if known else math.nan
+    swing = 1.0 - mean_stance
+    ratio = mean_stance / swing if swing > 0 else math.nan
+    return {
+        "duration_s": float(motion.duration),
+        "steps": float(len(all_strikes)),
+        "cadence_spm": float(ph.cadence_spm),
+        "cadence_rhythm_spm": motion_cadence(motion),
+        "step_length_m": _median(step_lengths),
+        "stride_length_m": _median(stride_lengths),
+        "speed_mps": speed,
+        "left_stance_pct": 100.0 * stance["left"],
+        "right_stance_pct": 100.0 * stance["right"],
+        "stance_pct": 100.0 * mean_stance,
+        "swing_pct": 100.0 * swing,
+        "stance_swing_ratio": ratio,
+        "double_support_pct": 100.0 * double,
+    }
+
+
+def to_json(values: dict[str, float], digits: int = 4) -> dict[str, float | None]:
+    """Round floats and turn NaN into ``None`` for JSON."""
+    return {k: (None if v is None or (isinstance(v, float) and math.isnan(v))
+                else round(float(v), digits)) for k, v in values.items()}
+
+
+# ---- plausibility of a reconstruction without ground truth --------------------------------
+KNEE_LIMITS_DEG = (0.0, 160.0)  # full extension to deep flexion (passive range, adults)
+HIP_LIMITS_DEG = (0.0, 130.0)  # thigh against the trunk's downward axis, any direction
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle (...) in degrees between vectors a and b (..., 3)."""
+    cos = np.sum(a * b, axis=-1) / np.maximum(
+        np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1), 1e-12)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def knee_flexion(motion: Motion, side: str = "right") -> np.ndarray:
+    """Knee flexion (T,) in degrees from joint positions: the angle between the thigh
+    (hip to knee) and the shank (knee to ankle) directions, 0 with the leg straight. It does
+    not depend on the skeleton's rest-pose conventions."""
+    p = motion.part_positions([f"{side}_hip", f"{side}_knee", f"{side}_ankle"])
+    return _angle_deg(p[:, 1] - p[:, 0], p[:, 2] - p[:, 1])
+
+
+def hip_angle(motion: Motion, side: str = "right") -> np.ndarray:
+    """Angle (T,) in degrees between the thigh (hip to knee) and the trunk's downward axis
+    (neck to pelvis): 0 standing straight, ~90 sitting; flexion, extension and abduction alike."""
+    p = motion.part_positions(["neck", "pelvis", f"{side}_hip", f"{side}_knee"])
+    return _angle_deg(p[:, 3] - p[:, 2], p[:, 1] - p[:, 0])
+
+
+def signal_cadence(rec, sensor: int = 0, stride_hz: tuple[float, float] = (0.5, 1.8)) -> float:
+    """Cadence (steps/min) from the raw signal of a leg-worn sensor, independent of any
+    reconstruction.
+
+    The angular velocity about its principal axis (the leg's swing axis) repeats once per
+    stride, with a strong second harmonic (two steps per stride, two knee flexions per
+    cycle). With Welch's power spectral density ``P`` (16 s segments), the stride frequency is
+    the ``f`` within ``stride_hz`` (walking and running strides) that maximizes
+    ``P(f) + P(2 f)`` (a two-harmonic sum, so that neither a dominant fundamental nor a
+    dominant harmonic is mistaken for the other); one stride has two steps.
+
+    Parameters
+    ----------
+    rec : Recording (any sampling; resampled to 50 Hz internally).
+    sensor : index of the sensor; it must ride on a leg (one swing per stride).
+    """
+    from imuloco.ops.filters import resample_linear
+
+    rate = 50.0
+    t = np.arange(rec.times[0], rec.times[-1], 1.0 / rate)
+    if len(t) < 2:
+        return math.nan
+    gyro = resample_linear(rec.times, rec.gyro[:, sensor], t)
+    gyro = gyro - gyro.mean(axis=0)
+    _, _, vt = np.linalg.svd(gyro, full_matrices=False)
+    return _stride_cadence(gyro @ vt[0], rate, stride_hz)
+
+
+def _stride_cadence(x: np.ndarray, rate: float, stride_hz: tuple[float, float]) -> float:
+    """2 x 60 x the stride frequency of a signal x (T,) sampled at ``rate``: the f within
+    ``stride_hz`` maximizing Welch's ``P(f) + P(2 f)`` (16 s segments, so 0.0625 Hz bins,
+    interpolated; clips shorter than that are one segment)."""
+    from scipy.signal import welch
+
+    if len(x) < 2 * rate / stride_hz[0]:
+        return math.nan  # less than two strides
+    f, p = welch(x - x.mean(), fs=rate, nperseg=min(len(x), int(16 * rate)))
+    cand = np.linspace(stride_hz[0], stride_hz[1], 521)
+    score = np.interp(cand, f, p) + np.interp(2 * cand, f, p)
+    return float(2 * 60.0 * cand[np.argmax(score)])
+
+
+def motion_cadence(motion: Motion, stride_hz: tuple[float, float] = (0.5, 1.8)) -> float:
+    """Cadence (steps/min) from the rhythm of a motion rather than from detected strikes: the
+    stride frequency (see :func:`signal_cadence`) of how far the right ankle is ahead of the
+    left along the heading, which swings once per stride. Unlike the strike count it does
+    not depend on the contact detector, which jitter in a reconstruction can fool into
+    extra strikes. NaN for motions shorter than two slow strides (4 s)."""
+    pos = motion.part_positions(["pelvis", "left_hip", "right_hip", "left_ankle",
+                                 "right_ankle"])
+    theta = heading_angle(pos[:, 1], pos[:, 2], 0.1 * motion.fps)
+    ahead = forward_difference(pos[:, 4], pos[:, 3], pos[:, 0], theta)
+    return _stride_cadence(ahead, motion.fps, stride_hz)
+
+
+def plausibility(motion: Motion) -> dict[str, float]:
+    """Checks of a reconstruction that need no ground truth.
+
+    Returns
+    -------
+    dict: ``finite`` (1.0 when every rotation and position is finite), knee flexion
+    ``knee_min_deg``/``knee_max_deg`` (both legs, limits :data:`KNEE_LIMITS_DEG`), hip angle
+    ``hip_max_deg`` (limit :data:`HIP_LIMITS_DEG`), ``knee_out_of_range_pct`` and
+    ``hip_out_of_range_pct`` (frames outside the limits), ``foot_skate_cm_s`` (mean horizontal
+    speed of feet while the reconstruction's own contacts say they are down, see
+    :func:`imuloco.evaluate.metrics.foot_skate`) and ``contact_pct`` (frames with a foot down).
+    """
+    from imuloco.evaluate.metrics import foot_skate
+    from imuloco.phases import foot_contacts
+
+    pos = motion.positions()
+    finite = bool(np.all(np.isfinite(pos)) and np.all(np.isfinite(motion.rotations)))
+    knee = np.concatenate([knee_flexion(motion, s) for s in FEET])
+    hip = np.concatenate([hip_angle(motion, s) for s in FEET])
+    contacts = foot_contacts(motion)
+    down = contacts["left_foot"] | contacts["right_foot"]
+    out = lambda a, lim: 100.0 * float(np.mean((a < lim[0] - 1e-6) | (a > lim[1])))
+    return {
+        "finite": float(finite),
+        "knee_min_deg": float(knee.min()), "knee_max_deg": float(knee.max()),
+        "knee_out_of_range_pct": out(knee, KNEE_LIMITS_DEG),
+        "hip_max_deg": float(hip.max()), "hip_out_of_range_pct": out(hip, HIP_LIMITS_DEG),
+        "foot_skate_cm_s": foot_skate(motion, motion, contacts),
+        "contact_pct": 100.0 * float(np.mean(down)),
+    }

@@ -1,0 +1,129 @@
+"""The HTML viewer in a real headless browser: it loads offline, plays, pauses, scrubs, orbits.
+
+Needs the ``selenium`` Python package (in the ``dev`` extra) and Debian's ``chromium`` and
+``chromium-driver`` packages (``apt-get install -y chromium chromium-driver``); the tests skip
+when either is missing, so CI machines without a browser still pass. Selenium is pointed at
+the system chromedriver, so it downloads nothing.
+
+Artefact: every run writes a screenshot of the playing viewer to pytest's ``tmp_path``; set
+``IMULOCO_ARTIFACTS=DIR`` (for example ``tests/artifacts``) to also copy it to
+``DIR/viewer.png`` for a person to look at.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from pathlib import Path
+
+import pytest
+
+webdriver = pytest.importorskip("selenium.webdriver")
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+DRIVER = shutil.which("chromedriver")
+pytestmark = pytest.mark.skipif(not (CHROMIUM and DRIVER),
+                                reason="Debian chromium and chromium-driver are not installed")
+
+
+@pytest.fixture(scope="module")
+def page(tmp_path_factory, sample_db) -> Path:
+    from imuloco.viz.html import write_viewer
+
+    clip = sample_db.where(content="walk", style="normal").clips[0].slice(0, 120)
+    path = tmp_path_factory.mktemp("viewer") / "viewer.html"
+    return write_viewer([clip, clip], path, ["ground truth", "reconstruction"])
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from selenium.webdriver.chrome.service import Service
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                "--window-size=1000,700", "--disable-extensions", "--no-first-run"):
+        opts.add_argument(arg)
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
+    driver.set_page_load_timeout(60)
+    yield driver
+    driver.quit()
+
+
+def _wait(driver, script: str, timeout: float = 20.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = driver.execute_script(script)
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for: {script}")
+
+
+def _state(driver) -> dict:
+    return driver.execute_script(
+        "return {frame: imuloco.state.frame, playing: imuloco.state.playing, "
+        "drawn: imuloco.state.framesDrawn, azimuth: imuloco.state.azimuth, "
+        "joints: imuloco.screenJoints(0)};")
+
+
+def _moved(a: list, b: list) -> float:
+    return max(abs(p[0] - q[0]) + abs(p[1] - q[1]) for p, q in zip(a, b))
+
+
+def test_viewer_plays_pauses_scrubs_and_orbits(browser, page, tmp_path):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    browser.get(page.as_uri())
+    _wait(browser, "return window.imuloco && imuloco.state.framesDrawn > 2")
+    # it plays: the frame advances and the figure moves on screen
+    a = _state(browser)
+    _wait(browser, f"return imuloco.state.frame >= {a['frame']} + 5 || "
+                   f"imuloco.state.frame < {a['frame']}")
+    b = _state(browser)
+    assert a["playing"] and b["drawn"] > a["drawn"]
+    assert _moved(a["joints"], b["joints"]) > 3.0  # pixels
+    # every joint is drawn inside the left panel of the canvas
+    w, h = browser.execute_script("const c = document.getElementById('view'); "
+                                  "return [c.width, c.height];")
+    assert all(0 <= x <= w / 2 and 0 <= y <= h for x, y in b["joints"])
+
+    shot = tmp_path / "viewer.png"
+    browser.save_screenshot(str(shot))
+    assert shot.stat().st_size > 5000
+    if os.environ.get("IMULOCO_ARTIFACTS"):
+        out = Path(os.environ["IMULOCO_ARTIFACTS"])
+        out.mkdir(parents=True, exist_ok=True)
+        shutil.copy(shot, out / "viewer.png")
+
+    # pause: the frame stays
+    browser.find_element(By.ID, "play").click()
+    paused = _state(browser)
+    time.sleep(0.3)
+    assert not paused["playing"] and _state(browser)["frame"] == paused["frame"]
+    # scrub to a frame: the slider drives the figure
+    browser.execute_script("const s = document.getElementById('scrub'); s.value = 60; "
+                           "s.dispatchEvent(new Event('input'));")
+    s60 = _state(browser)
+    assert s60["frame"] == 60
+    browser.execute_script("const s = document.getElementById('scrub'); s.value = 75; "
+                           "s.dispatchEvent(new Event('input'));")
+    assert _moved(s60["joints"], _state(browser)["joints"]) > 3.0
+    # orbit by dragging: same frame, another view
+    before = _state(browser)
+    canvas = browser.find_element(By.ID, "view")
+    ActionChains(browser).move_to_element(canvas).click_and_hold().move_by_offset(
+        120, 0).release().perform()
+    after = _state(browser)
+    assert after["frame"] == before["frame"]
+    assert after["azimuth"] != pytest.approx(before["azimuth"])
+    assert _moved(before["joints"], after["joints"]) > 3.0
+    # speed
+    browser.execute_script("const s = document.getElementById('speed'); s.value = '2'; "
+                           "s.dispatchEvent(new Event('change'));")
+    assert browser.execute_script("return imuloco.state.speed") == 2
+    errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    assert not errors, errors
