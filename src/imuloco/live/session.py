@@ -1,0 +1,292 @@
+"""One live walker: raw phone samples in, calibrated model-rate frames through an online method,
+joint positions out. No I/O here: :mod:`imuloco.live.server` feeds it from a websocket or a
+replayed file, and tests feed it directly.
+
+Resampling is causal: frame ``k`` (time ``t0 + k / fps``) is the local linear Gaussian kernel
+regression of the raw samples within ``radius`` seconds of it, emitted
+as soon as a sample later than ``t_k + radius`` arrives. The kernel width defaults to half a
+model period, the anti-aliasing width of :func:`imuloco.sensors.resample.resample` (which the
+training signals went through), and ``radius`` to two widths, so the resampling adds one model
+period of lag (33 ms at 30 fps). Hand-written because scipy's filters need a uniform grid and
+the whole signal; kernel regression handles a phone's irregular timestamps directly, and
+:func:`kernel_resample` gives the same frames in one call for offline checks.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from imuloco.core.recording import Recording
+from imuloco.ops.rotations import qrot
+
+log = logging.getLogger(__name__)
+
+
+def _kernel_frame(t: np.ndarray, x: np.ndarray, tk: float, sigma: float, radius: float
+                  ) -> np.ndarray:
+    """Local linear Gaussian kernel regression at tk of samples x (N, C) at times t (N,) within
+    ``radius``; the linear interpolation of the samples around tk when none is that close (a
+    gap). Local linear rather than a weighted mean: with irregular timestamps the weighted
+    mean is biased by the slope times the samples' mean offset, the line is not."""
+    inside = np.abs(t - tk) <= radius
+    if not inside.any():
+        return np.array([np.interp(tk, t, x[:, c]) for c in range(x.shape[1])])
+    d, xs = t[inside] - tk, x[inside]
+    w = np.exp(-0.5 * (d / sigma) ** 2)
+    s0, s1, s2 = w.sum(), w @ d, w @ d**2
+    det = s0 * s2 - s1 * s1
+    if det <= 1e-12 * s0 * s2 or len(d) < 3:  # too few samples for a line: weighted mean
+        return (w @ xs) / s0
+    return (s2 * (w @ xs) - s1 * ((w * d) @ xs)) / det
+
+
+def kernel_resample(times: np.ndarray, values: np.ndarray, fps: float, sigma: float | None = None,
+                    radius: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The frames :class:`KernelResampler` emits for these samples, in one call.
+
+    Parameters
+    ----------
+    times : ndarray, shape (N,), seconds, increasing.
+    values : ndarray, shape (N, C).
+    fps : frame rate of the output grid, which starts at ``times[0]``.
+    sigma, radius : kernel width and support in seconds (default ``0.5 / fps`` and
+        ``2 * sigma``).
+
+    Returns
+    -------
+    frame times (K,) and frames (K, C): every grid time ``t_k`` with ``t_k + radius`` before the
+    last sample.
+    """
+    times, values = np.asarray(times, dtype=np.float64), np.asarray(values, dtype=np.float64)
+    sigma = 0.5 / fps if sigma is None else sigma
+    radius = 2.0 * sigma if radius is None else radius
+    n = int(np.ceil((times[-1] - radius - times[0]) * fps - 1e-9)) if len(times) else 0
+    grid = times[0] + np.arange(max(n, 0)) / fps
+    grid = grid[grid + radius < times[-1]]
+    frames = np.empty((len(grid), values.shape[1]))
+    for k, tk in enumerate(grid):
+        lo = max(np.searchsorted(times, tk - radius, side="left") - 1, 0)
+        hi = np.searchsorted(times, tk + radius, side="right") + 1
+        frames[k] = _kernel_frame(times[lo:hi], values[lo:hi], tk, sigma, radius)
+    return grid, frames
+
+
+class KernelResampler:
+    """Online :func:`kernel_resample`: push samples one at a time, get the frames they complete.
+
+    Holds only the samples within ``radius`` of the next frame (plus one before, for gaps).
+    """
+
+    def __init__(self, fps: float, sigma: float | None = None, radius: float | None = None):
+        self.fps = fps
+        self.sigma = 0.5 / fps if sigma is None else sigma
+        self.radius = 2.0 * self.sigma if radius is None else radius
+        self.t0: float | None = None
+        self.next = 0  # index of the next frame to emit
+        self.buf: deque[tuple[float, np.ndarray]] = deque()
+
+    def push(self, t: float, x: np.ndarray) -> list[tuple[int, float, np.ndarray]]:
+        """Add one sample (C,) at time t (after the previous one); returns the completed
+        frames as (index, time, values (C,))."""
+        if self.t0 is None:
+            self.t0 = t
+        self.buf.append((t, np.asarray(x, dtype=np.float64)))
+        out = []
+        while True:
+            tk = self.t0 + self.next / self.fps
+            if not tk + self.radius < t:
+                break
+            ts = np.array([s[0] for s in self.buf])
+            xs = np.stack([s[1] for s in self.buf])
+            out.append((self.next, tk, _kernel_frame(ts, xs, tk, self.sigma, self.radius)))
+            self.next += 1
+            # keep one sample before the next frame's support
+            tn = self.t0 + self.next / self.fps - self.radius
+            while len(self.buf) > 1 and self.buf[1][0] < tn:
+                self.buf.popleft()
+        return out
+
+
+def fk_frame(rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray, parents: np.ndarray
+             ) -> np.ndarray:
+    """World joint positions (J, 3) of one frame: local rotations (J, 4) x, y, z, w, root (3,).
+
+    The same result as :func:`imuloco.ops.kinematics.fk` for a single frame, through rotation
+    matrices: ``fk`` broadcasts over frames and its per-joint quaternion products cost about
+    10 ms per call on one frame (numpy call overhead), which a 30 fps stream cannot afford.
+    """
+    from scipy.spatial.transform import Rotation
+
+    local = Rotation.from_quat(rotations).as_matrix()
+    glob = np.empty_like(local)
+    pos = np.empty((len(parents), 3))
+    for j, p in enumerate(parents):
+        if p < 0:
+            glob[j], pos[j] = local[j], root
+        else:
+            glob[j] = glob[p] @ local[j]
+            pos[j] = pos[p] + glob[p] @ offsets[j]
+    return pos
+
+
+@dataclass
+class Frame:
+    """One reconstructed frame.
+
+    index : model frame number from the first sample; time : its time, seconds on the sender's
+    clock; trigger : time of the sample whose arrival completed it; rotations : (J, 4) local
+    quaternions x, y, z, w; root : (3,) metres; positions : (J, 3) world joint positions,
+    metres, Y up.
+    """
+
+    index: int
+    time: float
+    trigger: float
+    rotations: np.ndarray
+    root: np.ndarray
+    positions: np.ndarray
+
+
+@dataclass
+class Calibration:
+    """Per sensor phone-to-segment rotations (S, 4) found on the first ``samples`` samples."""
+
+    rotations: np.ndarray
+    samples: int
+    seconds: float
+    details: list[dict] = field(default_factory=list)
+
+
+class LiveSession:
+    """Calibrate, resample and reconstruct one walker's samples as they arrive.
+
+    Parameters
+    ----------
+    method : a fitted method with ``supports_online``; its ``placements_`` are the sensors
+        every sample carries, in order.
+    calibrate_s : seconds of samples to calibrate how the phone sits on the leg
+        (:func:`imuloco.sensors.calibration.calibrate`); the first frames come out then. While
+        a leg sensor shows fewer than two leg swings the calibration waits up to three times
+        as long for the walk to start. ``0`` skips calibration (phone strapped in the segment's
+        anatomical frame).
+    sigma_s, radius_s : resampling kernel (see the module docstring).
+    calibration : a calibration found earlier for the same phone (skips calibrating).
+    """
+
+    def __init__(self, method, calibrate_s: float = 5.0, sigma_s: float | None = None,
+                 radius_s: float | None = None, calibration: Calibration | None = None) -> None:
+        if not getattr(method, "supports_online", False):
+            raise ValueError(f"method {method.name!r} has no online mode; live needs one of "
+                             "the methods `imuloco methods` lists as online")
+        self.method = method
+        self.placements = list(method.placements_)
+        self.calibrate_s = calibrate_s
+        self.stream = method.stream()
+        self.resampler = KernelResampler(float(method.fps_), sigma_s, radius_s)
+        self.calibration = calibration
+        self._raw: list[tuple[float, np.ndarray, np.ndarray]] = []
+        self._next_try = calibrate_s
+        self.last_t: float | None = None
+        self.dropped = 0  # samples not after the previous one
+
+    @property
+    def num_sensors(self) -> int:
+        return len(self.placements)
+
+    def describe(self) -> str:
+        """One line for the user: calibration progress or the frame count."""
+        if self.calibration is None and self.calibrate_s > 0:
+            span = self.last_t - self._raw[0][0] if self._raw else 0.0
+            wait = "walk a few steps" if span > self.calibrate_s else "stand still, then walk"
+            return f"calibrating: {span:.1f} s of {self.calibrate_s:g} s ({wait})"
+        return f"streaming: frame {self.resampler.next}"
+
+    def push(self, t: float, acc: np.ndarray, gyro: np.ndarray) -> list[Frame]:
+        """One sample: t seconds, acc (S, 3) m/s^2 and gyro (S, 3) rad/s in the phone's axes.
+
+        Returns the frames it completes (none while calibrating, a burst when it ends).
+        """
+        acc = np.asarray(acc, dtype=np.float64).reshape(self.num_sensors, 3)
+        gyro = np.asarray(gyro, dtype=np.float64).reshape(self.num_sensors, 3)
+        if self.last_t is not None and t <= self.last_t:
+            self.dropped += 1
+            return []
+        self.last_t = t
+        if self.calibration is None and self.calibrate_s > 0:
+            self._raw.append((t, acc, gyro))
+            if t - self._raw[0][0] < self._next_try or not self._calibrate():
+                return []
+            raw, self._raw = self._raw, []
+            frames = [f for s in raw for f in self._feed(*s)]
+            for f in frames:  # all completed by this sample's arrival
+                f.trigger = t
+            return frames
+        return self._feed(t, acc, gyro)
+
+    def _calibrate(self) -> bool:
+        from imuloco.sensors.calibration import LEG_PLACEMENTS, calibrate
+
+        t = np.array([s[0] for s in self._raw])
+        rec = Recording(t, np.stack([s[1] for s in self._raw]), np.stack([s[2] for s in self._raw]),
+                        self.placements)
+        try:
+            _, mounts = calibrate(rec)
+        except (ValueError, IndexError, np.linalg.LinAlgError) as e:
+            # standing still only: estimate_mounting finds no swing (IndexError: too few
+            # moving samples for its gyroscope SVD)
+            mounts, why = None, f"{type(e).__name__}: {e}"
+        else:
+            legs = [m for p, m in zip(self.placements, mounts)
+                    if any(s in p for s in LEG_PLACEMENTS)]
+            why = "fewer than two leg swings" if any(m.swings < 2 for m in legs) else ""
+        span = t[-1] - t[0]
+        if why and span < 3 * self.calibrate_s:
+            self._next_try = span + 1.0
+            return False
+        if mounts is None:
+            log.warning("calibration failed (%s): the phone's axes are used as they are", why)
+            rot = np.tile([0.0, 0.0, 0.0, 1.0], (self.num_sensors, 1))
+            details = []
+        else:
+            rot = np.stack([m.rotation for m in mounts])
+            details = [{"placement": p, "up_from": m.up_source, "still_s": round(m.still_s, 2),
+                        "swings": m.swings} for p, m in zip(self.placements, mounts)]
+        self.calibration = Calibration(rot, len(t), float(span), details)
+        return True
+
+    def _feed(self, t: float, acc: np.ndarray, gyro: np.ndarray) -> list[Frame]:
+        if self.calibration is not None:
+            acc = qrot(self.calibration.rotations, acc)
+            gyro = qrot(self.calibration.rotations, gyro)
+        row = np.concatenate([acc, gyro], axis=-1).reshape(-1)  # (6S,) as Recording.channels
+        sk = self.method.skeleton_
+        out = []
+        for k, tk, x in self.resampler.push(t, row):
+            rot, root = self.stream.step(x)
+            pos = fk_frame(rot, root, sk.offsets, sk.parents)
+            out.append(Frame(k, tk, t, rot, root, pos))
+        return out
+
+
+def offline_frames(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, fps: float,
+                   rotations: np.ndarray | None = None, sigma: float | None = None,
+                   radius: float | None = None) -> np.ndarray:
+    """The signal frames (K, 6 S) a :class:`LiveSession` feeds its stream, computed in one go.
+
+    times (N,), acc and gyro (N, S, 3) raw samples; rotations (S, 4) the calibration.
+    """
+    if rotations is not None:
+        acc, gyro = qrot(rotations, acc), qrot(rotations, gyro)
+    chans = np.concatenate([acc, gyro], axis=-1).reshape(len(times), -1)
+    return kernel_resample(times, chans, fps, sigma, radius)[1]
+
+
+def frames_to_json(frames: Sequence[Frame]) -> list[dict]:
+    """Pose messages: joint positions in millimetres (0.1 mm), flattened (J * 3)."""
+    return [{"type": "pose", "frame": f.index, "t": round(f.time, 4), "trigger": f.trigger,
+             "positions": np.round(f.positions * 1000.0, 1).ravel().tolist()} for f in frames]

@@ -1,0 +1,386 @@
+"""Live mode: causal resampling, calibration, streaming = offline, and the websocket server."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import urllib.request
+
+import numpy as np
+import pytest
+
+from imuloco.core.recording import Recording
+from imuloco.live.session import (
+    KernelResampler,
+    LiveSession,
+    fk_frame,
+    kernel_resample,
+    offline_frames,
+)
+from imuloco.ops.kinematics import fk
+from imuloco.ops.rotations import from_rotvec, qrot
+from imuloco.sensors.calibration import calibrate
+from imuloco.sensors.simulate import simulate
+
+CLIP = "dataset-2_walk_normal_001"
+CALIB_S = 4.0
+
+
+@pytest.fixture(scope="module")
+def fitted(sample_db):
+    """ridge (online) fitted on the sample without the streamed clip."""
+    from imuloco.methods import get_method
+
+    keep = [i for i, lab in enumerate(sample_db.labels) if lab["name"] != CLIP]
+    return get_method("ridge").fit(sample_db.subset(keep), ["right_ankle"], "phone", 0)
+
+
+@pytest.fixture(scope="module")
+def phone(sample_db):
+    """A simulated phone on the right shank, strapped turned by an arbitrary rotation:
+    times (N,), acc and gyro (N, 1, 3) in the phone's axes."""
+    clip = next(c for c in sample_db.clips if c.name == CLIP)
+    rec = simulate(clip, ["right_ankle"], rate=100.0, noise="phone", seed=11)
+    q = from_rotvec(np.array([0.4, -1.2, 2.0]))
+    return rec.times, qrot(q, rec.acc), qrot(q, rec.gyro)
+
+
+def _irregular(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.cumsum(rng.uniform(0.004, 0.016, n))
+
+
+def test_online_resampler_gives_the_batch_frames_one_period_late():
+    t = _irregular(400, 0)
+    x = np.random.default_rng(1).normal(size=(400, 3))
+    r = KernelResampler(30.0)
+    got = []
+    for ti, xi in zip(t, x):
+        for k, tk, v in r.push(ti, xi):
+            assert ti > tk + r.radius  # emitted once its support is complete, not earlier
+            assert ti - tk <= r.radius + 0.016 + 1e-9  # and no later than the next sample
+            got.append((k, tk, v))
+    grid, frames = kernel_resample(t, x, 30.0)
+    assert [g[0] for g in got] == list(range(len(grid)))
+    np.testing.assert_array_equal(np.array([g[1] for g in got]), grid)
+    np.testing.assert_array_equal(np.stack([g[2] for g in got]), frames)
+    assert len(r.buf) < 10  # bounded state
+
+
+def test_kernel_resample_follows_a_smooth_signal_and_bridges_gaps():
+    t = _irregular(1000, 2)
+    t = np.concatenate([t[t < 3.0], t[t > 3.3]])  # a 0.3 s gap
+    x = np.stack([np.sin(2 * np.pi * t), np.full_like(t, 9.81)], axis=1)
+    grid, frames = kernel_resample(t, x, 30.0)
+    assert np.allclose(np.diff(grid), 1 / 30.0)
+    np.testing.assert_allclose(frames[:, 1], 9.81)  # constants stay constant
+    ok = (grid > 0.05) & ((grid < 2.95) | (grid > 3.35))
+    # a 1 Hz sine through a 17 ms Gaussian: attenuation exp(-(2 pi f sigma)^2 / 2) < 1 %
+    assert np.max(np.abs(frames[ok, 0] - np.sin(2 * np.pi * grid[ok]))) < 0.02
+    inside = (grid > 3.05) & (grid < 3.25)  # across the gap: between the two ends
+    assert inside.any() and np.all(np.abs(frames[inside, 0]) <= 1.0)
+
+
+def test_single_frame_fk_matches_the_batched_fk(sample_db):
+    clip = sample_db.clips[0]
+    sk = clip.skeleton
+    for t in (0, clip.num_frames // 2):
+        np.testing.assert_allclose(fk_frame(clip.rotations[t], clip.root[t], sk.offsets,
+                                            sk.parents),
+                                   fk(clip.rotations[t], clip.root[t], sk.offsets,
+                                      sk.parents)[1], atol=1e-12)
+
+
+def test_session_calibrates_then_streams_the_offline_reconstruction(fitted, phone):
+    times, acc, gyro = phone
+    s = LiveSession(fitted, calibrate_s=CALIB_S)
+    frames = []
+    for i in range(len(times)):
+        out = s.push(times[i], acc[i], gyro[i])
+        if s.calibration is None:
+            assert not out  # nothing before the calibration
+        frames += out
+    c = s.calibration
+    assert c is not None and c.details[0]["swings"] >= 2
+    # the calibration is the offline one on the same first samples
+    _, mounts = calibrate(Recording(times[:c.samples], acc[:c.samples], gyro[:c.samples],
+                                    ["right_ankle"]))
+    np.testing.assert_allclose(c.rotations[0], mounts[0].rotation)
+    assert times[c.samples - 1] - times[0] >= CALIB_S > times[c.samples - 2] - times[0]
+    # every frame, in order, equal to the offline reconstruction of the same frames
+    signals = offline_frames(times, acc, gyro, fitted.fps_, c.rotations)
+    offline = fitted.reconstruct_signals(signals).positions()
+    assert [f.index for f in frames] == list(range(len(signals)))
+    streamed = np.stack([f.positions for f in frames])
+    assert streamed.shape == offline.shape == (len(signals), fitted.skeleton_.num_joints, 3)
+    np.testing.assert_allclose(streamed, offline, atol=1e-9)
+    # the calibrated signals read gravity up the shank: mean specific force along +y
+    assert np.mean(signals[:, 1]) > 0.8 * np.linalg.norm(np.mean(signals[:, :3], axis=0))
+
+
+def test_session_refuses_offline_methods_and_drops_old_samples(fitted):
+    class Offline:
+        name, supports_online = "x", False
+
+    with pytest.raises(ValueError, match="no online mode"):
+        LiveSession(Offline())
+    s = LiveSession(fitted, calibrate_s=0)
+    s.push(1.0, np.zeros(3), np.zeros(3))
+    assert s.push(1.0, np.zeros(3), np.zeros(3)) == [] and s.dropped == 1
+
+
+# ---- the websocket server ------------------------------------------------------------------
+async def _stream_through_server(fitted, phone, n_samples: int, timeout: float = 60.0):
+    from websockets.asyncio.client import connect
+
+    from imuloco.live.server import LiveServer
+
+    times, acc, gyro = phone
+    rows = np.concatenate([times[:n_samples, None], acc[:n_samples, 0], gyro[:n_samples, 0]], 1)
+    server = LiveServer(fitted, calibrate_s=CALIB_S)
+    await server.start("127.0.0.1", 0)
+    base = f"ws://127.0.0.1:{server.port}"
+    poses, seen, calibration = [], [], None
+    try:
+        page = await asyncio.to_thread(
+            lambda: urllib.request.urlopen(f"http://127.0.0.1:{server.port}/phone",
+                                           timeout=10).read().decode())
+        async with connect(base + "/ws/view") as view, connect(base + "/ws/phone") as ph:
+            hello = json.loads(await asyncio.wait_for(view.recv(), 10))
+            async with connect(base + "/ws/phone") as second:  # one phone at a time
+                await asyncio.wait_for(second.wait_closed(), 10)
+                assert second.close_code == 1013
+            await ph.send("not json")
+            err = {"type": None}
+            while err["type"] != "error":  # status messages come to the phone too
+                err = json.loads(await asyncio.wait_for(ph.recv(), 10))
+            for i in range(0, len(rows), 10):
+                await ph.send(json.dumps({"rows": rows[i:i + 10].tolist()}))
+            expected = len(kernel_resample(times[:n_samples], rows[:, 1:], fitted.fps_)[0])
+            loop = asyncio.get_running_loop()
+            end = loop.time() + timeout
+            while len(poses) < expected:
+                msg = json.loads(await asyncio.wait_for(view.recv(), end - loop.time()))
+                seen.append(msg["type"])
+                if msg["type"] == "pose":
+                    poses.append(msg)
+                elif msg["type"] == "calibrated":
+                    calibration = np.array(msg["rotations"])
+    finally:
+        await server.close()
+    return page, hello, err, poses, seen, calibration
+
+
+def test_server_streams_poses_equal_to_the_offline_method(fitted, phone):
+    pytest.importorskip("websockets")
+    n = 700  # 7 s: 4 s of calibration, then live frames
+    page, hello, err, poses, seen, calibration = asyncio.run(
+        asyncio.wait_for(_stream_through_server(fitted, phone, n), 120))
+    assert "DeviceMotionEvent" in page and "requestPermission" in page
+    sk = fitted.skeleton_
+    assert hello["type"] == "skeleton" and hello["parents"] == sk.parents.tolist()
+    assert len(hello["sides"]) == sk.num_joints and hello["fps"] == fitted.fps_
+    assert err["type"] == "error" and "rows" in err["text"]
+    assert seen.index("calibrated") < seen.index("pose")
+    assert [p["frame"] for p in poses] == list(range(len(poses)))
+    pos = np.array([p["positions"] for p in poses]).reshape(len(poses), sk.num_joints, 3) / 1000
+    assert np.isfinite(pos).all()
+    times, acc, gyro = phone
+    signals = offline_frames(times[:n], acc[:n], gyro[:n], fitted.fps_, calibration)
+    offline = fitted.reconstruct_signals(signals).positions()
+    np.testing.assert_allclose(pos, offline, atol=0.06e-3)  # sent rounded to 0.1 mm
+    # a standing-height figure whose feet stay near the floor
+    assert np.all(np.ptp(pos[:, :, 1], axis=1) > 1.0)
+
+
+async def _replay(fitted, path, timeout: float = 60.0):
+    from websockets.asyncio.client import connect
+
+    from imuloco.live.server import LiveServer
+
+    server = LiveServer(fitted, calibrate_s=CALIB_S)
+    await server.start("127.0.0.1", 0)
+    poses = []
+    try:
+        async with connect(f"ws://127.0.0.1:{server.port}/ws/view") as view:
+            await asyncio.wait_for(view.recv(), 10)
+            await asyncio.wait_for(server.replay(path, speed=25.0), timeout)
+            while True:
+                try:
+                    msg = json.loads(await asyncio.wait_for(view.recv(), 2))
+                except TimeoutError:
+                    break
+                if msg["type"] == "pose":
+                    poses.append(msg)
+    finally:
+        await server.close()
+    return poses
+
+
+def test_replay_streams_a_recorded_file(fitted, sample_db, tmp_path):
+    pytest.importorskip("websockets")
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.sensors.reallog import read_log
+
+    clip = next(c for c in sample_db.clips if c.name == CLIP)
+    path = write_generic_csv(simulate(clip, ["right_ankle"], 100.0, "phone", 12),
+                             tmp_path / "walk.csv")
+    poses = asyncio.run(_replay(fitted, path))
+    rec, _ = read_log(path, rate=None)
+    expected = len(kernel_resample(rec.times, rec.channels(), fitted.fps_)[0])
+    assert [p["frame"] for p in poses] == list(range(expected))
+    assert np.isfinite(np.array([p["positions"] for p in poses])).all()
+
+
+def test_a_pause_restarts_the_walker_with_the_same_calibration(fitted, phone):
+    pytest.importorskip("websockets")
+    from imuloco.live.server import LiveServer
+
+    times, acc, gyro = phone
+    rows = np.concatenate([times[:, None], acc[:, 0], gyro[:, 0]], 1)
+    server = LiveServer(fitted, calibrate_s=CALIB_S)  # not listening: feed() directly
+    server.start_session()
+    first = server.feed(rows[:600])
+    calibration = server.session.calibration
+    later = rows[600:700].copy()
+    later[:, 0] += 5.0  # the page slept for 5 s
+    second = server.feed(later)
+    assert first > 0 and server.session.calibration is calibration
+    assert 0 < second <= 1 + (later[-1, 0] - later[0, 0]) * fitted.fps_
+    assert server.session.resampler.next == second  # frames counted from 0 again
+
+
+# ---- the pages in a real headless browser (skipped without selenium and Debian chromium) -----
+@pytest.fixture
+def threaded_server(fitted):
+    """A LiveServer listening on a free loopback port, its event loop in a thread."""
+    pytest.importorskip("websockets")
+    import threading
+
+    from imuloco.live.server import LiveServer
+
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, daemon=True)
+    thread.start()
+    server = LiveServer(fitted, calibrate_s=CALIB_S)
+    asyncio.run_coroutine_threadsafe(server.start("127.0.0.1", 0), loop).result(20)
+    yield server, loop
+    asyncio.run_coroutine_threadsafe(server.close(), loop).result(20)
+    loop.call_soon_threadsafe(loop.stop)
+    thread.join(20)
+    loop.close()
+
+
+@pytest.fixture
+def browser():
+    import shutil
+
+    webdriver = pytest.importorskip("selenium.webdriver")
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    driver_path = shutil.which("chromedriver")
+    if not (chromium and driver_path):
+        pytest.skip("Debian chromium and chromium-driver are not installed")
+    from selenium.webdriver.chrome.service import Service
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = chromium
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                "--window-size=900,700", "--disable-extensions", "--no-first-run"):
+        opts.add_argument(arg)
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(service=Service(driver_path), options=opts)
+    driver.set_page_load_timeout(60)
+    yield driver
+    driver.quit()
+
+
+def _wait_for(check, timeout: float = 30.0):
+    import time
+
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = check()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError("timed out")
+
+
+def test_phone_page_sends_device_motion_in_si_units(threaded_server, browser):
+    from selenium.webdriver.common.by import By
+
+    server, _ = threaded_server
+    received = []
+    feed = server.feed
+    server.feed = lambda rows: (received.append(rows.copy()), feed(rows))[1]
+    browser.get(f"http://127.0.0.1:{server.port}/phone")
+    browser.find_element(By.ID, "start").click()
+    _wait_for(lambda: server.phone is not None)
+    # a phone lying on its back, turning: m/s^2 with gravity, rotationRate in deg/s
+    browser.execute_script("""
+        for (let i = 0; i < 20; i++) {
+          window.dispatchEvent(new DeviceMotionEvent("devicemotion", {
+            accelerationIncludingGravity: {x: 0.5, y: -1.0, z: 9.8},
+            rotationRate: {alpha: 90, beta: 180, gamma: -45}, interval: 10}));
+        }""")
+    _wait_for(lambda: sum(len(r) for r in received) >= 20)
+    rows = np.concatenate(received)
+    assert np.all(np.diff(rows[:, 0]) >= 0) and rows[0, 0] > 0  # seconds, not ms
+    assert rows[-1, 0] - rows[0, 0] < 5.0
+    # acc as given; gyro about x, y, z = beta, gamma, alpha, in rad/s
+    np.testing.assert_allclose(rows[:, 1:], np.tile([0.5, -1.0, 9.8, np.pi, -np.pi / 4,
+                                                    np.pi / 2], (len(rows), 1)))
+    assert "connected" in browser.find_element(By.ID, "status").text or \
+        "calibrating" in browser.find_element(By.ID, "status").text
+    assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+
+
+def test_live_page_draws_the_replayed_walker(threaded_server, browser, sample_db, tmp_path):
+    from imuloco.io.sensorlog import write_generic_csv
+
+    server, loop = threaded_server
+    clip = next(c for c in sample_db.clips if c.name == CLIP)
+    path = write_generic_csv(simulate(clip, ["right_ankle"], 100.0, "phone", 13),
+                             tmp_path / "walk.csv")
+    browser.get(f"http://127.0.0.1:{server.port}/live")
+    _wait_for(lambda: browser.execute_script("return imuloco.state().skel !== null"))
+    replay = asyncio.run_coroutine_threadsafe(server.replay(path, speed=4.0), loop)
+    _wait_for(lambda: browser.execute_script("return imuloco.state().pose !== null"))
+    first = browser.execute_script("return imuloco.state().pose")
+    _wait_for(lambda: browser.execute_script("return imuloco.state().pose")[0] != first[0])
+    replay.result(60)
+    state = browser.execute_script("return imuloco.state()")
+    assert len(state["pose"]) == 3 * fitted_joints(server)
+    assert state["floor"] < min(state["pose"][1::3]) + 0.05  # the floor under the feet
+    browser.save_screenshot(str(tmp_path / "live.png"))
+    assert (tmp_path / "live.png").stat().st_size > 5000
+    assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+
+
+def fitted_joints(server) -> int:
+    return server.method.skeleton_.num_joints
+
+
+def test_calibration_waits_for_the_walk_and_takes_up_from_standing(fitted, phone):
+    times, acc, gyro = phone
+    q = from_rotvec(np.array([0.4, -1.2, 2.0]))  # the phone's mounting (see the fixture)
+    rng = np.random.default_rng(4)
+    n = 600  # 6 s standing still, the shank vertical: gravity up the segment's y
+    t_still = np.arange(n) * 0.01
+    acc_still = qrot(q, np.array([0.0, 9.81, 0.0])) + rng.normal(0, 0.02, (n, 1, 3))
+    gyro_still = rng.normal(0, 0.005, (n, 1, 3))
+    s = LiveSession(fitted, calibrate_s=CALIB_S)
+    for i in range(n):
+        assert s.push(t_still[i], acc_still[i], gyro_still[i]) == []
+    assert s.calibration is None and "walk" in s.describe()  # no swing yet: still waiting
+    frames = []
+    for i in range(len(times)):
+        frames += s.push(times[i] + 6.0, acc[i], gyro[i])
+        if s.calibration is not None:
+            break
+    c = s.calibration
+    assert c is not None and c.details[0]["up_from"] == "still" and c.details[0]["swings"] >= 2
+    assert c.seconds < 3 * CALIB_S and frames and frames[0].index == 0
+    # gravity at rest now reads straight up the segment
+    np.testing.assert_allclose(qrot(c.rotations[0], qrot(q, np.array([0.0, 9.81, 0.0]))),
+                               [0.0, 9.81, 0.0], atol=0.05)
