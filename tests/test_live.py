@@ -13,11 +13,9 @@ from imuloco.core.recording import Recording
 from imuloco.live.session import (
     KernelResampler,
     LiveSession,
-    fk_frame,
     kernel_resample,
     offline_frames,
 )
-from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import from_rotvec, qrot
 from imuloco.sensors.calibration import calibrate
 from imuloco.sensors.simulate import simulate
@@ -79,16 +77,6 @@ def test_kernel_resample_follows_a_smooth_signal_and_bridges_gaps():
     assert np.max(np.abs(frames[ok, 0] - np.sin(2 * np.pi * grid[ok]))) < 0.02
     inside = (grid > 3.05) & (grid < 3.25)  # across the gap: between the two ends
     assert inside.any() and np.all(np.abs(frames[inside, 0]) <= 1.0)
-
-
-def test_single_frame_fk_matches_the_batched_fk(sample_db):
-    clip = sample_db.clips[0]
-    sk = clip.skeleton
-    for t in (0, clip.num_frames // 2):
-        np.testing.assert_allclose(fk_frame(clip.rotations[t], clip.root[t], sk.offsets,
-                                            sk.parents),
-                                   fk(clip.rotations[t], clip.root[t], sk.offsets,
-                                      sk.parents)[1], atol=1e-12)
 
 
 def test_session_calibrates_then_streams_the_offline_reconstruction(fitted, phone):

@@ -84,3 +84,15 @@ def test_noise_is_seeded_and_bounded(sample_db):
     assert np.abs(a.acc).max() <= phone.acc_range and np.abs(a.gyro).max() <= phone.gyro_range
     gaps = np.diff(a.times)
     assert gaps.min() > 0 and gaps.max() > 0.015  # jittered, with dropped samples
+
+
+def test_fk_matches_hand_computed_positions(two_joint_skeleton):
+    """A root turned 90 degrees about +Z puts a child 1 m above it at 1 m along -X."""
+    from imuloco.ops.kinematics import fk
+
+    h = np.sqrt(0.5)
+    rot = np.array([[0.0, 0.0, h, h], [0.0, 0.0, 0.0, 1.0]])
+    grot, pos = fk(rot, np.array([1.0, 2.0, 3.0]), two_joint_skeleton.offsets,
+                   two_joint_skeleton.parents)
+    np.testing.assert_allclose(pos, [[1.0, 2.0, 3.0], [0.0, 2.0, 3.0]], atol=1e-12)
+    np.testing.assert_allclose(np.abs(grot[1] @ rot[0]), 1.0, atol=1e-12)  # same rotation

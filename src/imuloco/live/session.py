@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imuloco.core.recording import Recording
+from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import qrot
 
 log = logging.getLogger(__name__)
@@ -110,28 +111,6 @@ class KernelResampler:
             while len(self.buf) > 1 and self.buf[1][0] < tn:
                 self.buf.popleft()
         return out
-
-
-def fk_frame(rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray, parents: np.ndarray
-             ) -> np.ndarray:
-    """World joint positions (J, 3) of one frame: local rotations (J, 4) x, y, z, w, root (3,).
-
-    The same result as :func:`imuloco.ops.kinematics.fk` for a single frame, through rotation
-    matrices: ``fk`` broadcasts over frames and its per-joint quaternion products cost about
-    10 ms per call on one frame (numpy call overhead), which a 30 fps stream cannot afford.
-    """
-    from scipy.spatial.transform import Rotation
-
-    local = Rotation.from_quat(rotations).as_matrix()
-    glob = np.empty_like(local)
-    pos = np.empty((len(parents), 3))
-    for j, p in enumerate(parents):
-        if p < 0:
-            glob[j], pos[j] = local[j], root
-        else:
-            glob[j] = glob[p] @ local[j]
-            pos[j] = pos[p] + glob[p] @ offsets[j]
-    return pos
 
 
 @dataclass
@@ -236,9 +215,7 @@ class LiveSession:
                         self.placements)
         try:
             _, mounts = calibrate(rec)
-        except (ValueError, IndexError, np.linalg.LinAlgError) as e:
-            # standing still only: estimate_mounting finds no swing (IndexError: too few
-            # moving samples for its gyroscope SVD)
+        except (ValueError, np.linalg.LinAlgError) as e:  # e.g. standing still only: no swing
             mounts, why = None, f"{type(e).__name__}: {e}"
         else:
             legs = [m for p, m in zip(self.placements, mounts)
@@ -268,7 +245,7 @@ class LiveSession:
         out = []
         for k, tk, x in self.resampler.push(t, row):
             rot, root = self.stream.step(x)
-            pos = fk_frame(rot, root, sk.offsets, sk.parents)
+            pos = fk(rot, root, sk.offsets, sk.parents)[1]
             out.append(Frame(k, tk, t, rot, root, pos))
         return out
 

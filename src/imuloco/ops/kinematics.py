@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from imuloco.ops.rotations import qmul, qrot
+from imuloco.ops.rotations import from_matrix, qrot, to_matrix
 
 
 def fk(
@@ -25,15 +25,18 @@ def fk(
     positions : ndarray, shape (..., J, 3)
     """
     rotations = np.asarray(rotations, dtype=np.float64)
-    grot = np.empty_like(rotations)
+    # Rotation matrices: one scipy conversion each way, and a matrix product per joint, cost
+    # less than quaternion products (numpy call overhead dominates for a single frame).
+    local = to_matrix(rotations)
+    glob = np.empty_like(local)
     pos = np.empty(rotations.shape[:-1] + (3,))
-    grot[..., 0, :] = rotations[..., 0, :]
+    glob[..., 0, :, :] = local[..., 0, :, :]
     pos[..., 0, :] = root
     for j in range(1, len(parents)):  # the tree order is inherently sequential; J is small
         p = parents[j]
-        grot[..., j, :] = qmul(grot[..., p, :], rotations[..., j, :])
-        pos[..., j, :] = pos[..., p, :] + qrot(grot[..., p, :], offsets[j])
-    return grot, pos
+        glob[..., j, :, :] = glob[..., p, :, :] @ local[..., j, :, :]
+        pos[..., j, :] = pos[..., p, :] + glob[..., p, :, :] @ offsets[j]
+    return from_matrix(glob), pos
 
 
 def point_on_segment(

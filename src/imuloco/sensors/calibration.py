@@ -130,6 +130,9 @@ def estimate_mounting(rec: Recording, placement: str | int | None = None,
     up /= np.linalg.norm(up)
     # medio-lateral axis: principal axis of the gyroscope, off the up axis
     moving = ~still
+    if np.count_nonzero(moving) < 3:
+        raise ValueError(f"{name}: the phone never moves in this recording; calibration needs "
+                         "the leg to swing (walk a few steps)")
     w = gyro[moving] - np.outer(gyro[moving] @ up, up)
     _, sv, vt = np.linalg.svd(w, full_matrices=False)
     x = vt[0]
