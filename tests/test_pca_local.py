@@ -1,0 +1,56 @@
+"""The PCA local-model baseline (Tautges et al. 2008 sec. 5.2 after Chai and Hodgins 2005)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from imuloco.methods import load_model, pose
+from imuloco.methods.pca_local import PCALocal
+from imuloco.methods.training import synthesize
+
+
+@pytest.fixture(scope="module")
+def fitted(sample_db):
+    return PCALocal(max_nfev=3).fit(sample_db.where(content="walk"), ["left_ankle", "left_wrist"])
+
+
+def test_one_step_decode_matches_pose_decode(fitted, sample_db):
+    """The per-frame root/heading update is pose.decode's, one frame at a time."""
+    motion = sample_db.clips[-1].slice(0, 12)
+    vec = pose.encode(motion)
+    ref = pose.decode(vec, motion.skeleton, motion.fps)
+    root, theta = ref.root[0], 0.0
+    for f in range(1, len(vec)):
+        rot, new_root, th = fitted._step(vec[f:f + 1], root, theta)
+        assert np.allclose(new_root[0], ref.root[f], atol=1e-9)
+        assert np.allclose(np.abs(np.sum(rot[0] * ref.rotations[f], axis=-1)), 1.0, atol=1e-9)
+        root, theta = new_root[0], float(th[0])
+
+
+def test_local_pca_reproduces_a_database_pose(fitted):
+    q = fitted.poses_[100].astype(np.float64)
+    mu, comp, _ = fitted._local_model(q)
+    assert comp.shape[0] <= fitted.k and np.allclose(comp @ comp.T, np.eye(len(comp)))
+    proj = mu + ((q - mu) @ comp.T) @ comp
+    # the kept components explain most of the query's offset from the neighbours' mean
+    assert np.linalg.norm(proj - q) < 0.5 * np.linalg.norm(q - mu)
+
+
+@pytest.mark.parametrize("placements", [["right_wrist"], ["left_ankle", "right_ankle",
+                                        "left_wrist", "right_wrist", "chest"]])
+def test_reconstructs_any_sensor_set(sample_db, placements):
+    m = PCALocal(max_nfev=2).fit(sample_db.where(content="run"), placements)
+    ex = synthesize(sample_db.subset([1]), placements, "phone", seed=3)[0]
+    out = m.reconstruct_signals(ex.signals[:15])
+    assert out.num_frames == 15 and np.isfinite(out.rotations).all()
+    assert np.isfinite(out.root).all()
+
+
+def test_save_load_round_trip(fitted, sample_db, tmp_path):
+    loaded = load_model(fitted.save(tmp_path / "p.npz"))
+    assert isinstance(loaded, PCALocal) and loaded.get_params() == fitted.get_params()
+    ex = synthesize(sample_db.subset([12]), fitted.placements_, "phone", seed=3)[0]
+    a = fitted.reconstruct_signals(ex.signals[:10])
+    b = loaded.reconstruct_signals(ex.signals[:10])
+    assert np.allclose(a.rotations, b.rotations, atol=1e-6)
