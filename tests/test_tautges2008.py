@@ -9,7 +9,7 @@ from tensorly.tenalg import multi_mode_dot
 
 from imuloco.methods import get_method, load_model
 from imuloco.methods.tautges2008.align import eq17_distance, vertical_rotation
-from imuloco.methods.tautges2008.method import Tautges2008, sensor_points
+from imuloco.methods.tautges2008.method import Tautges2008
 from imuloco.methods.tautges2008.tensor import (
     chain_cycles,
     gait_cycles,
@@ -19,7 +19,7 @@ from imuloco.methods.tautges2008.tensor import (
 from imuloco.methods.training import synthesize
 from imuloco.ops.rotations import about_y, geodesic, qrot
 from imuloco.sensors.placement import anatomical_frame, get_placement
-from imuloco.sensors.simulate import sensor_trajectory
+from imuloco.sensors.simulate import attached_trajectories, sensor_trajectory
 
 PLACEMENTS = ["right_ankle", "left_wrist"]
 
@@ -49,11 +49,11 @@ def test_vertical_rotation_recovers_a_known_yaw():
     assert np.allclose(th, [0.5, -1.0]) and d < 1e-20
 
 
-def test_sensor_points_match_the_shared_virtual_sensor(sample_db):
+def test_attached_trajectories_match_the_single_sensor_path(sample_db):
     motion = sample_db.clips[-1].slice(0, 40)
     poses = motion.rotations[::5]
     frames = [anatomical_frame(motion.skeleton, get_placement(p), poses) for p in PLACEMENTS]
-    pos, ori = sensor_points(motion, frames)
+    pos, ori = attached_trajectories(motion, frames)
     for s, p in enumerate(PLACEMENTS):
         ref_pos, ref_ori = sensor_trajectory(motion, p)
         assert np.allclose(pos[:, s], ref_pos, atol=1e-9)

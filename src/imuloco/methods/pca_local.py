@@ -31,11 +31,10 @@ from sklearn.neighbors import NearestNeighbors
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
 from imuloco.methods.base import Method, register
-from imuloco.methods.tautges2008.method import sensor_points
 from imuloco.methods.training import Example
 from imuloco.ops.rotations import about_y, from_6d, qmul, qrot
 from imuloco.sensors.placement import anatomical_frame, get_placement
-from imuloco.sensors.simulate import GRAVITY
+from imuloco.sensors.simulate import GRAVITY, attached_trajectories
 
 
 @register
@@ -118,7 +117,7 @@ class PCALocal(Method):
     def _sensors(self, rot: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Sensor positions (C, S, 3) and orientations (C, S, 4) of poses."""
         m = Motion(self.skeleton_, rot, root, self.fps_)
-        return sensor_points(m, self._anat)
+        return attached_trajectories(m, self._anat)
 
     def _solve_frame(self, q1: np.ndarray, q2: np.ndarray, control: np.ndarray,
                      root_prev: np.ndarray, theta: float) -> np.ndarray:

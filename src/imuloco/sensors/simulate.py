@@ -21,10 +21,31 @@ from scipy.spatial.transform import Rotation, RotationSpline
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
 from imuloco.ops.rotations import continuous, qinv, qmul, qrot
-from imuloco.sensors.noise import G, NoiseModel, corrupt, get_noise, random_misplacement, sample_times
+from imuloco.sensors.noise import (
+    G,
+    NoiseModel,
+    corrupt,
+    get_noise,
+    random_misplacement,
+    sample_times,
+)
 from imuloco.sensors.placement import Placement, anatomical_frame, get_placement
 
 GRAVITY = np.array([0.0, -G, 0.0])  # world is Y up
+
+
+Attachment = tuple[int, np.ndarray, np.ndarray]  # joint, offset (3,), rotation (4,)
+
+
+def attached_trajectories(motion: Motion, attachments: list[Attachment]
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """World positions (T, S, 3) and sensor-to-world orientations (T, S, 4) of sensors
+    rigidly attached to joints (``anatomical_frame`` results), with one forward kinematics for
+    all of them: optimizers that synthesize signals many times compute the attachments once."""
+    grot, pos = motion.fk()
+    p = np.stack([pos[:, j] + qrot(grot[:, j], off) for j, off, _ in attachments], axis=1)
+    q = np.stack([continuous(qmul(grot[:, j], rot)) for j, _, rot in attachments], axis=1)
+    return p, q
 
 
 def sensor_trajectory(motion: Motion, placement: str | Placement) -> tuple[np.ndarray, np.ndarray]:
@@ -32,11 +53,9 @@ def sensor_trajectory(motion: Motion, placement: str | Placement) -> tuple[np.nd
     motion's frames."""
     # the motion's poses settle the segment's twist in a skeleton whose rest pose is not a
     # standing pose (see anatomical_frame)
-    joint, offset, rotation = anatomical_frame(motion.skeleton, get_placement(placement),
-                                               motion.rotations[::5])
-    grot, pos = motion.fk()
-    q = grot[:, joint]
-    return pos[:, joint] + qrot(q, offset), continuous(qmul(q, rotation))
+    attachment = anatomical_frame(motion.skeleton, get_placement(placement), motion.rotations[::5])
+    p, q = attached_trajectories(motion, [attachment])
+    return p[:, 0], q[:, 0]
 
 
 def ideal_signals(motion: Motion, placement: str | Placement, times: np.ndarray

@@ -50,25 +50,9 @@ from imuloco.methods.tautges2008.tensor import (
     register_cycle,
 )
 from imuloco.methods.training import Example
-from imuloco.ops.kinematics import point_on_segment
-from imuloco.ops.rotations import about_y, continuous, qinv, qmul, qrot
+from imuloco.ops.rotations import about_y, qinv, qrot
 from imuloco.sensors.placement import anatomical_frame, get_placement
-from imuloco.sensors.simulate import GRAVITY
-
-
-def sensor_points(motion: Motion, frames: list[tuple[int, np.ndarray, np.ndarray]]
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """World positions (T, S, 3) and orientations (T, S, 4) of sensors: the same as
-    :func:`imuloco.sensors.simulate.sensor_trajectory` (shared anatomical frames and
-    :func:`imuloco.ops.kinematics.point_on_segment`), with one forward kinematics for all
-    sensors instead of one per sensor and the anatomical frames computed once: the optimizer
-    calls this thousands of times. ``tests/test_tautges2008.py`` checks it against
-    ``sensor_trajectory``. frames : ``anatomical_frame`` results, one per sensor."""
-    grot, pos = motion.fk()
-    p = np.stack([point_on_segment(grot, pos, j, off) for j, off, _ in frames], axis=1)
-    q = np.stack([continuous(qmul(grot[:, j], rot)) for j, _, rot in frames], axis=1)
-    return p, q
-
+from imuloco.sensors.simulate import GRAVITY, attached_trajectories
 
 MARGIN = 3  # extra synthesized frames each side of a window, so the spline's ends do not count
 
@@ -149,7 +133,7 @@ class Tautges2008(Method):
         motion = Motion(self.skeleton_, rot.reshape(c * m, -1, 4), root.reshape(c * m, 3),
                         self.fps_)
         t = np.arange(m) / self.fps_
-        pos, ori = sensor_points(motion, self._frames())
+        pos, ori = attached_trajectories(motion, self._frames())
         acc = CubicSpline(t, pos.reshape(c, m, -1, 3), axis=1)(t[MARGIN:-MARGIN], 2)
         if self.frame == "sensor":
             q = ori.reshape(c, m, -1, 4)[:, MARGIN:-MARGIN]
