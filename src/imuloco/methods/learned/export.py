@@ -1,0 +1,108 @@
+"""ONNX export of a ``learned`` model, to run it on a phone or in a browser.
+
+The exported graph is the whole per-frame network with its input standardization and output
+de-standardization (and, for a mirrored model, the mirroring) baked in:
+
+- inputs ``signals`` (1, T, 6 S) raw channels at the model rate (m/s^2, rad/s; sensor order
+  and fps in the metadata) and ``h`` (layers, 1, hidden), zeros at the start;
+- outputs ``pose`` (1, T, 6 J + 4) pose vectors (:mod:`imuloco.methods.pose`), ``contacts``
+  (1, T, 4) probabilities, ``sigma`` (1, T) metres, and ``h_out`` to feed back.
+
+T may be 1 (online, one frame per call carrying ``h``) or a whole recording. Decoding pose
+vectors into joint rotations and the root path is left to the host (a few lines: Gram-Schmidt
+per joint and an integration of the velocity), as is foot pinning.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from imuloco.methods.learned.method import CONTACT_SWAP, Learned
+from imuloco.methods.learned.model import CONTACT_PARTS, rotation_from_6d
+from imuloco.ops.mirror import mirror_pairs
+
+
+class _Exported(nn.Module):
+    def __init__(self, model: Learned) -> None:
+        super().__init__()
+        f = torch.float32
+        self.net = model.net_
+        self.register_buffer("imap", torch.as_tensor(model.input_map_, dtype=f))
+        self.register_buffer("x_mean", torch.as_tensor(model.x_mean_, dtype=f))
+        self.register_buffer("x_std", torch.as_tensor(model.x_std_, dtype=f))
+        self.register_buffer("y_mean", torch.as_tensor(model.y_mean_, dtype=f))
+        self.register_buffer("y_std", torch.as_tensor(model.y_std_, dtype=f))
+        self.mirror = bool(model.output_mirror_)
+        sk = model.skeleton_
+        self.j = sk.num_joints
+        if self.mirror:
+            parents = np.asarray(sk.parents)
+            frames = np.asarray(model.frames_)
+            left = frames[np.where(parents >= 0, parents, 0)].swapaxes(-1, -2)
+            left[parents < 0] = np.diag([-1.0, 1.0, 1.0])
+            self.register_buffer("left", torch.as_tensor(left, dtype=f))
+            self.register_buffer("right", torch.as_tensor(frames, dtype=f))
+            self.swap = [int(k) for k in mirror_pairs(sk)]
+
+    def forward(self, signals: torch.Tensor, h: torch.Tensor
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        x = (signals @ self.imap.T - self.x_mean) / self.x_std
+        p, logit, logvar, h_out = self.net(x, h)
+        pose = p * self.y_std + self.y_mean
+        contacts = torch.sigmoid(logit)
+        if self.mirror:  # see Learned._mirror_vectors
+            j = self.j
+            rot = rotation_from_6d(pose[..., : 6 * j].reshape(pose.shape[0], pose.shape[1], j, 6))
+            rot = self.left @ rot[:, :, self.swap] @ self.right
+            six = torch.cat([rot[..., :, 0], rot[..., :, 1]], dim=-1).reshape(
+                pose.shape[0], pose.shape[1], 6 * j)
+            sign = torch.ones(4)
+            sign[1] = -1.0
+            sign[3] = -1.0
+            pose = torch.cat([six, pose[..., 6 * j:] * sign], dim=-1)
+            contacts = contacts[..., CONTACT_SWAP]
+        return pose, contacts, torch.exp(0.5 * logvar[..., 0]), h_out
+
+
+def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Path:
+    """Write ``model`` as an ONNX graph (see the module docstring); the metadata hold the
+    placements, fps, joint names and parents, and the contact order. Checked with
+    :func:`onnx.checker.check_model`."""
+    import onnx
+
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
+    module = _Exported(model).eval()
+    c = model.x_mean_.shape[0]
+    x = torch.zeros(1, 5, c)
+    h = model.net_.initial_state(1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with warnings.catch_warnings():
+        # the TorchScript-based exporter (no onnxscript needed) announces its deprecation
+        warnings.simplefilter("ignore")
+        torch.onnx.export(module, (x, h), str(path), dynamo=False, opset_version=17,
+                          input_names=["signals", "h"],
+                          output_names=["pose", "contacts", "sigma", "h_out"],
+                          dynamic_axes={"signals": {1: "frames"}, "pose": {1: "frames"},
+                                        "contacts": {1: "frames"}, "sigma": {1: "frames"}})
+    proto = onnx.load(str(path))
+    sk = model.skeleton_
+    meta = {"method": model.name, "placements": json.dumps(model.placements_),
+            "fps": str(model.fps_), "joints": json.dumps(list(sk.names)),
+            "parents": json.dumps([int(p) for p in sk.parents]),
+            "offsets_m": json.dumps(np.asarray(sk.offsets).round(6).tolist()),
+            "contacts": json.dumps(list(CONTACT_PARTS)),
+            "channels": "per sensor acc x,y,z (m/s^2) then gyro x,y,z (rad/s), sensor frame"}
+    for k, v in meta.items():
+        entry = proto.metadata_props.add()
+        entry.key, entry.value = k, v
+    onnx.checker.check_model(proto)
+    onnx.save(proto, str(path))
+    return path

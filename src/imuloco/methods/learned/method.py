@@ -1,0 +1,300 @@
+"""``learned``: imuloco's own causal recurrent reconstructor (see :mod:`.model`).
+
+Signals are standardized and fed to a GRU frame by frame; its pose vectors are decoded with
+:func:`imuloco.methods.pose.decode` (root path integrated from the predicted velocity and yaw
+rate), then the feet predicted in contact are pinned (:func:`imuloco.methods.postprocess.
+pin_feet`, heels at the ankle joints and toes at the toe joints), which removes foot skating.
+:meth:`Learned.stream` does the same one frame at a time with the GRU's hidden state and gives
+the offline result frame for frame.
+
+A model for the other leg (:meth:`Learned.mirrored`) reuses the weights: the other leg's
+signals are mapped onto this leg's sensor axes and the predicted pose is mirrored back.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from imuloco.core.motion import Motion
+from imuloco.methods import pose
+from imuloco.methods.base import Method, Stream, register
+from imuloco.methods.features import PoseIntegrator
+from imuloco.methods.learned import train as tr
+from imuloco.methods.learned.model import CONTACT_PARTS, Reconstructor, TorchFK
+from imuloco.methods.training import Example
+from imuloco.ops.kinematics import fk
+from imuloco.ops.mirror import mirror, mirror_frames, mirror_pairs, mirror_rotations
+from imuloco.ops.rotations import from_6d, to_6d
+
+HEADING_REFLECTION = np.diag([-1.0, 1.0, 1.0])  # left is +X in the heading frame
+CONTACT_SWAP = [CONTACT_PARTS.index(p.replace("left", "#").replace("right", "left")
+                                    .replace("#", "right")) for p in CONTACT_PARTS]
+
+
+@dataclass
+class Prediction:
+    """Per-frame outputs of the network, decoded.
+
+    vectors : ndarray, shape (T, 6 J + 4), pose vectors (:mod:`imuloco.methods.pose`).
+    contacts : ndarray, shape (T, 4), contact probabilities of
+        :data:`imuloco.methods.learned.model.CONTACT_PARTS`.
+    sigma : ndarray, shape (T,), predicted rms joint position error, metres (the confidence:
+        lower is more confident).
+    """
+
+    vectors: np.ndarray
+    contacts: np.ndarray
+    sigma: np.ndarray
+
+
+@register
+class Learned(Method):
+    """A causal GRU from sensor channels to pose vectors, contacts and confidence.
+
+    Parameters
+    ----------
+    hidden, layers : GRU width and depth.
+    epochs, batch_size, window, lr : training schedule (windows of ``window`` frames).
+    draws : augmented simulations of every clip besides the benchmark's own draw.
+    speed : speed changes of up to +-``speed`` (fraction) in augmented draws.
+    noise_scale : noise levels scaled by up to this factor (log-uniform, both ways).
+    mirror : mirror every other augmented draw left/right.
+    validation : fraction of clips held out (by name hash) for the validation curve.
+    threads : torch CPU threads while fitting (None: torch's default). Use 1 on a machine
+        shared with other jobs: torch's thread pool stalls when its cores are taken (a batch
+        took 10x longer with 2 threads than with 1 on a loaded 2-core machine).
+    seed : seeds augmentation, initialization and batching.
+    """
+
+    name = "learned"
+    summary = "imuloco's causal GRU: pose, contacts and confidence; feet pinned (torch)"
+    supports_online = True
+
+    def __init__(self, hidden: int = 128, layers: int = 2, epochs: int = 10,
+                 batch_size: int = 32, window: int = 120, lr: float = 2e-3, draws: int = 2,
+                 speed: float = 0.15, noise_scale: float = 2.0, mirror: bool = True,
+                 validation: float = 0.05, threads: int | None = None, seed: int = 0) -> None:
+        self.hidden = hidden
+        self.layers = layers
+        self.epochs = epochs
+        self.batch_size = batch_size
+        self.window = window
+        self.lr = lr
+        self.draws = draws
+        self.speed = speed
+        self.noise_scale = noise_scale
+        self.mirror = mirror
+        self.validation = validation
+        self.threads = threads
+        self.seed = seed
+
+    # ---- learning ---------------------------------------------------------------------------
+    def fit_examples(self, examples: list[Example], progress: bool = False) -> None:
+        if self.threads:
+            torch.set_num_threads(int(self.threads))
+        val_mask = [zlib.crc32(e.labels["name"].encode()) < self.validation * 2**32
+                    for e in examples]
+        if all(val_mask):
+            val_mask = [False] * len(examples)
+        train_ex = [e for e, v in zip(examples, val_mask) if not v]
+        val_ex = [e for e, v in zip(examples, val_mask) if v]
+        sk = self.skeleton_
+        try:
+            mirror_pairs(sk)
+            can_mirror = self.mirror
+        except (KeyError, ValueError):
+            can_mirror = False
+        train_ex = tr.augment(train_ex, self.placements_, self.noise_, self.seed, self.draws,
+                              self.speed, self.noise_scale, can_mirror, progress)
+        x, y, c, pos, lengths = tr.stack(train_ex)
+        self.x_mean_, self.x_std_ = x.mean(0), np.maximum(x.std(0), 1e-3)
+        self.y_mean_ = y.mean(0)
+        # 6-D components that barely move (end joints) would dominate a plain standardization
+        self.y_std_ = np.maximum(y.std(0), 0.05)
+        train_set = self._arrays(x, y, c, pos, lengths)
+        val_set = self._arrays(*tr.stack(val_ex)) if val_ex else None
+        self.net_ = Reconstructor(x.shape[1], y.shape[1], self.hidden, self.layers)
+        self.input_map_ = np.eye(x.shape[1])
+        self.output_mirror_ = False
+        self.frames_ = np.tile(np.eye(3), (sk.num_joints, 1, 1))
+        self.history_ = tr.train(self.net_, TorchFK(sk.offsets, sk.parents), train_set, val_set,
+                                 self.y_mean_, self.y_std_, self.epochs, self.batch_size,
+                                 self.window, self.lr, tr.LossWeights(), self.seed, progress)
+        self.net_.eval()
+
+    def _arrays(self, x: np.ndarray, y: np.ndarray, c: np.ndarray, pos: np.ndarray,
+                lengths: np.ndarray) -> tr.Arrays:
+        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+        return tr.Arrays(((x - self.x_mean_) / self.x_std_).astype(np.float32),
+                         ((y - self.y_mean_) / self.y_std_).astype(np.float32), c, pos,
+                         starts, lengths)
+
+    # ---- reconstruction ---------------------------------------------------------------------
+    def _inputs(self, signals: np.ndarray) -> torch.Tensor:
+        s = np.nan_to_num(np.asarray(signals, dtype=np.float64)) @ self.input_map_.T
+        return torch.as_tensor((s - self.x_mean_) / self.x_std_, dtype=torch.float32)
+
+    def _outputs(self, p: torch.Tensor, logit: torch.Tensor, logvar: torch.Tensor) -> Prediction:
+        vectors = p.numpy().astype(np.float64) * self.y_std_ + self.y_mean_
+        contacts = torch.sigmoid(logit).numpy().astype(np.float64)
+        if self.output_mirror_:
+            vectors, contacts = self._mirror_vectors(vectors), contacts[..., CONTACT_SWAP]
+        sigma = np.exp(0.5 * logvar.numpy()[..., 0].astype(np.float64))
+        return Prediction(vectors, contacts, sigma)
+
+    def predict(self, signals: np.ndarray) -> Prediction:
+        """Network outputs for signals (T, 6 S) at the model rate, run from a zero state."""
+        signals = np.asarray(signals)
+        if signals.ndim != 2 or signals.shape[1] != self.x_mean_.shape[0]:
+            raise ValueError(f"learned: expected signals (T, {self.x_mean_.shape[0]}) for "
+                             f"placements {self.placements_}, got {signals.shape}")
+        with torch.no_grad():
+            p, logit, logvar, _ = self.net_(self._inputs(signals)[None])
+        return self._outputs(p[0], logit[0], logvar[0])
+
+    def reconstruct_signals(self, signals: np.ndarray) -> Motion:
+        out = self.predict(signals)
+        motion = pose.decode(out.vectors, self.skeleton_, self.fps_)
+        return pin(motion, out.contacts)
+
+    def stream(self) -> LearnedStream:
+        return LearnedStream(self)
+
+    # ---- the other leg ----------------------------------------------------------------------
+    def _mirror_vectors(self, vectors: np.ndarray) -> np.ndarray:
+        sk = self.skeleton_
+        j = sk.num_joints
+        rot = from_6d(vectors[..., : 6 * j].reshape(*vectors.shape[:-1], j, 6))
+        rot = mirror_rotations(rot, self.frames_, mirror_pairs(sk), sk.parents,
+                               HEADING_REFLECTION)
+        out = vectors.copy()
+        out[..., : 6 * j] = to_6d(rot).reshape(*vectors.shape[:-1], 6 * j)
+        out[..., 6 * j + 1] *= -1  # leftward velocity
+        out[..., 6 * j + 3] *= -1  # yaw rate
+        return out
+
+    def mirrored(self, motions: list[Motion]) -> Learned:
+        """This model for the mirror placements (``right_ankle`` -> ``left_ankle``).
+
+        The other leg's sensor axes relate to this leg's mirrored ones by a signed permutation
+        per sensor, found by simulating both on ``motions`` (clean) and mirroring one; the
+        mirror frames of the skeleton come from ``motions`` too (:func:`mirror_frames`).
+        """
+        from imuloco.sensors.simulate import simulate
+
+        other = [_partner(p) for p in self.placements_]
+        frames = mirror_frames(motions)
+        c = 6 * len(other)
+        a, b = [], []
+        for m in motions:
+            rec_o = simulate(m, other, 100.0, "clean", 0)
+            rec_s = simulate(mirror(m, frames), self.placements_, 100.0, "clean", 0)
+            a.append(rec_o.channels())
+            b.append(rec_s.channels())
+        a, b = np.concatenate(a), np.concatenate(b)
+        fit = np.linalg.lstsq(a, b, rcond=None)[0].T          # b ≈ a @ fit.T
+        cmap = np.zeros((c, c))
+        rows = np.argmax(np.abs(fit), axis=1)
+        cmap[np.arange(c), rows] = np.sign(fit[np.arange(c), rows])
+        new = Learned(**self.get_params())
+        new.skeleton_, new.fps_, new.noise_ = self.skeleton_, self.fps_, self.noise_
+        new.placements_ = other
+        arrays, values = self.get_state()
+        new.set_state(arrays, values)
+        new.input_map_ = cmap @ self.input_map_
+        new.output_mirror_ = not self.output_mirror_
+        new.frames_ = frames
+        return new
+
+    # ---- persistence ------------------------------------------------------------------------
+    def get_state(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        arrays = {f"net.{k}": v.detach().numpy().copy() for k, v in
+                  self.net_.state_dict().items()}
+        arrays.update(x_mean=self.x_mean_, x_std=self.x_std_, y_mean=self.y_mean_,
+                      y_std=self.y_std_, input_map=self.input_map_, frames=self.frames_)
+        values = {"output_mirror": bool(self.output_mirror_), "history": self.history_,
+                  "channels": int(self.x_mean_.shape[0]), "pose_dim": int(self.y_mean_.shape[0]),
+                  "protocol": getattr(self, "protocol_", {})}
+        return arrays, values
+
+    def set_state(self, arrays: dict[str, np.ndarray], values: dict[str, Any]) -> None:
+        self.x_mean_, self.x_std_ = arrays["x_mean"], arrays["x_std"]
+        self.y_mean_, self.y_std_ = arrays["y_mean"], arrays["y_std"]
+        self.input_map_, self.frames_ = arrays["input_map"], arrays["frames"]
+        self.output_mirror_ = bool(values["output_mirror"])
+        self.history_ = values.get("history", [])
+        self.protocol_ = values.get("protocol", {})
+        self.net_ = Reconstructor(int(values["channels"]), int(values["pose_dim"]), self.hidden,
+                                  self.layers)
+        self.net_.load_state_dict({k[4:]: torch.as_tensor(v) for k, v in arrays.items()
+                                   if k.startswith("net.")})
+        self.net_.eval()
+
+
+def _partner(placement: str) -> str:
+    for a, b in (("left", "right"), ("right", "left")):
+        if placement.startswith(a + "_"):
+            return b + placement[len(a):]
+    raise ValueError(f"placement {placement!r} has no left/right partner to mirror to")
+
+
+PIN_PARTS = CONTACT_PARTS  # heel contact pins the ankle joint, toe contact the toe joint
+
+
+def pin(motion: Motion, contacts: np.ndarray) -> Motion:
+    """:func:`imuloco.methods.postprocess.pin_feet` with the predicted heel and toe contacts."""
+    from imuloco.methods.postprocess import pin_feet
+
+    return pin_feet(motion, contacts, PIN_PARTS)
+
+
+class LearnedStream(Stream):
+    """One frame in, one pose out: the GRU state, the pose integrator and the foot pinning
+    carried from frame to frame (bounded state), giving :meth:`Learned.reconstruct_signals`'s
+    frames. After each step, ``contacts`` (4,) and ``sigma`` (metres) hold the frame's
+    contact probabilities and confidence."""
+
+    def __init__(self, model: Learned) -> None:
+        self.model = model
+        self.h = model.net_.initial_state(1)
+        self.integrator = PoseIntegrator(model.skeleton_, model.fps_)
+        sk = model.skeleton_
+        self.feet = [sk.part(p) for p in PIN_PARTS]
+        self.prev: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # raw root, rel, c
+        self.root = np.zeros(3)
+        self.contacts = np.zeros(len(PIN_PARTS))
+        self.sigma = float("nan")
+
+    def step(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        m = self.model
+        with torch.no_grad():
+            p, logit, logvar, self.h = m.net_(m._inputs(np.asarray(sample)[None])[None], self.h)
+        out = m._outputs(p[0], logit[0], logvar[0])
+        self.contacts, self.sigma = out.contacts[0], float(out.sigma[0])
+        rot, raw_root = self.integrator.step(out.vectors[0])
+        sk = m.skeleton_
+        _, pos = fk(rot, raw_root, sk.offsets, sk.parents)
+        rel = pos[self.feet] - raw_root
+        c = self.contacts
+        if self.prev is None:
+            self.root = raw_root.copy()
+        else:
+            # the same step rule as pin_feet, one frame at a time
+            prev_root, prev_rel, prev_c = self.prev
+            step = raw_root - prev_root
+            w = np.minimum(c, prev_c)
+            wsum = w.sum()
+            blend = min(max(wsum, 0.0), 1.0)
+            target = (w[:, None] * -(rel - prev_rel)).sum(0) / max(wsum, 1e-9) if wsum > 0 \
+                else step
+            new = step.copy()
+            new[[0, 2]] = (1 - blend) * step[[0, 2]] + blend * target[[0, 2]]
+            self.root = self.root + new
+            self.root[1] = raw_root[1]
+        self.prev = (raw_root, rel, c)
+        return rot, self.root.copy()

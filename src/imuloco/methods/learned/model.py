@@ -1,0 +1,88 @@
+"""The network of the ``learned`` method and the differentiable pieces its losses need (torch).
+
+``Reconstructor`` is causal: a per-frame input layer, a stacked GRU and per-frame output heads,
+so the same weights run a whole sequence at once (:meth:`Reconstructor.forward`) or one frame at
+a time with a bounded hidden state (:meth:`Reconstructor.step`). Heads, per frame:
+
+- ``pose`` : the standardized pose vector of :mod:`imuloco.methods.pose` (6-D local rotations,
+  root height, root velocity in the heading frame, yaw rate);
+- ``contact`` : logits of heel and toe contact of both feet (left heel, right heel, left toe,
+  right toe);
+- ``logvar`` : log of the expected squared joint position error (m^2) of the frame, trained by
+  a Gaussian negative log-likelihood; its square root is the per-frame confidence in metres.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+CONTACT_PARTS = ("left_ankle", "right_ankle", "left_toe", "right_toe")
+
+
+class Reconstructor(nn.Module):
+    """Sensor channels (B, T, C) -> pose (B, T, D), contact logits (B, T, 4), logvar (B, T, 1).
+
+    Parameters
+    ----------
+    channels : C, the number of input channels (6 per sensor).
+    pose_dim : D, the pose-vector length (6 J + 4).
+    hidden : GRU width.
+    layers : stacked GRU layers.
+    """
+
+    def __init__(self, channels: int, pose_dim: int, hidden: int = 256, layers: int = 2) -> None:
+        super().__init__()
+        self.inp = nn.Sequential(nn.Linear(channels, hidden), nn.GELU())
+        self.gru = nn.GRU(hidden, hidden, layers, batch_first=True)
+        self.pose = nn.Linear(hidden, pose_dim)
+        self.contact = nn.Linear(hidden, len(CONTACT_PARTS))
+        self.logvar = nn.Linear(hidden, 1)
+        self.hidden, self.layers = hidden, layers
+
+    def forward(self, x: torch.Tensor, h: torch.Tensor | None = None
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """x : (B, T, C), h : (layers, B, hidden) or None -> pose, contact, logvar, new h."""
+        y, h = self.gru(self.inp(x), h)
+        return self.pose(y), self.contact(y), self.logvar(y), h
+
+    def initial_state(self, batch: int = 1) -> torch.Tensor:
+        return torch.zeros(self.layers, batch, self.hidden)
+
+
+def rotation_from_6d(d: torch.Tensor) -> torch.Tensor:
+    """6-D rotations (..., 6) -> matrices (..., 3, 3), the Gram-Schmidt map of
+    :func:`imuloco.ops.rotations.from_6d` (first two columns, then their cross product)."""
+    a = nn.functional.normalize(d[..., :3], dim=-1)
+    b = d[..., 3:] - (a * d[..., 3:]).sum(-1, keepdim=True) * a
+    b = nn.functional.normalize(b, dim=-1)
+    return torch.stack([a, b, torch.linalg.cross(a, b)], dim=-1)
+
+
+class TorchFK(nn.Module):
+    """Joint positions relative to the root from local rotation matrices, differentiable.
+
+    :func:`imuloco.ops.kinematics.fk` is numpy; the losses need gradients, so the same
+    recursion is written again over torch tensors.
+
+    Parameters
+    ----------
+    offsets : ndarray, shape (J, 3), metres.
+    parents : ndarray, shape (J,), parents[j] < j.
+    """
+
+    def __init__(self, offsets: np.ndarray, parents: np.ndarray) -> None:
+        super().__init__()
+        self.register_buffer("offsets", torch.as_tensor(np.asarray(offsets), dtype=torch.float32))
+        self.parents = [int(p) for p in parents]
+
+    def forward(self, rot: torch.Tensor) -> torch.Tensor:
+        """rot : (..., J, 3, 3) local rotations -> positions (..., J, 3), root at the origin."""
+        grot = [rot[..., 0, :, :]]
+        pos = [torch.zeros_like(rot[..., 0, :, 0])]
+        for j in range(1, len(self.parents)):
+            p = self.parents[j]
+            grot.append(grot[p] @ rot[..., j, :, :])
+            pos.append(pos[p] + (grot[p] @ self.offsets[j].unsqueeze(-1)).squeeze(-1))
+        return torch.stack(pos, dim=-2)

@@ -1,0 +1,185 @@
+"""The learned method: network shapes, training, online == offline, files, mirroring, ONNX."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from imuloco.methods import get_method, load_model
+from imuloco.methods.learned.model import Reconstructor, TorchFK, rotation_from_6d
+from imuloco.methods.training import synthesize
+from imuloco.ops.heading import heading_from_hips
+from imuloco.ops.kinematics import fk
+from imuloco.ops.mirror import _reflection, mirror, mirror_frames, mirror_pairs
+from imuloco.ops.rotations import from_6d, to_6d
+
+TINY = {"hidden": 24, "layers": 1, "epochs": 8, "batch_size": 8, "window": 40, "lr": 1e-2,
+        "draws": 1, "validation": 0.0, "threads": 1}
+
+
+@pytest.fixture(scope="module")
+def tiny_model(sample_db):
+    db = sample_db.subset([0, 4, 12])  # a run, a left turn, a walk
+    torch.manual_seed(0)
+    return get_method("learned", **TINY).fit(db, ["right_ankle"], "phone", seed=0)
+
+
+@pytest.fixture(scope="module")
+def test_signals(sample_db):
+    ex = synthesize(sample_db.subset([13]), ["right_ankle"], "phone", seed=5)[0]
+    return ex.signals[:90]
+
+
+def test_forward_shapes():
+    net = Reconstructor(6, 6 * 5 + 4, hidden=16, layers=2)
+    pose, contact, logvar, h = net(torch.zeros(3, 7, 6))
+    assert pose.shape == (3, 7, 34) and contact.shape == (3, 7, 4)
+    assert logvar.shape == (3, 7, 1) and h.shape == (2, 3, 16)
+
+
+def test_torch_fk_and_6d_match_numpy(sample_db):
+    m = sample_db.clips[0].slice(0, 5)
+    sk = m.skeleton
+    six = to_6d(m.rotations)
+    mats = rotation_from_6d(torch.as_tensor(six, dtype=torch.float64))
+    pos = TorchFK(sk.offsets, sk.parents).double()(mats).numpy()
+    ref = fk(from_6d(six), np.zeros(3), sk.offsets, sk.parents)[1]
+    np.testing.assert_allclose(pos, ref, atol=1e-6)  # offsets are stored as float32
+
+
+def test_fit_lowers_training_loss(tiny_model):
+    total = [h["total"] for h in tiny_model.history_]
+    assert len(total) == TINY["epochs"]
+    assert total[-1] < 0.8 * total[0]
+
+
+def test_reconstruct_shapes_and_confidence(tiny_model, test_signals):
+    out = tiny_model.predict(test_signals)
+    j = tiny_model.skeleton_.num_joints
+    assert out.vectors.shape == (90, 6 * j + 4)
+    assert out.contacts.shape == (90, 4) and np.all((out.contacts >= 0) & (out.contacts <= 1))
+    assert out.sigma.shape == (90,) and np.all(out.sigma > 0)
+    motion = tiny_model.reconstruct_signals(test_signals)
+    assert motion.num_frames == 90 and np.all(np.isfinite(motion.positions()))
+
+
+def test_stream_equals_offline(tiny_model, test_signals):
+    offline = tiny_model.reconstruct_signals(test_signals)
+    stream = tiny_model.stream()
+    rots, roots = zip(*(stream.step(s) for s in test_signals))
+    dots = np.abs(np.sum(np.stack(rots) * offline.rotations, axis=-1))
+    np.testing.assert_allclose(dots, 1.0, atol=1e-5)
+    np.testing.assert_allclose(np.stack(roots), offline.root, atol=1e-4)
+
+
+def test_save_load_round_trip(tiny_model, test_signals, tmp_path):
+    path = tiny_model.save(tmp_path / "m.npz")
+    with np.load(path, allow_pickle=False) as z:  # no pickled objects inside
+        assert "net.gru.weight_ih_l0" in z.files
+    loaded = load_model(path)
+    a = tiny_model.reconstruct_signals(test_signals)
+    b = loaded.reconstruct_signals(test_signals)
+    np.testing.assert_array_equal(a.rotations, b.rotations)
+    np.testing.assert_array_equal(a.root, b.root)
+    assert loaded.history_ == tiny_model.history_
+
+
+def test_mirror_is_an_involution_and_reflects_positions(sample_db):
+    frames = mirror_frames(sample_db.clips)
+    swap = mirror_pairs(sample_db.skeleton)
+    assert np.array_equal(swap[swap], np.arange(len(swap)))
+    for m in sample_db.clips[::5]:
+        mm = mirror(m, frames)
+        twice = mirror(mm, frames)
+        np.testing.assert_allclose(twice.positions(), m.positions(), atol=1e-3)
+        # the mirrored figure's joint k is where the partner of k was, reflected
+        pos = m.positions()
+        hips = pos[0, [m.skeleton.part("left_hip"), m.skeleton.part("right_hip")]]
+        ref = _reflection(float(heading_from_hips(hips[0], hips[1])))
+        want = (pos[:, swap] - m.root[0]) @ ref.T + m.root[0]
+        np.testing.assert_allclose(mm.positions(), want, atol=5e-3)
+
+
+def test_mirror_turns_left_turns_into_right_turns(sample_db):
+    m = sample_db.where(content="walk-turn-left").clips[0]
+    yaw = np.unwrap(heading_from_hips(*m.part_positions(["left_hip", "right_hip"]).swapaxes(0, 1)))
+    mm = mirror(m)
+    yaw_m = np.unwrap(heading_from_hips(*mm.part_positions(["left_hip", "right_hip"])
+                                        .swapaxes(0, 1)))
+    assert abs(yaw[-1] - yaw[0]) > 0.5
+    np.testing.assert_allclose(yaw_m[-1] - yaw_m[0], -(yaw[-1] - yaw[0]), atol=0.05)
+
+
+def test_mirrored_model_twice_is_the_model(tiny_model, sample_db, test_signals):
+    left = tiny_model.mirrored(sample_db.clips[:4])
+    assert left.placements_ == ["left_ankle"]
+    back = left.mirrored(sample_db.clips[:4])
+    np.testing.assert_array_equal(back.input_map_, tiny_model.input_map_)
+    a = tiny_model.predict(test_signals).vectors
+    b = back.predict(test_signals).vectors
+    np.testing.assert_allclose(a, b, atol=1e-6)
+    # the left model reads a left-ankle recording and mirrors its output consistently
+    v = left.predict(test_signals).vectors
+    np.testing.assert_allclose(left._mirror_vectors(left._mirror_vectors(v)), v, atol=1e-6)
+
+
+def test_onnx_export(tiny_model, sample_db, test_signals, tmp_path):
+    onnx = pytest.importorskip("onnx")
+    from imuloco.methods.learned.export import export_onnx
+
+    left = tiny_model.mirrored(sample_db.clips[:4])
+    for model in (tiny_model, left):
+        path = export_onnx(model, tmp_path / f"{model.placements_[0]}.onnx")
+        proto = onnx.load(str(path))
+        onnx.checker.check_model(proto)
+        meta = {p.key: p.value for p in proto.metadata_props}
+        assert meta["method"] == "learned" and model.placements_[0] in meta["placements"]
+        ort = pytest.importorskip("onnxruntime")
+        sess = ort.InferenceSession(str(path))
+        h = np.zeros((model.layers, 1, model.hidden), np.float32)
+        pose_, contacts, _, _ = sess.run(None, {"signals": test_signals[None].astype(
+            np.float32), "h": h})
+        ref = model.predict(test_signals)
+        np.testing.assert_allclose(pose_[0], ref.vectors, atol=2e-3)
+        np.testing.assert_allclose(contacts[0], ref.contacts, atol=1e-4)
+
+
+def test_cli_train_any_method(tmp_path):
+    from click.testing import CliRunner
+
+    from imuloco.cli import cli
+
+    out = tmp_path / "mean.npz"
+    res = CliRunner().invoke(cli, ["train", "--method", "mean", "--split", "random-clips",
+                                   "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert load_model(out).name == "mean"
+    res = CliRunner().invoke(cli, ["train", "--method", "learned", "--param", "epochs=1",
+                                   "--param", "hidden=8", "--param", "layers=1",
+                                   "--param", "draws=0", "--limit", "3", "-o",
+                                   str(tmp_path / "l.npz")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "l.npz.history.json").exists()
+    res = CliRunner().invoke(cli, ["export-onnx", "--model", str(tmp_path / "l.npz"), "-o",
+                                   str(tmp_path / "l.onnx")])
+    assert res.exit_code == 0, res.output
+
+
+def test_package_imports_without_torch():
+    import subprocess
+    import sys
+
+    code = (
+        "import importlib.abc, sys\n"
+        "class Block(importlib.abc.MetaPathFinder):\n"
+        "    def find_spec(self, name, path, target=None):\n"
+        "        if name == 'torch' or name.startswith('torch.'):\n"
+        "            raise ModuleNotFoundError(\"No module named 'torch'\", name='torch')\n"
+        "sys.meta_path.insert(0, Block())\n"
+        "import imuloco.methods, imuloco.cli, imuloco.ops.mirror\n"
+        "assert 'learned' not in imuloco.methods.REGISTRY and 'mean' in imuloco.methods.REGISTRY\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert res.returncode == 0, res.stderr
