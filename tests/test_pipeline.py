@@ -130,7 +130,7 @@ def test_choose_method_falls_back_to_a_baseline_fitted_on_the_sample(monkeypatch
 
     monkeypatch.setattr(pipeline, "shipped_model", lambda method, placement: None)
     method, note = pipeline.choose_method(exclude=[DEMO_CLIP])
-    assert method.name == pipeline.FALLBACKS[0]
+    assert method.name == pipeline.FALLBACK
     assert "fitted" in note and "15 clips" in note
     assert method.placements_ == ["right_ankle"]
     with pytest.raises(KeyError, match="unknown method"):

@@ -72,11 +72,11 @@ def phases(motion_file: Path, as_json: bool, reference: str) -> None:
 @cli.command()
 def methods() -> None:
     """List the reconstruction methods with one line each."""
-    from imuloco.methods import REGISTRY
+    from imuloco.methods import available_methods
 
-    width = max(len(n) for n in REGISTRY)
-    for name in sorted(REGISTRY):
-        cls = REGISTRY[name]
+    found = available_methods()
+    width = max(len(n) for n in found)
+    for name, cls in found.items():
         online = "online" if cls.supports_online else "offline"
         click.echo(f"{name:<{width}}  [{online:>7}]  {cls.summary}")
 

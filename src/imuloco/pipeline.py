@@ -32,11 +32,11 @@ from imuloco.core.recording import Recording
 log = logging.getLogger(__name__)
 
 DEFAULT_METHOD = "learned"
-# Baselines to fall back on, best first. ridge before knn: knn is closer on simulated signals
+# The baseline to fall back on. ridge rather than knn: knn is closer on simulated signals
 # (MPJPE 5.0 against 6.1 cm, heldout-styles on the sample) but ridge generalizes to a real
 # phone: on the RealWorld shin recording its cadence is 105 steps/min like the raw signal's,
 # knn's jittery output gives 160-200.
-FALLBACKS = ("ridge", "knn", "mean")
+FALLBACK = "ridge"
 DEMO_CLIP = "dataset-2_walk_normal_001"
 # Methods that pin their feet themselves with the contacts they predict (better than the
 # contacts the pipeline would detect on their output), so the pipeline does not pin again.
@@ -70,7 +70,7 @@ def choose_method(method: str | None = None, model: str | Path | None = None,
     -------
     (Method, str)
     """
-    from imuloco.methods import REGISTRY, get_method, load_model
+    from imuloco.methods import get_method, load_model, method_class
     from imuloco.methods.base import ModelFileError
 
     if model is not None:
@@ -88,10 +88,10 @@ def choose_method(method: str | None = None, model: str | Path | None = None,
             return load_model(path), f"pretrained {name!r} model shipped with imuloco ({path.name})"
         except (ModelFileError, ImportError) as e:
             log.warning("cannot load the shipped model %s: %s", path, e)
-    if method is not None and method not in REGISTRY:
-        raise KeyError(f"unknown method {method!r}; available: {sorted(REGISTRY)}")
+    if method is not None:
+        method_class(method)  # fails clearly for an unknown or uninstalled method
     if method is None:
-        method = next(n for n in FALLBACKS if n in REGISTRY)
+        method = FALLBACK
         why = (f"no pretrained {DEFAULT_METHOD!r} model is usable here, so the best available "
                f"baseline {method!r} was fitted")
     else:

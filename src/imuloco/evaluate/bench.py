@@ -156,11 +156,10 @@ def run_bench(
     limit : read at most this many clips (before the split), for quick runs.
     seed : training seed; test recordings use ``seed + TEST_SEED_OFFSET``.
     """
-    from imuloco.methods import REGISTRY
+    from imuloco.methods import method_class
 
-    unknown = [m for m in methods if m not in REGISTRY]
-    if unknown:
-        raise KeyError(f"unknown method(s) {unknown}; available: {sorted(REGISTRY)}")
+    for m in methods:  # fail before any work on an unknown or uninstalled method
+        method_class(m)
     placements = list(placements)
     db = load_data(data, limit, progress)
     train, test_db = split(db, split_name)

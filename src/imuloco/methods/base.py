@@ -152,13 +152,15 @@ def load_model(path: str | Path) -> Method:
     if version != FORMAT_VERSION:
         raise ModelFileError(f"{path}: model file format version {version}, this imuloco reads "
                              f"version {FORMAT_VERSION}; retrain with `imuloco train`")
-    import imuloco.methods  # noqa: F401  (registers the built-in methods)
+    from imuloco.methods import method_class
 
     name = header.get("method")
-    if name not in REGISTRY:
-        raise ModelFileError(f"{path}: unknown method {name!r}; known: {sorted(REGISTRY)}")
+    try:
+        cls = method_class(str(name))
+    except KeyError as e:
+        raise ModelFileError(f"{path}: {e.args[0]}") from None
     try:  # a header or arrays that do not fit the method: missing keys, wrong shapes
-        method = REGISTRY[name](**header["params"])
+        method = cls(**header["params"])
         sk = header["skeleton"]
         method.skeleton_ = Skeleton(sk["names"], data.pop("__parents__"),
                                     data.pop("__offsets__"),

@@ -1,0 +1,244 @@
+"""Speed benchmark of online methods over database sizes (``imuloco bench --speed``).
+
+For each size, a database of that many frames is built from the data (clips taken in a fixed
+shuffled order; the last one cut to size), the method is fitted on it, and one held-out test
+clip is streamed frame by frame through :meth:`Method.stream` with each ``step`` timed.
+Mousas 2017 (Table 2) reports 65 fps at 500 frames falling to 12 fps at 10,000.
+
+Protocol details fixed here:
+
+- The largest database is simulated once and every size takes its first frames, so sizes
+  and methods share one simulation (and the sensor noise of a clip is the same in all).
+- The test clip is the first clip of the ``random-clips`` test split and is never in the
+  database; its signals are simulated with the test seed offset. It is streamed for at least
+  :data:`MIN_STEPS` steps (looped when shorter), after :data:`WARMUP` untimed steps.
+- When the data hold fewer frames than a size asks for, clips are repeated; each copy is
+  renamed (``name~rep2``...) so that its simulated sensor noise differs, and the record says
+  ``repeated: true`` with the number of distinct frames.
+- Timings use one BLAS/OpenMP thread (threadpoolctl), like a single core.
+- ``online_fps`` is steps over their total wall time; latencies are per step, in ms, wall
+  clock. On a shared machine other processes inflate wall times, so each record also has
+  ``online_fps_cpu`` and ``online_cpu_ms_p50`` from this thread's CPU time and the 1-minute
+  ``load_avg`` when it was measured.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from imuloco.core.motion import MotionDatabase
+from imuloco.evaluate.protocols import in_random_test
+from imuloco.methods.training import TEST_SEED_OFFSET, Example, synthesize
+
+DEFAULT_SIZES = (500, 1000, 2000, 5000, 10000, 20000, 50000, 100000)
+MIN_STEPS = 300
+WARMUP = 10
+MIN_CLIP = 60  # frames: a clip cut shorter than this is left out (too short to segment)
+
+
+def build_database(db: MotionDatabase, frames: int, seed: int = 0
+                   ) -> tuple[MotionDatabase, dict[str, Any]]:
+    """A database of about ``frames`` frames from ``db`` (see the module docstring).
+
+    Returns the database and facts about it: ``db_frames`` (actual), ``clips``, ``repeated``,
+    ``distinct_frames``.
+    """
+    if len(db) == 0:
+        raise ValueError("build_database: empty database")
+    order = np.random.default_rng(seed).permutation(len(db))
+    clips, labels, total, k = [], [], 0, 0
+    used: dict[int, int] = {}
+    while total < frames:
+        i = int(order[k % len(db)])
+        rep = k // len(db)
+        k += 1
+        motion, lab = db.clips[i], dict(db.labels[i])
+        need = frames - total
+        if motion.num_frames > need:
+            if need < MIN_CLIP:
+                if clips:
+                    break
+                need = min(motion.num_frames, MIN_CLIP)
+            motion = motion.slice(0, need)
+        if rep:
+            lab["name"] = f"{lab['name']}~rep{rep + 1}"
+        clips.append(motion)
+        labels.append(lab)
+        used[i] = max(used.get(i, 0), motion.num_frames)
+        total += motion.num_frames
+    info = {"db_frames": int(total), "clips": len(clips), "repeated": k > len(db),
+            "distinct_frames": int(sum(used.values()))}
+    return MotionDatabase(clips, labels), info
+
+
+def _split_test(db: MotionDatabase) -> tuple[MotionDatabase, MotionDatabase]:
+    test = [i for i, lab in enumerate(db.labels) if in_random_test(lab["name"])]
+    if not test:
+        test = [len(db) - 1]
+    rest = [i for i in range(len(db)) if i != test[0]]
+    return db.subset(rest), db.subset(test[:1])
+
+
+def time_stream(method, signals: np.ndarray, min_steps: int = MIN_STEPS,
+                warmup: int = WARMUP) -> tuple[np.ndarray, np.ndarray]:
+    """Per-step wall times and CPU times of this thread (s) of streaming ``signals`` (T, C),
+    looped to ``min_steps``. The CPU time leaves out the time other processes hold the core,
+    which on a shared machine is most of a wall-clock outlier."""
+    stream = method.stream()
+    for sample in signals[:warmup]:
+        stream.step(sample)
+    reps = int(np.ceil(min_steps / len(signals)))
+    rows = np.concatenate([signals] * reps)[:max(min_steps, len(signals))]
+    out = np.empty(len(rows))
+    cpu = np.empty(len(rows))
+    clock, cpu_clock = time.perf_counter, time.thread_time
+    for t, sample in enumerate(rows):
+        t0, c0 = clock(), cpu_clock()
+        stream.step(sample)
+        out[t], cpu[t] = clock() - t0, cpu_clock() - c0
+    return out, cpu
+
+
+def _prefix(examples: list[Example], frames: int) -> tuple[list[Example], dict[str, Any]]:
+    """The first ``frames`` frames of a list of examples (the last one cut), as
+    :func:`build_database` would pick them."""
+    out, total = [], 0
+    for ex in examples:
+        need = frames - total
+        if need <= 0:
+            break
+        n = ex.motion.num_frames
+        if n > need:
+            if need < MIN_CLIP and out:
+                break
+            n = max(min(n, MIN_CLIP), need)
+            ex = Example(ex.motion.slice(0, n), ex.signals[:n], ex.labels)
+        out.append(ex)
+        total += n
+    names: dict[str, int] = {}
+    for e in out:
+        key = e.labels["name"].split("~rep")[0]
+        names[key] = max(names.get(key, 0), e.motion.num_frames)
+    info = {"db_frames": int(total), "clips": len(out),
+            "repeated": any("~rep" in e.labels["name"] for e in out),
+            "distinct_frames": int(sum(names.values()))}
+    return out, info
+
+
+def _fit(name: str, params: dict[str, Any], examples: list[Example], placements: list[str],
+         noise: str):
+    """A method fitted on already simulated examples (what :meth:`Method.fit` does after its
+    simulation step), so that every size and method shares one simulation."""
+    from imuloco.methods import get_method
+
+    method = get_method(name, **params)
+    method.placements_ = list(placements)
+    method.noise_ = noise
+    method.skeleton_ = examples[0].motion.skeleton
+    method.fps_ = float(examples[0].motion.fps)
+    method.fit_examples(examples)
+    return method
+
+
+def speed_benchmark(
+    methods: Sequence[str],
+    out: Path,
+    data: Path | None = None,
+    db_frames: Sequence[int] | None = None,
+    placements: Sequence[str] = ("right_ankle",),
+    noise: str = "phone",
+    seed: int = 0,
+    params: dict[str, dict[str, Any]] | None = None,
+) -> list[dict[str, Any]]:
+    """Time online reconstruction against database size; writes ``speed.json``/``speed.md``.
+
+    Parameters
+    ----------
+    methods : registry names of online methods (offline ones get a record with None timings).
+    out : output folder.
+    data : folder of clips (None: the bundled sample, repeated for the large sizes).
+    db_frames : database sizes in frames (default :data:`DEFAULT_SIZES`).
+    placements, noise, seed : sensors simulated for training and the test clip.
+    params : hyperparameters per method name.
+
+    The largest database is simulated once; each size takes its first frames (clips in the
+    fixed order of :func:`build_database`, the last one cut).
+
+    Returns the records: ``method``, ``db_frames``, ``online_fps``, ``online_latency_ms_p50``,
+    ``online_latency_ms_p99``, plus ``requested_frames``, ``clips``, ``repeated``,
+    ``distinct_frames``, ``fit_s``, ``steps``, ``online_fps_cpu``, ``online_cpu_ms_p50``,
+    ``load_avg`` and ``states`` (the method's state count when it has one).
+    """
+    from imuloco.evaluate.bench import load_data
+    from imuloco.methods import method_class
+
+    for m in methods:  # fail before any work on an unknown or uninstalled method
+        method_class(m)
+    sizes = list(db_frames or DEFAULT_SIZES)
+    placements = list(placements)
+    db, test_db = _split_test(load_data(data))
+    test = synthesize(test_db, placements, noise, seed + TEST_SEED_OFFSET)[0]
+    big, _ = build_database(db, max(sizes), seed)
+    examples = synthesize(big, placements, noise, seed)
+    records = []
+    with threadpool_limits(limits=1):
+        for name in methods:
+            for size in sizes:
+                sub, info = _prefix(examples, size)
+                rec: dict[str, Any] = {"method": name, "requested_frames": size, **info}
+                t0 = time.perf_counter()
+                method = _fit(name, (params or {}).get(name, {}), sub, placements, noise)
+                rec["fit_s"] = round(time.perf_counter() - t0, 2)
+                lower = getattr(method, "lower_", None)
+                rec["states"] = int(lower.num_states) if lower is not None else None
+                if method.supports_online:
+                    load = os.getloadavg()[0]
+                    dt, cpu = time_stream(method, test.signals)
+                    ms, cpu_ms = dt * 1e3, cpu * 1e3
+                    rec.update(online_fps=float(len(dt) / dt.sum()),
+                               online_latency_ms_p50=float(np.percentile(ms, 50)),
+                               online_latency_ms_p99=float(np.percentile(ms, 99)),
+                               online_fps_cpu=float(len(cpu) / cpu.sum()),
+                               online_cpu_ms_p50=float(np.percentile(cpu_ms, 50)),
+                               steps=len(dt), load_avg=round(load, 2),
+                               cpu_count=os.cpu_count())
+                else:
+                    rec.update(online_fps=None, online_latency_ms_p50=None,
+                               online_latency_ms_p99=None, online_fps_cpu=None,
+                               online_cpu_ms_p50=None, steps=0)
+                records.append(rec)
+                del method
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "speed.json").write_text(json.dumps(records, indent=1) + "\n")
+    (out / "speed.md").write_text(speed_table(records, data) + "\n")
+    return records
+
+
+def speed_table(records: list[dict[str, Any]], data: Path | None = None) -> str:
+    """A markdown table of speed records."""
+    def f(v: Any, fmt: str) -> str:
+        return "-" if v is None else format(v, fmt)
+
+    source = "bundled sample" if data is None else Path(data).name
+    lines = [f"# Online speed against database size ({source}, one thread)", "",
+             ("| method | db frames | states | fps | latency p50 ms | latency p99 ms | fps (CPU) "
+             "| CPU ms p50 | load | fit s | repeated clips |"),
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for r in records:
+        lines.append(
+            f"| {r['method']} | {r['db_frames']} | {f(r.get('states'), 'd')} "
+            f"| {f(r['online_fps'], '.0f')} | {f(r['online_latency_ms_p50'], '.3f')} "
+            f"| {f(r['online_latency_ms_p99'], '.3f')} | {f(r.get('online_fps_cpu'), '.0f')} "
+            f"| {f(r.get('online_cpu_ms_p50'), '.3f')} | {f(r.get('load_avg'), '.1f')} "
+            f"| {f(r.get('fit_s'), '.1f')} "
+            f"| {'yes (' + str(r['distinct_frames']) + ' distinct)' if r.get('repeated') else 'no'} |")
+    return "\n".join(lines)
