@@ -36,3 +36,52 @@ def pin_feet(motion: Motion, contacts: np.ndarray, feet: tuple[str, ...] = ("lef
     root = motion.root.copy()
     root[1:, [0, 2]] = motion.root[0, [0, 2]] + np.cumsum(new_step[:, [0, 2]], axis=0)
     return Motion(motion.skeleton, motion.rotations, root, motion.fps, motion.name)
+
+
+def laplacian_smooth_quaternions(q: np.ndarray, lam: float = 0.5, iterations: int = 3
+                                 ) -> np.ndarray:
+    """Laplacian smoothing of rotation tracks in quaternion space (Eom et al. 2014 sec. 6.2).
+
+    Each iteration moves every inner frame's rotation towards the SLERP midpoint of its two
+    neighbours by the fraction ``lam`` (itself a SLERP), ``q_t <- slerp(q_t, mid_t, lam)``;
+    the first and last frames stay. Shapes broadcast over trailing tracks.
+
+    Parameters
+    ----------
+    q : ndarray, shape (T, ..., 4), quaternions x, y, z, w.
+    lam : step towards the neighbours' midpoint per iteration, in [0, 1].
+    iterations : number of passes.
+
+    Returns
+    -------
+    ndarray, shape (T, ..., 4), unit quaternions in the hemisphere of the input.
+    """
+    from imuloco.ops.rotations import continuous, from_rotvec, normalize, qinv, qmul, to_rotvec
+
+    if not 0.0 <= lam <= 1.0:
+        raise ValueError(f"laplacian_smooth_quaternions: lam must be in [0, 1], got {lam}")
+    q = continuous(normalize(np.asarray(q, dtype=np.float64)), axis=0)
+    if len(q) < 3:
+        return q
+    for _ in range(iterations):
+        # the SLERP midpoint of two unit quaternions in one hemisphere is their normalized sum
+        mid = normalize(q[:-2] + q[2:])
+        step = to_rotvec(qmul(qinv(q[1:-1]), mid))
+        inner = qmul(q[1:-1], from_rotvec(lam * step))
+        q = np.concatenate([q[:1], inner, q[-1:]], axis=0)
+        q = continuous(q, axis=0)
+    return q
+
+
+def laplacian_smooth(x: np.ndarray, lam: float = 0.5, iterations: int = 3) -> np.ndarray:
+    """The Euclidean counterpart of :func:`laplacian_smooth_quaternions`:
+    ``x_t <- x_t + lam ((x_{t-1} + x_{t+1}) / 2 - x_t)`` per pass, ends fixed.
+
+    x : ndarray, shape (T, ...). Returns the same shape.
+    """
+    if not 0.0 <= lam <= 1.0:
+        raise ValueError(f"laplacian_smooth: lam must be in [0, 1], got {lam}")
+    x = np.array(x, dtype=np.float64)
+    for _ in range(iterations if len(x) >= 3 else 0):
+        x[1:-1] += lam * (0.5 * (x[:-2] + x[2:]) - x[1:-1])
+    return x
