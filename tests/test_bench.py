@@ -143,3 +143,18 @@ def test_cli_evaluate_rejects_other_skeletons(tmp_path, sample_db, spinning_moti
     write_bvh(spinning_motion, tmp_path / "s.bvh")
     res = CliRunner().invoke(cli, ["evaluate", str(tmp_path / "a.bvh"), str(tmp_path / "s.bvh")])
     assert res.exit_code != 0 and "skeleton" in res.output
+
+
+def test_method_spec_carries_hyperparameters():
+    from imuloco.evaluate.bench import parse_method_spec
+
+    assert parse_method_spec("ridge") == ("ridge", {})
+    assert parse_method_spec("eom2014[variant=mlp-no-hmm;context=7]") == (
+        "eom2014", {"variant": "mlp-no-hmm", "context": 7})
+    with pytest.raises(KeyError, match="expected"):
+        parse_method_spec("ridge[window")
+    recs = run_bench(["ridge[window=3]"], out=None, **QUICK)
+    assert {r["method"] for r in recs} == {"ridge[window=3]"}
+    # the hyperparameter reached the method: a 3-sample window differs from the default
+    default = run_bench(["ridge"], out=None, **QUICK)
+    assert recs[-1]["mpjpe_cm"] != default[-1]["mpjpe_cm"]

@@ -87,7 +87,8 @@ def _csv(value: str | None) -> list[str]:
 
 @cli.command()
 @click.option("--method", "method_names", required=True,
-              help="Method name(s), comma separated (see `imuloco methods`).")
+              help="Method name(s), comma separated (see `imuloco methods`); a variant as "
+                   "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm].")
 @click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
               default="random-clips", show_default=True)
 @click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",

@@ -131,6 +131,26 @@ def evaluate_method(
     return {"clips": clips, "cost": cost, "per_joint": joint_sum / frames, "curves": curves}
 
 
+def parse_method_spec(spec: str) -> tuple[str, dict[str, Any]]:
+    """``"eom2014[variant=mlp-no-hmm;context=7]"`` -> ``("eom2014", {"variant": "mlp-no-hmm",
+    "context": 7})``: a method name with hyperparameters, values parsed as JSON when they can
+    be. Lets one bench compare variants of a method (e.g. the 2014 paper's ablation)."""
+    name, _, rest = spec.partition("[")
+    params: dict[str, Any] = {}
+    if rest:
+        if not rest.endswith("]"):
+            raise KeyError(f"method {spec!r}: expected NAME[key=value;key=value]")
+        for item in filter(None, rest[:-1].split(";")):
+            key, eq, value = item.partition("=")
+            if not eq:
+                raise KeyError(f"method {spec!r}: expected key=value, got {item!r}")
+            try:
+                params[key.strip()] = json.loads(value)
+            except json.JSONDecodeError:
+                params[key.strip()] = value.strip()
+    return name.strip(), params
+
+
 def run_bench(
     methods: Sequence[str],
     split_name: str = "random-clips",
@@ -146,7 +166,9 @@ def run_bench(
 
     Parameters
     ----------
-    methods : registry names.
+    methods : registry names, each optionally with hyperparameters as
+        ``NAME[key=value;key=value]`` (see :func:`parse_method_spec`); records keep the spec
+        as their ``method``.
     split_name : ``"random-clips"`` or ``"heldout-styles"``.
     noise : sensor noise preset for training and test signals.
     placements : sensor placement presets.
@@ -158,8 +180,9 @@ def run_bench(
     """
     from imuloco.methods import method_class
 
-    for m in methods:  # fail before any work on an unknown or uninstalled method
-        method_class(m)
+    specs = {m: parse_method_spec(m) for m in methods}
+    for name, _ in specs.values():  # fail before any work on an unknown or uninstalled method
+        method_class(name)
     placements = list(placements)
     db = load_data(data, limit, progress)
     train, test_db = split(db, split_name)
@@ -170,8 +193,8 @@ def run_bench(
     records, details = [], {}
     for name in tqdm(methods, desc="methods", disable=not progress or len(methods) < 2):
         with threadpool_limits(limits=1):
-            res = evaluate_method(name, train, test, placements, noise, seed,
-                                  progress=progress)
+            res = evaluate_method(specs[name][0], train, test, placements, noise, seed,
+                                  params=specs[name][1], progress=progress)
         details[name] = res
         types = [t for t in MOTION_TYPES if any(c["motion_type"] == t for c in res["clips"])]
         types += sorted({c["motion_type"] for c in res["clips"]} - set(types) - {None})
