@@ -34,7 +34,7 @@ log = logging.getLogger(__name__)
 DEFAULT_METHOD = "learned"
 # The baseline to fall back on. ridge rather than knn: knn is closer on simulated signals
 # (MPJPE 5.0 against 6.1 cm, heldout-styles on the sample) but ridge generalizes to a real
-# phone: on the RealWorld shin recording its cadence is 105 steps/min like the raw signal's,
+# phone: on the RealWorld shin recording its rhythm cadence is 102 steps/min (raw signal 101),
 # knn's jittery output gives 160-200.
 FALLBACK = "ridge"
 DEMO_CLIP = "dataset-2_walk_normal_001"
@@ -232,7 +232,8 @@ def _check_free(paths: Sequence[Path], overwrite: bool) -> None:
 def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequence[Path] = (),
                    html: Path | None = None, overwrite: bool = False, progress: bool = False,
                    max_seconds: float | None = None) -> list[Path]:
-    """Write the stick-figure video(s) (``.mp4``/``.gif``, frames drawn once) and the HTML
+    """Write the stick-figure video(s) (``.mp4``/``.gif``, frames drawn once; one video is
+    streamed to its encoder, as a long recording's frames do not fit in memory) and the HTML
     viewer of ``motions`` side by side."""
     from imuloco.viz.html import write_viewer
     from imuloco.viz.skeleton import StickRenderer, write_video
@@ -242,11 +243,16 @@ def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequ
     if video:
         renderer = StickRenderer(motions, titles)
         stop = None if max_seconds is None else int(max_seconds * renderer.fps) + 1
-        frames = renderer.frames(stop=stop, progress=progress)
-        for path in video:
-            # GIFs at about 15 fps (browsers slow faster GIFs down), MP4 at the motion's rate
-            step = max(1, round(renderer.fps / 15)) if path.suffix.lower() == ".gif" else 1
-            out.append(write_video(frames[::step], path, renderer.fps / step, overwrite))
+        # GIFs at about 15 fps (browsers slow faster GIFs down), MP4 at the motion's rate
+        steps = [max(1, round(renderer.fps / 15)) if p.suffix.lower() == ".gif" else 1
+                 for p in video]
+        if len(video) == 1:
+            frames = renderer.iter_frames(steps[0], stop=stop, progress=progress)
+            out.append(write_video(frames, video[0], renderer.fps / steps[0], overwrite))
+        else:
+            frames = renderer.frames(stop=stop, progress=progress)
+            for path, step in zip(video, steps):
+                out.append(write_video(frames[::step], path, renderer.fps / step, overwrite))
     if html is not None:
         out.append(write_viewer(motions, html, titles, title=" vs ".join(titles),
                                 overwrite=overwrite))

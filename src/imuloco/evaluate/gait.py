@@ -168,20 +168,28 @@ def signal_cadence(rec, sensor: int = 0, stride_hz: tuple[float, float] = (0.5, 
     gyro = resample_linear(rec.times, rec.gyro[:, sensor], t)
     gyro = gyro - gyro.mean(axis=0)
     _, _, vt = np.linalg.svd(gyro, full_matrices=False)
-    return _stride_cadence(gyro @ vt[0], rate, stride_hz)
+    return _stride_cadence(gyro @ vt[0], rate, stride_hz, harmonics=(1, 2))
 
 
-def _stride_cadence(x: np.ndarray, rate: float, stride_hz: tuple[float, float]) -> float:
+def _stride_cadence(x: np.ndarray, rate: float, stride_hz: tuple[float, float],
+                    harmonics: tuple[int, ...] = (1,)) -> float:
     """2 x 60 x the stride frequency of a signal x (T,) sampled at ``rate``: the f within
-    ``stride_hz`` maximizing Welch's ``P(f) + P(2 f)`` (16 s segments, so 0.0625 Hz bins,
-    interpolated; clips shorter than that are one segment)."""
+    ``stride_hz`` maximizing Welch's ``sum_k P(k f)`` over ``harmonics`` (16 s segments,
+    clips shorter than that are one segment; zero-padded to 0.01 Hz bins so that short clips
+    are not read off a coarse grid).
+
+    A harmonic sum ties with its own subharmonic (``P(f/2) + P(f)``) whenever the signal has
+    no power at ``2 f``, and the tie goes to the lower frequency: use ``harmonics=(1, 2)`` only
+    for signals with a strong second harmonic (a leg's gyroscope), ``(1,)`` otherwise."""
     from scipy.signal import welch
 
     if len(x) < 2 * rate / stride_hz[0]:
         return math.nan  # less than two strides
-    f, p = welch(x - x.mean(), fs=rate, nperseg=min(len(x), int(16 * rate)))
+    nperseg = min(len(x), int(16 * rate))
+    nfft = max(nperseg, 1 << math.ceil(math.log2(100.0 * rate)))
+    f, p = welch(x - x.mean(), fs=rate, nperseg=nperseg, nfft=nfft)
     cand = np.linspace(stride_hz[0], stride_hz[1], 521)
-    score = np.interp(cand, f, p) + np.interp(2 * cand, f, p)
+    score = sum(np.interp(k * cand, f, p) for k in harmonics)
     return float(2 * 60.0 * cand[np.argmax(score)])
 
 
@@ -190,12 +198,16 @@ def motion_cadence(motion: Motion, stride_hz: tuple[float, float] = (0.5, 1.8)) 
     stride frequency (see :func:`signal_cadence`) of how far the right ankle is ahead of the
     left along the heading, which swings once per stride. Unlike the strike count it does
     not depend on the contact detector, which jitter in a reconstruction can fool into
-    extra strikes. NaN for motions shorter than two slow strides (4 s)."""
+    extra strikes. NaN for motions shorter than two slow strides (4 s).
+
+    That difference changes sign every step (half-wave antisymmetric), so its spectrum holds
+    the stride frequency and its odd harmonics only: the stride is the fundamental's peak (a
+    ``P(f) + P(2 f)`` score would tie with ``f / 2`` and halve the cadence)."""
     pos = motion.part_positions(["pelvis", "left_hip", "right_hip", "left_ankle",
                                  "right_ankle"])
     theta = heading_angle(pos[:, 1], pos[:, 2], 0.1 * motion.fps)
     ahead = forward_difference(pos[:, 4], pos[:, 3], pos[:, 0], theta)
-    return _stride_cadence(ahead, motion.fps, stride_hz)
+    return _stride_cadence(ahead, motion.fps, stride_hz, harmonics=(1,))
 
 
 def plausibility(motion: Motion) -> dict[str, float]:

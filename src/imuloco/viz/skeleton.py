@@ -8,7 +8,7 @@ imageio: MP4 through imageio-ffmpeg's bundled ffmpeg binary, GIF through Pillow.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -189,21 +189,28 @@ class StickRenderer:
         self.figure.draw_artist(self.clock)
         return np.asarray(self.canvas.buffer_rgba())[..., :3].copy()
 
-    def frames(self, step: int = 1, start: int = 0, stop: int | None = None,
-               progress: bool = False) -> np.ndarray:
-        """Frames ``start:stop:step`` as an array (N, H, W, 3) uint8."""
+    def iter_frames(self, step: int = 1, start: int = 0, stop: int | None = None,
+                    progress: bool = False) -> Iterator[np.ndarray]:
+        """Frames ``start:stop:step`` one at a time, each (H, W, 3) uint8 (a long recording's
+        frames do not fit in memory together: 10 min at 30 fps is 7 GB)."""
         from tqdm.auto import tqdm
 
         idx = range(start, self.num_frames if stop is None else min(stop, self.num_frames), step)
-        return np.stack([self.frame(t) for t in tqdm(idx, desc="rendering", unit="frame",
-                                                     disable=not progress, leave=False)])
+        for t in tqdm(idx, desc="rendering", unit="frame", disable=not progress, leave=False):
+            yield self.frame(t)
+
+    def frames(self, step: int = 1, start: int = 0, stop: int | None = None,
+               progress: bool = False) -> np.ndarray:
+        """Frames ``start:stop:step`` as an array (N, H, W, 3) uint8."""
+        return np.stack(list(self.iter_frames(step, start, stop, progress)))
 
 
-def write_video(frames: np.ndarray, path: str | Path, fps: float, overwrite: bool = False
-                ) -> Path:
-    """Write RGB frames (N, H, W, 3) uint8 as ``.mp4`` (H.264) or ``.gif`` (one palette of
-    ``GIF_COLORS`` colours for the whole clip), both encoded by the ffmpeg binary that the
-    imageio-ffmpeg package ships (no system ffmpeg needed).
+def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path, fps: float,
+                overwrite: bool = False) -> Path:
+    """Write RGB frames (N, H, W, 3) uint8 (or an iterable of (H, W, 3) frames, streamed to
+    the encoder) as ``.mp4`` (H.264) or ``.gif`` (one palette of ``GIF_COLORS`` colours for
+    the whole clip), both encoded by the ffmpeg binary that the imageio-ffmpeg package ships
+    (no system ffmpeg needed).
 
     Refuses to replace an existing file unless ``overwrite``.
     """
@@ -213,10 +220,14 @@ def write_video(frames: np.ndarray, path: str | Path, fps: float, overwrite: boo
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
     suffix = path.suffix.lower()
-    frames = np.asarray(frames, dtype=np.uint8)
-    if frames.ndim != 4 or frames.shape[-1] != 3 or len(frames) == 0:
+    if isinstance(frames, np.ndarray) and (
+            frames.ndim != 4 or frames.shape[-1] != 3 or len(frames) == 0):
         raise ValueError(f"write_video: expected frames (N, H, W, 3), got {frames.shape}")
-    h, w = frames.shape[1:3]
+    frames = iter(frames)
+    first = np.asarray(next(frames, np.zeros((0,))), dtype=np.uint8)
+    if first.ndim != 3 or first.shape[-1] != 3:
+        raise ValueError(f"write_video: expected frames (H, W, 3), got {first.shape}")
+    h, w = first.shape[:2]
     if suffix == ".mp4":
         if h % 2 or w % 2:
             raise ValueError(f"write_video: H.264 needs even frame sizes, got {w}x{h}")
@@ -237,8 +248,9 @@ def write_video(frames: np.ndarray, path: str | Path, fps: float, overwrite: boo
     writer = imageio_ffmpeg.write_frames(str(path), (w, h), fps=fps, macro_block_size=1,
                                          ffmpeg_log_level="error", **options)
     writer.send(None)  # start the ffmpeg process
+    writer.send(np.ascontiguousarray(first))
     for f in frames:
-        writer.send(np.ascontiguousarray(f))
+        writer.send(np.ascontiguousarray(f, dtype=np.uint8))
     writer.close()
     return path
 
@@ -260,7 +272,7 @@ def render_video(motions: Sequence[Motion], path: str | Path, titles: Sequence[s
         fps = 15.0 if path.suffix.lower() == ".gif" else renderer.fps
     step = max(1, round(renderer.fps / fps))
     stop = None if max_seconds is None else int(max_seconds * renderer.fps) + 1
-    frames = renderer.frames(step, stop=stop, progress=progress)
+    frames = renderer.iter_frames(step, stop=stop, progress=progress)
     return write_video(frames, path, renderer.fps / step, overwrite=overwrite)
 
 

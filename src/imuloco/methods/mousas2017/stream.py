@@ -1,0 +1,356 @@
+"""Online reconstruction, one sensor frame at a time (Mousas 2017 sec. 5.3 and 6).
+
+Each step:
+
+1. emissions ``b_i(y_t)`` of all frame states (one matrix-vector product, :mod:`.model`);
+2. the forward step of both levels (:mod:`.forward`): the upper level (one chain per phase
+   over its registered frames, emission eq. 8) gives ``p(S_h | y_1..t)`` and the most probable
+   phase; the lower level (one chain per segment, emission eq. 9) gives ``a_t(i, S_h)``;
+3. reactive interpolation: the K most probable segments of that phase, by their summed forward
+   probability, with weights ``a_k`` that sum to 1 (eq. 10-12), and inside each segment its
+   frame states weighted by their forward probability. The pose is eq. 13: the forward-weighted
+   sum of the conditional means ``mu^X(y_t)`` (eq. 6), which is the arg max of the conditional
+   Gaussian. The interpolated observation ``y_bar`` (eq. 10) and covariance (eq. 12) are kept
+   on the stream (``y_bar``, ``variance``);
+4. velocity-based blending (after Levine et al. 2009, which the paper cites without details):
+   the previous output pose is advanced by the interpolated joint angular velocities and then
+   pulled towards the interpolated pose with weight ``blend`` per frame, so that a switch of
+   segments or phases does not jump;
+5. decoding of the root (heading integrated from the yaw rate, position from the heading-frame
+   velocity, as :func:`imuloco.methods.pose.decode`) and, when enabled, the foot-skate
+   clean-up of :func:`imuloco.methods.postprocess.pin_feet`, here step by step with the same
+   arithmetic, on the predicted contacts.
+
+A missing sample (any NaN) skips the emission at both levels: the transitions alone move the
+forward variables (the frame "skip" and phase "exit" transitions of sec. 5.2 are what let it
+recover when samples return) and the pose is the interpolated means without the regression.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from imuloco.methods.base import Stream
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b for (..., 3) arrays; inline because np.cross is slow on small arrays."""
+    return a[..., [1, 2, 0]] * b[..., [2, 0, 1]] - a[..., [2, 0, 1]] * b[..., [1, 2, 0]]
+
+
+def matrix_from_6d(d: np.ndarray) -> np.ndarray:
+    """6-D rotations (..., 6) -> matrices (..., 3, 3), the Gram-Schmidt of
+    :func:`imuloco.ops.rotations.from_6d` (its columns are the 6-D vector's two halves)."""
+    a = d[..., :3] / np.sqrt((d[..., :3] ** 2).sum(-1))[..., None]
+    b = d[..., 3:] - (a * d[..., 3:]).sum(-1)[..., None] * a
+    b /= np.sqrt((b * b).sum(-1))[..., None]
+    out = np.empty(d.shape[:-1] + (3, 3))
+    out[..., 0], out[..., 1], out[..., 2] = a, b, _cross(a, b)
+    return out
+
+
+def matrix_exp(r: np.ndarray) -> np.ndarray:
+    """Rotation vectors (..., 3) -> matrices (..., 3, 3) (Rodrigues,
+    ``I + sin(a)/a K + 2 (sin(a/2)/a)^2 K^2``: no cancellation for small angles a)."""
+    a = np.sqrt((r * r).sum(-1))[..., None, None] + 1e-300
+    k = (r @ _SKEW_MAP).reshape(r.shape[:-1] + (3, 3))
+    h = np.sin(0.5 * a) / a
+    return _EYE3 + (np.sin(a) / a) * k + (2.0 * h * h) * (k @ k)
+
+
+_SKEW_MAP = np.zeros((3, 9))  # [r]_x as a linear map of r, flattened row-major
+_SKEW_MAP[2, 1], _SKEW_MAP[1, 2], _SKEW_MAP[0, 5] = -1.0, 1.0, -1.0
+_SKEW_MAP[2, 3], _SKEW_MAP[1, 6], _SKEW_MAP[0, 7] = 1.0, -1.0, 1.0
+_EYE3 = np.eye(3)
+
+
+def _shepperd_map() -> tuple[np.ndarray, np.ndarray]:
+    """The linear map from a rotation matrix's 9 entries to the symmetric 4x4 matrix K whose
+    row k is ``4 q_k q`` (quaternion x, y, z, w): ``K = m.reshape(9) @ C + c``."""
+    c = np.zeros((9, 4, 4))
+    e = {(i, j): 3 * i + j for i in range(3) for j in range(3)}
+    diag = [(0, (1, -1, -1)), (1, (-1, 1, -1)), (2, (-1, -1, 1)), (3, (1, 1, 1))]
+    for k, signs in diag:
+        for i, sgn in enumerate(signs):
+            c[e[i, i], k, k] = sgn
+    pairs = {(0, 1): ((0, 1), (1, 0), 1), (0, 2): ((0, 2), (2, 0), 1),
+             (1, 2): ((1, 2), (2, 1), 1), (0, 3): ((2, 1), (1, 2), -1),
+             (1, 3): ((0, 2), (2, 0), -1), (2, 3): ((1, 0), (0, 1), -1)}
+    for (a, b), (p, q, sgn) in pairs.items():
+        for r, cc in ((a, b), (b, a)):
+            c[e[p], r, cc] += 1
+            c[e[q], r, cc] += sgn
+    return c.reshape(9, 16), np.eye(4).reshape(16)
+
+
+_SHEPPERD = _shepperd_map()
+
+
+def matrix_to_quat(m: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) -> quaternions (..., 4) x, y, z, w (Shepperd's method:
+    the row of K with the largest diagonal entry, computed in one matrix product)."""
+    lead = m.shape[:-2]
+    k = (m.reshape(-1, 9) @ _SHEPPERD[0] + _SHEPPERD[1]).reshape(-1, 4, 4)
+    best = np.argmax(k.reshape(-1, 16)[:, ::5], axis=1)
+    q = k[np.arange(len(k)), best]
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return q.reshape(lead + (4,))
+
+
+def _yaw_matrix(theta: float) -> np.ndarray:
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+# Floors that keep every float32 in the forward pass a normal number. Subnormal floats
+# (below 1.2e-38) are 10-30 times slower in every arithmetic operation, and without floors the
+# forward variable of unlikely states decays into them within a few frames. Every emission
+# gets e^-40 times the best state's added (a sample that fits no state cannot rule a state out
+# alone, a robust likelihood), and every state 1e-18 of forward mass after normalising (at 10^5
+# states, 1e-13 in all): products then stay above 1e-36. Floors are added, not taken as
+# maxima: np.maximum is about six times slower than np.add on float32.
+EMISSION_FLOOR = float(np.exp(-40.0))
+ALPHA_FLOOR = 1e-18
+
+
+class MousasStream(Stream):
+    """One online session of a fitted :class:`Mousas2017` (see the module docstring).
+
+    pin : apply the foot-skate clean-up step by step.
+    """
+
+    def __init__(self, model, pin: bool = True) -> None:
+        self.m = model
+        self.pin = pin
+        self.lower = model.lower_
+        self.upper = model.upper_
+        self.fs = model.states_
+        sk = model.skeleton_
+        self.j = sk.num_joints
+        self.lay = model.layout_
+        self.alpha: np.ndarray | None = None
+        n = self.lower.num_states
+        self._b = np.empty(n, dtype=np.float32)
+        self._work = np.empty(n, dtype=np.float32)
+        self._pred = np.empty(n, dtype=np.float32)
+        self._bu = np.empty(self.fs.group_count.size, dtype=np.float32)
+        # (phase, first group, first state, H, L) of each block
+        self._blocks = [(h, g0, st, big_h, length) for (h, *_), (g0, st, big_h, length)
+                        in zip(self.lower.blocks, self.fs.blocks)]
+        self._a_up = self.upper.dense()
+        self._phase_block = {b[0]: i for i, b in enumerate(self._blocks)}
+        self._ones = np.ones(max(b[3] for b in self._blocks), dtype=np.float32)
+        self.alpha_up: np.ndarray | None = None
+        self.t = 0
+        self.q_prev: np.ndarray | None = None
+        self.r_prev: np.ndarray | None = None
+        self.theta = 0.0
+        self.root_raw = np.zeros(3)
+        self.root_out = np.zeros(3)
+        self.rel_prev: np.ndarray | None = None
+        self.c_prev: np.ndarray | None = None
+        # diagnostics of the last step
+        self.phase = -1
+        self.phase_posterior = np.zeros(self.upper.num_phases)
+        self.y_bar = np.zeros(self.fs.mu_y.shape[1])
+        self.variance = np.zeros(self.fs.mu_x.shape[1])
+        self.contacts = np.zeros(2)
+        self.pose_vector = np.zeros(self.lay["pose"].stop)
+        # the legs' sub-skeleton for the clean-up: joints from the root to each ankle
+        feet = [sk.part("left_ankle"), sk.part("right_ankle")]
+        chain: set[int] = set()
+        for f in feet:
+            while f >= 0:
+                chain.add(int(f))
+                f = int(sk.parents[f])
+        self._legs = np.array(sorted(chain))
+        where = {int(j): i for i, j in enumerate(self._legs)}
+        self._leg_parents = np.array([where.get(int(sk.parents[j]), -1) for j in self._legs])
+        self._leg_offsets = sk.offsets[self._legs]
+        self._leg_feet = np.array([where[f] for f in feet])
+        depth = np.zeros(self._legs.size, dtype=int)
+        for i in range(1, self._legs.size):
+            depth[i] = depth[self._leg_parents[i]] + 1
+        self._levels = [(np.flatnonzero(depth == d), self._leg_parents[depth == d])
+                        for d in range(1, depth.max() + 1)]
+        chains = []
+        for f in feet:  # joints below the root down to each ankle
+            path = []
+            while f > 0:
+                path.append(int(f))
+                f = int(sk.parents[f])
+            chains.append(path[::-1])
+        same = len(chains[0]) == len(chains[1]) and sk.parents[chains[0][0]] == 0 == \
+            sk.parents[chains[1][0]]
+        self._chains = np.array(chains) if same else None
+        self._chain_offsets = sk.offsets[self._chains][..., None] if same else None
+
+    # ---- inference --------------------------------------------------------------------------
+    def _filter(self, y: np.ndarray | None) -> None:
+        """Both levels' forward step, in preallocated float32 buffers (no per-frame
+        allocation of (N,) arrays: at 10^5 states that costs more than the arithmetic)."""
+        fs, low = self.fs, self.lower
+        if y is None:
+            b = bu = None
+        else:
+            b = fs.log_emission(y, out=self._b)
+            b -= b.max()
+            np.exp(b, out=b)
+            b += EMISSION_FLOOR
+            bu = self._bu
+            for _, g0, st, big_h, length in self._blocks:  # eq. 8: mean over the H segments
+                np.matmul(b[st: st + big_h * length].reshape(length, big_h),
+                          self._ones[:big_h], out=bu[g0: g0 + length])
+            bu /= fs.group_count
+        if self.alpha is None:
+            self.alpha = low.initial()
+            if b is not None:
+                self.alpha *= b
+            self.alpha /= self.alpha.sum()
+            self.alpha += ALPHA_FLOOR
+            self.alpha_up = self.upper.initial() if bu is None else self._norm(
+                self.upper.initial() * bu)
+            return
+        pred = low.predict(self.alpha, out=self._pred, work=self._work)
+        if b is None:
+            c = pred.sum()
+        else:
+            c = np.dot(pred, b)  # the normaliser without a product array (BLAS)
+            pred *= b
+        np.multiply(pred, 1.0 / c, out=self.alpha)
+        self.alpha += ALPHA_FLOOR
+        up = self.alpha_up @ self._a_up  # the upper level is small: a dense product
+        if bu is not None:
+            up *= bu
+        c = up.sum()
+        self.alpha_up = up / c if c > 0 else self._norm(self.alpha_up @ self._a_up)
+
+    @staticmethod
+    def _norm(a: np.ndarray) -> np.ndarray:
+        s = a.sum()
+        return a / s if s > 0 else np.full_like(a, 1.0 / a.size)
+
+    def _interpolate(self, y: np.ndarray | None) -> np.ndarray:
+        """Eq. 10-13 in the most probable phase; returns x_bar (dx,)."""
+        fs = self.fs
+        pp = np.bincount(fs.group_phase, self.alpha_up, minlength=self.upper.num_phases)
+        self.phase_posterior = pp
+        order = np.argsort(-pp)
+        for h in order:  # the lower level may hold no mass in that phase: take the next
+            blk_id = self._phase_block.get(int(h))
+            if blk_id is None:
+                continue
+            _, g0, st, big_h, length = self._blocks[blk_id]
+            blk = self.alpha[st: st + big_h * length].reshape(length, big_h)
+            w = blk.sum(axis=0)
+            if w.max() > 0:
+                break
+        self.phase = int(h)
+        k = min(self.m.K, big_h)
+        idx = np.argpartition(w, big_h - k)[big_h - k:] if k < big_h else np.arange(big_h)
+        tot = float(w[idx].sum())
+        weights = (blk[:, idx].T / tot if tot > 0 else
+                   np.full((k, length), 1.0 / (k * length))).astype(np.float64)
+        rows = st + np.arange(length)[None, :] * big_h + idx[:, None]   # (K, L)
+        x = np.einsum("kl,kld->d", weights, fs.mu_x[rows])
+        self.y_bar = np.einsum("kl,kld->d", weights, fs.mu_y[rows])        # eq. 10
+        self.variance = weights.sum(0) @ fs.cond_var[g0: g0 + length]      # eq. 12
+        if y is not None:                                                   # eq. 6, 11
+            r = np.einsum("kl,kld->ld", weights, y - fs.mu_y[rows])
+            x += np.einsum("lde,le->d", fs.reg[g0: g0 + length], r)
+        return x
+
+    # ---- output -----------------------------------------------------------------------------
+    def _pose(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        lay, fps, j = self.lay, self.m.fps_, self.j
+        d6 = x[lay["rot6d"]].reshape(j, 6)
+        if self.r_prev is not None and self.m.blend < 1.0:
+            # velocity-based blending in the 6-D representation: advance the previous pose by
+            # the interpolated angular velocity, then move towards the interpolated pose
+            pred = self.r_prev @ matrix_exp(x[lay["omega"]].reshape(j, 3) / fps)
+            pred6 = pred[:, :, :2].swapaxes(1, 2).reshape(j, 6)  # columns 0 and 1
+            d6 = self.m.blend * d6 + (1.0 - self.m.blend) * pred6
+        r = matrix_from_6d(d6)
+        self.r_prev = r
+        height, vx, vz, yaw_rate = (float(v) for v in x[lay["root"]])
+        if self.t > 0:
+            self.theta += yaw_rate / fps
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        rm = r.copy()
+        rm[0] = _yaw_matrix(self.theta) @ r[0]
+        # root step: the heading-frame velocity turned by the yaw (about +Y), as pose.decode
+        sx, sz = ((c * vx + s * vz) / fps, (c * vz - s * vx) / fps) if self.t > 0 else (0.0, 0.0)
+        raw = self.root_raw
+        raw[0] += sx
+        raw[2] += sz
+        raw[1] = height
+        rot = matrix_to_quat(rm)
+        if self.q_prev is not None:  # keep quaternion signs continuous over time
+            rot[(rot * self.q_prev).sum(-1) < 0] *= -1.0
+        self.q_prev = rot
+        lo, hi = x[lay["contacts"]]
+        contacts = np.array([min(max(float(lo), 0.0), 1.0), min(max(float(hi), 0.0), 1.0)])
+        self.contacts = contacts
+        if not self.pin:
+            return rot, raw.copy()
+        # pin_feet, one step: the root step that keeps the feet in contact still
+        rel = self._feet_relative(rm)
+        new = raw.copy()
+        if self.rel_prev is not None:
+            w0, w1 = min(contacts[0], self.c_prev[0]), min(contacts[1], self.c_prev[1])
+            wsum = w0 + w1
+            blend = min(wsum, 1.0)
+            if wsum > 0:
+                d = (w0 * (self.rel_prev[0] - rel[0]) + w1 * (self.rel_prev[1] - rel[1])) / wsum
+                tx, tz = float(d[0]), float(d[2])
+            else:
+                tx, tz = sx, sz
+            new = self.root_out.copy()
+            new[0] += (1 - blend) * sx + blend * tx
+            new[2] += (1 - blend) * sz + blend * tz
+            new[1] = height
+        self.root_out, self.rel_prev, self.c_prev = new, rel, contacts
+        return rot, new.copy()
+
+    def _feet_relative(self, rm: np.ndarray) -> np.ndarray:
+        """Ankle positions relative to the root (2, 3), world axes; rm : (J, 3, 3) local
+        matrices with the root's global. Forward kinematics of the two leg chains only, both
+        at once (``pos += G off_j; G = G R_j`` down each chain)."""
+        if self._chains is None:
+            return self._feet_relative_levels(rm)
+        local = rm[self._chains]                          # (2, D, 3, 3)
+        g = rm[0]  # (3, 3), broadcast against both chains
+        pos = np.zeros((2, 3, 1))
+        for d in range(self._chains.shape[1]):
+            pos = pos + g @ self._chain_offsets[:, d]
+            g = g @ local[:, d]
+        return pos[..., 0]
+
+    def _feet_relative_levels(self, rm: np.ndarray) -> np.ndarray:
+        """:meth:`_feet_relative` for legs of different depths, one tree level at a time."""
+        n = self._legs.size
+        glob = np.empty((n, 3, 3))
+        pos = np.zeros((n, 3))
+        local = rm[self._legs]
+        glob[0] = local[0]
+        for lvl, par in self._levels:
+            gp = glob[par]
+            glob[lvl] = gp @ local[lvl]
+            pos[lvl] = pos[par] + (gp @ self._leg_offsets[lvl][..., None])[..., 0]
+        return pos[self._leg_feet]
+
+    def step(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """sample : (6 S,) one sensor frame, NaN when missing -> (rotations (J, 4), root (3,))."""
+        y = np.asarray(sample, dtype=np.float64)
+        if y.shape != self.y_bar.shape:
+            raise ValueError(f"mousas2017 stream: expected a sample of shape {self.y_bar.shape} "
+                             f"(6 channels per sensor {self.m.placements_}), got {y.shape}")
+        obs = y if np.all(np.isfinite(y)) else None
+        self._filter(obs)
+        x = self._interpolate(obs)
+        self.pose_vector = x[self.lay["pose"]]
+        out = self._pose(x)
+        self.t += 1
+        return out

@@ -1,0 +1,250 @@
+"""Mousas 2017: transitions, forward algorithm, registration, fit/stream, model files."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from scipy.special import logsumexp
+
+from imuloco.evaluate.metrics import mpjpe
+from imuloco.methods import get_method, load_model
+from imuloco.methods.mousas2017.forward import Topology, forward
+from imuloco.methods.mousas2017.registration import split_by_speed, warp_matrix
+from imuloco.methods.mousas2017.stream import matrix_exp, matrix_from_6d, matrix_to_quat
+from imuloco.methods.training import TEST_SEED_OFFSET, synthesize
+from imuloco.ops.rotations import from_6d
+
+A_FRAME = (0.5, 0.3, 0.2)   # unequal, so that a mix-up of self/next/skip shows
+A_PHASE = (0.2, 0.5, 0.3)
+
+
+def tiny_topology() -> Topology:
+    """Phases 0, 2, 5 of 8: two segments of 3 frames, one of 1 frame, two of 2 frames."""
+    nxt = np.zeros((8, 8))
+    nxt[0, 2] = 1.0
+    nxt[2, 5], nxt[2, 0] = 3.0, 1.0
+    nxt[5, 0] = 1.0
+    return Topology(np.array([0, 2, 5]), np.array([2, 1, 2]), np.array([3, 1, 2]), nxt,
+                    A_FRAME, A_PHASE)
+
+
+def reference_matrix() -> np.ndarray:
+    """The tiny topology's transition matrix, written out from the rules one state at a time
+    (frame-major blocks: state = start + j H + s)."""
+    blocks = [(0, 2, 3), (2, 1, 1), (5, 2, 2)]  # (phase, H, L)
+    states, start = [], 0
+    for b, (h, big_h, length) in enumerate(blocks):
+        states += [(b, j, s, start + j * big_h + s) for j in range(length)
+                   for s in range(big_h)]
+        start += big_h * length
+    index = {(b, j, s): i for b, j, s, i in states}
+    n = len(states)
+    nxt = {0: {2: 1.0}, 2: {5: 0.75, 0: 0.25}, 5: {0: 1.0}}
+    phase_of = {b: h for b, (h, _, _) in enumerate(blocks)}
+    block_of = {h: b for b, h in phase_of.items()}
+    a = np.zeros((n, n))
+    for b, j, s, i in states:
+        length = blocks[b][2]
+        out = 0.0
+        for step, p in enumerate(A_FRAME):
+            if j + step < length:
+                a[i, index[(b, j + step, s)]] += p
+            else:
+                out += p
+        h = phase_of[b]
+        to_phase = {hh: 0.0 for hh in nxt}
+        to_phase[h] += A_PHASE[0]
+        for hh, p in nxt[h].items():
+            to_phase[hh] += A_PHASE[1] * p
+        for hh in to_phase:
+            to_phase[hh] += A_PHASE[2] / 3
+        for hh, p in to_phase.items():
+            bb = block_of[hh]
+            big_h = blocks[bb][1]
+            for ss in range(big_h):
+                a[i, index[(bb, 0, ss)]] += out * p / big_h
+    return a
+
+
+def test_transitions_follow_the_rules():
+    topo = tiny_topology()
+    a = topo.dense()
+    np.testing.assert_allclose(a, reference_matrix(), atol=1e-12)
+    np.testing.assert_allclose(a.sum(axis=1), 1.0, atol=1e-12)
+
+
+def test_forward_matches_brute_force():
+    topo = tiny_topology()
+    a = reference_matrix()
+    n = topo.num_states
+    rng = np.random.default_rng(0)
+    logb = rng.normal(0.0, 3.0, size=(4, n))
+    alpha, loglik = forward(topo, logb)
+    pi = np.full(n, 1.0 / n)
+    # every path of 4 states
+    joint = np.zeros(n)
+    for path in itertools.product(range(n), repeat=4):
+        p = pi[path[0]] * np.exp(logb[0, path[0]])
+        for t in range(1, 4):
+            p *= a[path[t - 1], path[t]] * np.exp(logb[t, path[t]])
+        joint[path[-1]] += p
+    assert loglik == pytest.approx(np.log(joint.sum()), rel=1e-10)
+    np.testing.assert_allclose(alpha[-1], joint / joint.sum(), atol=1e-12)
+
+
+def test_forward_long_stream_does_not_underflow():
+    """10,000 steps with emissions that would underflow any unscaled forward pass, against
+    a log-space reference; missing samples (NaN rows) only propagate the transitions."""
+    topo = tiny_topology()
+    log_a = np.log(np.maximum(reference_matrix(), 1e-300))
+    n, steps = topo.num_states, 10_000
+    rng = np.random.default_rng(1)
+    logb = -rng.uniform(0.0, 200.0, size=(steps, n))
+    logb[5000:5030] = np.nan
+    alpha, loglik = forward(topo, logb)
+    assert np.all(np.isfinite(alpha)) and np.isfinite(loglik)
+    np.testing.assert_allclose(alpha.sum(axis=1), 1.0, atol=1e-12)
+    log_alpha = np.log(np.full(n, 1.0 / n)) + logb[0]
+    for t in range(1, steps):
+        x = log_alpha[:, None] + log_a          # logsumexp over the previous state, inline
+        m = x.max(axis=0)
+        log_alpha = m + np.log(np.exp(x - m).sum(axis=0))
+        if not np.isnan(logb[t, 0]):
+            log_alpha = log_alpha + logb[t]
+    assert loglik == pytest.approx(logsumexp(log_alpha), rel=1e-9)
+    np.testing.assert_allclose(alpha[-1], np.exp(log_alpha - logsumexp(log_alpha)), atol=1e-9)
+    np.testing.assert_allclose(alpha[5001], alpha[5000] @ reference_matrix(), atol=1e-12)
+
+
+def test_topology_rejects_unequal_lengths_and_bad_probabilities():
+    with pytest.raises(ValueError, match="summing to 1"):
+        Topology(np.array([0]), np.array([1]), np.array([2]), np.zeros((8, 8)),
+                 (0.5, 0.5, 0.5))
+    with pytest.raises(ValueError, match="increase"):
+        Topology(np.array([2, 1]), np.array([1, 1]), np.array([2, 2]), np.zeros((8, 8)))
+
+
+def test_warp_matrix_registers_a_time_stretched_copy():
+    from dtaidistance import dtw_ndim
+
+    t = np.linspace(0, 1, 6)
+    ref = np.stack([np.sin(3 * t), np.cos(2 * t)], axis=1)
+    slow = np.stack([np.sin(3 * np.linspace(0, 1, 12)), np.cos(2 * np.linspace(0, 1, 12))], 1)
+    w = warp_matrix(dtw_ndim.warping_path(slow, ref), 12, 6)
+    np.testing.assert_allclose(w.sum(axis=1), 1.0)
+    assert np.abs(w @ slow - ref).max() < 0.15
+    assert np.abs(slow[::2] - ref).max() > np.abs(w @ slow - ref).max()
+
+
+def test_split_by_speed_caps_lengths():
+    speed = np.abs(np.sin(np.linspace(0, 6 * np.pi, 90)))
+    pieces = split_by_speed(speed, 15)
+    assert pieces[0][0] == 0 and pieces[-1][1] == 90
+    assert all(b - a <= 15 for a, b in pieces)
+    assert all(p[1] == q[0] for p, q in itertools.pairwise(pieces))
+
+
+def test_rotation_helpers_match_scipy():
+    rot = Rotation.random(200, random_state=3)
+    q = matrix_to_quat(rot.as_matrix())
+    np.testing.assert_allclose(np.abs((q * rot.as_quat()).sum(-1)), 1.0, atol=1e-12)
+    half_turns = Rotation.from_rotvec(np.pi * np.array([[1, -1, 0], [0, 0, 1]]) /
+                                      np.array([[2**0.5], [1.0]]))
+    q = matrix_to_quat(half_turns.as_matrix())
+    np.testing.assert_allclose(np.abs((q * half_turns.as_quat()).sum(-1)), 1.0, atol=1e-12)
+    rv = np.random.default_rng(0).normal(0, 0.7, (50, 3))
+    rv[0] = 0.0
+    np.testing.assert_allclose(matrix_exp(rv), Rotation.from_rotvec(rv).as_matrix(), atol=1e-12)
+    d6 = np.random.default_rng(1).normal(size=(30, 6))
+    np.testing.assert_allclose(matrix_from_6d(d6), Rotation.from_quat(from_6d(d6)).as_matrix(),
+                               atol=1e-12)
+
+
+# ---- fitted on the bundled sample ---------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def fitted(sample_db):
+    """Fitted on 15 sample clips; the 16th (a walk) held out."""
+    names = [lab["name"] for lab in sample_db.labels]
+    test_i = names.index("dataset-2_walk_normal_001")
+    train = sample_db.subset([i for i in range(len(sample_db)) if i != test_i])
+    model = get_method("mousas2017").fit(train, ["right_ankle"], "phone", seed=0)
+    mean = get_method("mean").fit(train, ["right_ankle"], "phone", seed=0)
+    test = synthesize(sample_db.subset([test_i]), ["right_ankle"], "phone",
+                      TEST_SEED_OFFSET)[0]
+    return model, mean, test
+
+
+def test_fit_and_stream_beat_the_mean_pose(fitted):
+    model, mean, test = fitted
+    rec = model.reconstruct_signals(test.signals)
+    assert rec.num_frames == test.motion.num_frames
+    assert np.all(np.isfinite(rec.rotations)) and np.all(np.isfinite(rec.root))
+    err, err_mean = mpjpe(test.motion, rec), mpjpe(test.motion, mean.reconstruct_signals(
+        test.signals))
+    assert err < 0.8 * err_mean, (err, err_mean)
+    # the online stream with per-step foot pinning gives the same poses as the offline path
+    st = model.stream()
+    out = [st.step(s) for s in test.signals]
+    rot = np.stack([o[0] for o in out])
+    np.testing.assert_allclose(np.abs((rot * rec.rotations).sum(-1)), 1.0, atol=1e-9)
+    root = np.stack([o[1] for o in out])
+    np.testing.assert_allclose(root, rec.root, atol=1e-9)
+    assert set(model.states_.group_phase.tolist()) <= set(range(8))
+
+
+def test_stream_survives_a_dropout(fitted):
+    model, _, test = fitted
+    sig = test.signals.copy()
+    sig[60:90] = np.nan                      # 1 s at 30 fps
+    rec = model.reconstruct_signals(sig)
+    assert np.all(np.isfinite(rec.rotations)) and np.all(np.isfinite(rec.root))
+    full = model.reconstruct_signals(test.signals)
+    late = slice(150, None)
+    # well after the samples return, the joints move as in the undisturbed reconstruction
+    # (the root's heading and position are integrated, so they keep the offset they took)
+    np.testing.assert_allclose(np.abs((rec.rotations[late, 1:] * full.rotations[late, 1:]
+                                       ).sum(-1)), 1.0, atol=1e-3)
+    with pytest.raises(ValueError, match="shape"):
+        model.stream().step(np.zeros(5))
+
+
+def test_recording_gaps_reach_the_model_as_missing(fitted):
+    from imuloco.core.recording import Recording
+    from imuloco.methods.training import to_frames
+    from imuloco.sensors.resample import find_gaps
+    from imuloco.sensors.simulate import simulate
+
+    model, _, test = fitted
+    rec = simulate(test.motion.slice(0, 120), ["right_ankle"], 100.0, "phone", seed=5)
+    keep = (rec.times < 1.0) | (rec.times > 2.0)
+    cut = Recording(rec.times[keep], rec.acc[keep], rec.gyro[keep], rec.placements)
+    out = model.reconstruct(cut)
+    (gap,) = find_gaps(cut.times, 0.1)
+    times = cut.times[0] + np.arange(out.num_frames) / model.fps_
+    rows = to_frames(cut, times - cut.times[0], model.fps_)
+    missing = (times > gap.start) & (times < gap.stop)
+    assert 28 <= missing.sum() <= 31
+    rows[missing] = np.nan
+    ref = model.reconstruct_signals(rows)
+    np.testing.assert_allclose(out.rotations, ref.rotations)
+    assert np.all(np.isfinite(out.rotations))
+
+
+def test_save_load_round_trip(fitted, tmp_path):
+    model, _, test = fitted
+    path = model.save(tmp_path / "m.npz")
+    again = load_model(path)
+    assert again.get_params() == model.get_params()
+    a = model.reconstruct_signals(test.signals[:80])
+    b = again.reconstruct_signals(test.signals[:80])
+    np.testing.assert_array_equal(a.rotations, b.rotations)
+    np.testing.assert_array_equal(a.root, b.root)
+
+
+def test_bad_hyperparameters_are_refused(sample_db):
+    with pytest.raises(ValueError, match="blend"):
+        get_method("mousas2017", blend=0.0).fit(sample_db.subset([0]), ["right_ankle"])

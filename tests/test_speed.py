@@ -1,0 +1,43 @@
+"""The speed benchmark: database building and the records it writes (timings not asserted)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from imuloco.evaluate.speed import build_database, speed_benchmark, speed_table
+
+KEYS = {"method", "db_frames", "online_fps", "online_latency_ms_p50", "online_latency_ms_p99"}
+
+
+def test_build_database_sizes_and_repeats(sample_db):
+    small, info = build_database(sample_db, 500)
+    assert 500 - 60 <= info["db_frames"] <= 500 and info["db_frames"] == small.num_frames
+    assert not info["repeated"]
+    big, info = build_database(sample_db, 3 * sample_db.num_frames)
+    assert info["repeated"] and info["distinct_frames"] <= sample_db.num_frames
+    names = [lab["name"] for lab in big.labels]
+    assert len(set(names)) == len(names)          # copies get their own noise seeds
+    assert abs(info["db_frames"] - 3 * sample_db.num_frames) <= 60
+    again, _ = build_database(sample_db, 500)
+    assert [lab["name"] for lab in again.labels] == [lab["name"] for lab in small.labels]
+
+
+def test_speed_benchmark_writes_records(tmp_path):
+    records = speed_benchmark(["mousas2017", "mean"], tmp_path, None, [400])
+    assert [r["method"] for r in records] == ["mousas2017", "mean"]
+    for r in records:
+        assert KEYS <= set(r)
+        assert r["online_fps"] > 0 and r["online_latency_ms_p99"] >= r["online_latency_ms_p50"]
+        assert r["steps"] >= 300
+    assert records[0]["states"] > 0
+    on_disk = json.loads((tmp_path / "speed.json").read_text())
+    assert [r["db_frames"] for r in on_disk] == [r["db_frames"] for r in records]
+    md = (tmp_path / "speed.md").read_text()
+    assert md == speed_table(records) + "\n" and "mousas2017" in md
+
+
+def test_speed_benchmark_rejects_unknown_methods(tmp_path):
+    with pytest.raises(KeyError, match="unknown"):
+        speed_benchmark(["no-such-method"], tmp_path, None, [400])
