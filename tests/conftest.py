@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -43,3 +45,45 @@ def spinning_motion(two_joint_skeleton: Skeleton) -> Motion:
     rot[:, 0] = about_y(t)
     rot[:, 1, 3] = 1.0
     return Motion(two_joint_skeleton, rot, np.zeros((90, 3)), 30.0, "spin")
+
+
+def read_mp4_frames(path: Path, width: int, height: int) -> np.ndarray:
+    """Frames (N, height, width, 3) of an MP4 of that size, decoded by the bundled ffmpeg in
+    one subprocess run (imageio's readers leave ffmpeg's pipes to the garbage collector:
+    ResourceWarnings, errors here)."""
+    import imageio_ffmpeg
+
+    out = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(path),
+                          "-f", "rawvideo", "-pix_fmt", "rgb24", "-"], capture_output=True,
+                         check=True).stdout
+    assert len(out) % (width * height * 3) == 0, "frame size differs"
+    return np.frombuffer(out, np.uint8).reshape(-1, height, width, 3)
+
+
+@pytest.fixture
+def read_mp4():
+    """:func:`read_mp4_frames`, for tests that check written videos."""
+    return read_mp4_frames
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """Debian's headless chromium driven by selenium through the system chromedriver (nothing
+    is downloaded); skips when selenium, ``chromium`` or ``chromium-driver`` is missing."""
+    webdriver = pytest.importorskip("selenium.webdriver")
+    from selenium.webdriver.chrome.service import Service
+
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    driver_path = shutil.which("chromedriver")
+    if not (chromium and driver_path):
+        pytest.skip("Debian chromium and chromium-driver are not installed")
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = chromium
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                "--window-size=1000,700", "--disable-extensions", "--no-first-run"):
+        opts.add_argument(arg)
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(service=Service(driver_path), options=opts)
+    driver.set_page_load_timeout(60)
+    yield driver
+    driver.quit()

@@ -26,21 +26,6 @@ from imuloco.sensors.simulate import simulate
 DEMO_CLIP = "dataset-2_walk_normal_001"
 
 
-def read_mp4(path, width: int, height: int) -> np.ndarray:
-    """Frames (N, height, width, 3) of an MP4 of that size, decoded by the bundled ffmpeg in
-    one subprocess run (imageio's readers leave ffmpeg's pipes to the garbage collector:
-    ResourceWarnings, errors here)."""
-    import subprocess
-
-    import imageio_ffmpeg
-
-    out = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(path),
-                          "-f", "rawvideo", "-pix_fmt", "rgb24", "-"], capture_output=True,
-                         check=True).stdout
-    assert len(out) % (width * height * 3) == 0, "frame size differs"
-    return np.frombuffer(out, np.uint8).reshape(-1, height, width, 3)
-
-
 @pytest.fixture(scope="module")
 def walks(sample_db):
     return sample_db.where(content=["walk", "walk-turn-left", "walk-turn-right"])
@@ -254,7 +239,7 @@ def test_cli_render(tmp_path, demo_clip):
 
 
 @pytest.mark.slow
-def test_demo_writes_everything(tmp_path):
+def test_demo_writes_everything(tmp_path, read_mp4):
     """``imuloco demo`` end to end (the README's first command)."""
     import imageio.v3 as iio
 

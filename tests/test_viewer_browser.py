@@ -19,12 +19,7 @@ from pathlib import Path
 
 import pytest
 
-webdriver = pytest.importorskip("selenium.webdriver")
-
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-DRIVER = shutil.which("chromedriver")
-pytestmark = pytest.mark.skipif(not (CHROMIUM and DRIVER),
-                                reason="Debian chromium and chromium-driver are not installed")
+pytest.importorskip("selenium.webdriver")  # the `browser` fixture (conftest) skips too
 
 
 @pytest.fixture(scope="module")
@@ -34,22 +29,6 @@ def page(tmp_path_factory, sample_db) -> Path:
     clip = sample_db.where(content="walk", style="normal").clips[0].slice(0, 120)
     path = tmp_path_factory.mktemp("viewer") / "viewer.html"
     return write_viewer([clip, clip], path, ["ground truth", "reconstruction"])
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from selenium.webdriver.chrome.service import Service
-
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                "--window-size=1000,700", "--disable-extensions", "--no-first-run"):
-        opts.add_argument(arg)
-    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
-    driver.set_page_load_timeout(60)
-    yield driver
-    driver.quit()
 
 
 def _wait(driver, script: str, timeout: float = 20.0):

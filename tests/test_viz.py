@@ -24,21 +24,6 @@ from imuloco.viz.skeleton import (
 )
 
 
-def read_mp4(path, width: int, height: int) -> np.ndarray:
-    """Frames (N, height, width, 3) of an MP4 of that size, decoded by the bundled ffmpeg in
-    one subprocess run (imageio's readers leave ffmpeg's pipes to the garbage collector:
-    ResourceWarnings, errors here)."""
-    import subprocess
-
-    import imageio_ffmpeg
-
-    out = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(path),
-                          "-f", "rawvideo", "-pix_fmt", "rgb24", "-"], capture_output=True,
-                         check=True).stdout
-    assert len(out) % (width * height * 3) == 0, "frame size differs"
-    return np.frombuffer(out, np.uint8).reshape(-1, height, width, 3)
-
-
 @pytest.fixture(scope="module")
 def walk(sample_db) -> Motion:
     return sample_db.where(content="walk", style="normal").clips[0].slice(0, 45)
@@ -84,7 +69,7 @@ def test_renderer_draws_a_moving_figure(walk):
 
 
 @pytest.mark.parametrize("suffix", [".mp4", ".gif"])
-def test_video_round_trip(tmp_path, suffix):
+def test_video_round_trip(tmp_path, suffix, read_mp4):
     import imageio.v3 as iio
 
     frames = np.full((6, 64, 96, 3), 255, dtype=np.uint8)
