@@ -137,3 +137,10 @@ def test_missing_arrays_fail_clearly(models, tmp_path):
     np.savez(tmp_path / "part.npz", **data)
     with pytest.raises(ModelFileError, match="incomplete"):
         load_model(tmp_path / "part.npz")
+
+
+def test_training_protocol_travels_with_the_model(models, tmp_path):
+    model = models["ridge"]
+    assert model.protocol_["clips"] > 0 and model.protocol_["noise"] == model.noise_
+    back = load_model(model.save(tmp_path / "m.npz"))
+    assert back.protocol_ == model.protocol_

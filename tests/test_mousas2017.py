@@ -95,6 +95,23 @@ def test_forward_matches_brute_force():
     np.testing.assert_allclose(alpha[-1], joint / joint.sum(), atol=1e-12)
 
 
+@pytest.mark.parametrize("a_frame", [A_FRAME, (1 / 3, 1 / 3, 1 / 3), (0.0, 0.6, 0.4)])
+def test_unscaled_prediction_is_the_prediction_over_a_self(a_frame):
+    """The stream's fast path (``scaled=False``) differs from the transition only by the
+    common factor a_self, for unequal, the paper's equal, and a zero a_self."""
+    topo = tiny_topology()
+    topo = Topology(topo.phases, topo.counts, topo.lengths, topo.next_phase, a_frame, A_PHASE)
+    alpha = np.random.default_rng(3).dirichlet(np.ones(topo.num_states))
+    ref = alpha @ np.stack([topo.predict(row) for row in np.eye(topo.num_states)])
+    np.testing.assert_allclose(topo.predict(alpha), ref, atol=1e-15)
+    scale = a_frame[0] if a_frame[0] > 0 else 1.0
+    out, work = np.empty_like(alpha), np.empty_like(alpha)
+    np.testing.assert_allclose(topo.predict(alpha, out, work, scaled=False) * scale, ref,
+                               atol=1e-15)
+    if a_frame == A_FRAME:
+        np.testing.assert_allclose(ref, alpha @ reference_matrix(), atol=1e-15)
+
+
 def test_forward_long_stream_does_not_underflow():
     """10,000 steps with emissions that would underflow any unscaled forward pass, against
     a log-space reference; missing samples (NaN rows) only propagate the transitions."""
@@ -194,6 +211,44 @@ def test_fit_and_stream_beat_the_mean_pose(fitted):
     root = np.stack([o[1] for o in out])
     np.testing.assert_allclose(root, rec.root, atol=1e-9)
     assert set(model.states_.group_phase.tolist()) <= set(range(8))
+
+
+def test_stream_filter_matches_the_offline_forward(fitted):
+    """The stream's float32 forward step (floors, exp clamp, unscaled transitions) gives the
+    filtering distribution of the float64 offline :func:`forward` to float32 tolerance, with
+    and without missing samples."""
+    model, _, test = fitted
+    sig = test.signals[:60].copy()
+    sig[30:40] = np.nan
+    logb = model.states_.log_emission_batch(sig)
+    logb[30:40] = np.nan
+    topo = model.lower_
+    topo64 = Topology(topo.phases, topo.counts, topo.lengths, topo.next_phase, topo.a_frame,
+                      topo.a_phase)
+    alpha, _ = forward(topo64, logb)
+    st = model.stream()
+    for t, sample in enumerate(sig):
+        st.step(sample)
+        np.testing.assert_allclose(st.alpha, alpha[t], atol=2e-5, err_msg=f"step {t}")
+
+
+def test_exp_clamp_changes_no_bit(fitted, monkeypatch):
+    """Log emissions clamped at max - 60 before exp give the same forward variable, bit for
+    bit, as the unclamped exp (they fall below the emission floor's half ulp), on samples far
+    from every state, where the clamp acts on most states."""
+    from imuloco.methods.mousas2017 import stream as stream_mod
+
+    model, _, test = fitted
+    sig = test.signals[:30].copy()
+    sig[10:15, :3] += 40.0                   # m/s^2: far from every state
+    logb = model.states_.log_emission_batch(sig[10:15])
+    assert np.mean(logb - logb.max(axis=1, keepdims=True) < stream_mod.EXP_CLAMP) > 0.5
+    runs = []
+    for clamp in (stream_mod.EXP_CLAMP, -np.inf):
+        monkeypatch.setattr(stream_mod, "EXP_CLAMP", clamp)
+        st = model.stream()
+        runs.append([(st.step(x), st.alpha.copy())[1] for x in sig])
+    np.testing.assert_array_equal(np.stack(runs[0]), np.stack(runs[1]))
 
 
 def test_stream_survives_a_dropout(fitted):

@@ -188,9 +188,6 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
     Writes OUTPUT, and for methods that keep a training history (``learned``) its losses per
     epoch beside it as OUTPUT.history.json and, with matplotlib, OUTPUT.curves.png.
     """
-    import datetime
-    import platform
-    import time
 
     from imuloco.evaluate.protocols import split
     from imuloco.io.database import load_database, load_sample
@@ -210,16 +207,10 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
     if split_name is not None:
         db = split(db, split_name)[0]
     placements = _csv(placement)
-    start = time.perf_counter()
     method.fit(db, placements, noise, seed, progress=True)
-    seconds = time.perf_counter() - start
-    method.protocol_ = {
-        "data": "bundled sample" if data is None else Path(data).name, "clips": len(db),
-        "frames": int(db.num_frames), "split": split_name or "all", "placements": placements,
-        "noise": noise, "seed": seed, "train_seconds": round(seconds, 1),
-        "trained_at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "machine": f"{platform.machine()}, {__import__('os').cpu_count()} CPUs",
-    }
+    method.protocol_.update(data="bundled sample" if data is None else Path(data).name,
+                            split=split_name or "all")
+    seconds = method.protocol_["train_seconds"]
     method.save(output, overwrite=force)
     click.echo(f"trained {method_name} on {len(db)} clips ({db.num_frames} frames) in "
                f"{seconds / 60:.1f} min; wrote {output}")

@@ -34,7 +34,7 @@ class Motion:
     def __post_init__(self) -> None:
         self.rotations = np.asarray(self.rotations, dtype=np.float64)
         self.root = np.asarray(self.root, dtype=np.float64)
-        t, j = self.rotations.shape[:2]
+        t = len(self.rotations) if self.rotations.ndim else 0
         if self.rotations.shape != (t, self.skeleton.num_joints, 4) or self.root.shape != (t, 3):
             raise ValueError(
                 f"motion {self.name!r}: expected rotations (T, {self.skeleton.num_joints}, 4) "

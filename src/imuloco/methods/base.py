@@ -16,14 +16,18 @@ format version, the method name, its hyperparameters and the skeleton.
 
 from __future__ import annotations
 
+import datetime
 import inspect
 import json
+import os
+import platform
+import time
 import zipfile
 import zlib
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar, Self, TypeVar
 
 import numpy as np
 
@@ -65,17 +69,29 @@ class Method(ABC):
     supports_online: ClassVar[bool] = False
 
     # ---- learning ---------------------------------------------------------------------------
-    def fit(self: M, db: MotionDatabase, placements: Sequence[str] = ("right_ankle",),
-            noise: str = "phone", seed: int = 0, progress: bool = False) -> M:
-        """Synthesize ``placements`` with ``noise`` on ``db`` and learn from it."""
+    def fit(self, db: MotionDatabase, placements: Sequence[str] = ("right_ankle",),
+            noise: str = "phone", seed: int = 0, progress: bool = False) -> Self:
+        """Synthesize ``placements`` with ``noise`` on ``db`` and learn from it.
+
+        Records what it was trained on in ``protocol_`` (saved with the model): clips, frames,
+        placements, noise, seed, seconds, date and machine; callers may add to it (the
+        ``train`` command adds the data folder and split)."""
         if len(db) == 0:
             raise ValueError("cannot fit on an empty database")
         self.placements_ = list(placements)
         self.noise_ = noise
         self.skeleton_ = db.skeleton
         self.fps_ = float(db.clips[0].fps)
+        start = time.perf_counter()
         self.fit_examples(synthesize(db, placements, noise, seed, progress=progress),
                           progress=progress)
+        self.protocol_ = {
+            "clips": len(db), "frames": int(db.num_frames), "placements": list(placements),
+            "noise": noise, "seed": seed,
+            "train_seconds": round(time.perf_counter() - start, 1),
+            "trained_at": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+            "machine": f"{platform.machine()}, {os.cpu_count()} CPUs",
+        }
         return self
 
     @abstractmethod
@@ -86,7 +102,7 @@ class Method(ABC):
     def reconstruct(self, rec: Recording) -> Motion:
         """Reconstruct a Motion at the model rate from a recording of the fitted placements."""
         rec = rec.select(self.placements_)
-        frames = int(round((rec.times[-1] - rec.times[0]) * self.fps_)) + 1
+        frames = round((rec.times[-1] - rec.times[0]) * self.fps_) + 1
         times = np.arange(frames) / self.fps_
         return self.reconstruct_signals(to_frames(rec, times, self.fps_))
 
@@ -124,7 +140,7 @@ class Method(ABC):
             "placements": self.placements_, "noise": self.noise_, "fps": self.fps_,
             "skeleton": {"names": sk.names, "body_map": sk.body_map,
                          "end_sites": {str(k): v.tolist() for k, v in sk.end_sites.items()}},
-            "values": values,
+            "protocol": getattr(self, "protocol_", {}), "values": values,
         }
         blob = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -169,6 +185,7 @@ def load_model(path: str | Path) -> Method:
         method.placements_ = header["placements"]
         method.noise_ = header["noise"]
         method.fps_ = header["fps"]
+        method.protocol_ = header.get("protocol", {})
         method.set_state(data, header["values"])
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise ModelFileError(f"{path}: {name} model file is incomplete or corrupted "

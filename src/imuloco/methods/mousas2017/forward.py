@@ -109,33 +109,48 @@ class Topology:
         return np.full(self.num_states, 1.0 / self.num_states, dtype=self.dtype)
 
     def predict(self, alpha: np.ndarray, out: np.ndarray | None = None,
-                work: np.ndarray | None = None) -> np.ndarray:
+                work: np.ndarray | None = None, scaled: bool = True) -> np.ndarray:
         """One transition: ``sum_i alpha_i a_ij`` for every j, shape (N,) -> (N,).
 
         out, work : optional preallocated (N,) buffers of alpha's dtype (``out`` is returned);
         a stream passes them so that no large array is allocated per frame.
+        scaled : False returns the prediction divided by ``a_self`` of the frame level (when it
+            is > 0), a common factor that a normalised forward step removes anyway: with the
+            paper's equal probabilities the shifts are then plain additions (no multiply
+            passes, no temporary).
         """
         fs, fn, fk = self.a_frame
-        pred = np.multiply(alpha, fs, out=out)
+        if fs > 0:
+            scale, fn, fk, fs = fs, fn / fs, fk / fs, 1.0
+        else:
+            scale = 1.0
+        pred = np.empty_like(alpha) if out is None else out
+        if fs == 1.0:
+            np.copyto(pred, alpha)
+        else:
+            np.multiply(alpha, fs, out=pred)
         tmp = np.empty_like(alpha) if work is None else work
-        for h, st, big_h, length in self.blocks:
-            if length >= 2:  # next frame: a shift by H inside the block
-                t = np.multiply(alpha[st: st + big_h * (length - 1)], fn,
-                                out=tmp[:big_h * (length - 1)])
-                pred[st + big_h: st + big_h * length] += t
-            if length >= 3:  # skip a frame
-                t = np.multiply(alpha[st: st + big_h * (length - 2)], fk,
-                                out=tmp[:big_h * (length - 2)])
-                pred[st + 2 * big_h: st + big_h * length] += t
+        for _, st, big_h, length in self.blocks:
+            for shift, w in ((1, fn), (2, fk)):  # next frame and skip: shifts by H in the block
+                if length <= shift or w == 0:
+                    continue
+                n = big_h * (length - shift)
+                src = alpha[st: st + n]
+                if w != 1.0:
+                    src = np.multiply(src, w, out=tmp[:n])
+                dst = pred[st + shift * big_h: st + big_h * length]
+                np.add(dst, src, out=dst)
         # mass that moves past the last frame ends the segment: the sums of every block's last
         # and second-to-last frame runs, all in one reduceat
         runs = np.add.reduceat(alpha, self._run_index)
         out_phase = np.zeros(self.num_phases)
         out_phase[self.phases] = runs[self._last_pos] * (fn + fk) + \
-            runs[self._prev_pos] * self._prev_w
+            runs[self._prev_pos] * (self._prev_w / scale)
         entry = out_phase @ self.phase_trans
         for h, st, big_h, _ in self.blocks:  # pi: each segment's first frame alike
             pred[st: st + big_h] += entry[h] / big_h
+        if scaled and scale != 1.0:
+            pred *= scale
         return pred
 
     def dense(self) -> np.ndarray:
