@@ -548,3 +548,13 @@ def test_shared_clip_round_trip(shared_dir: Path, tmp_path: Path):
     assert back.skeleton.names == m.skeleton.names and back.num_frames == m.num_frames
     err = np.abs(back.positions() - m.positions()).max()
     assert err < 1e-6, err
+
+
+def test_limited_database_spreads_over_the_folder(sample_db):
+    from imuloco.data import SAMPLE_DIR
+    from imuloco.io.database import load_database, spread
+
+    assert spread(10, 3) == [0, 4, 9] and spread(4, None) == [0, 1, 2, 3]
+    db = load_database(SAMPLE_DIR, limit=4, progress=False)
+    assert len(db) == 4
+    assert len({lab["content"] for lab in db.labels}) >= 3  # not only the first type by name

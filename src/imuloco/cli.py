@@ -190,7 +190,7 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
     """
 
     from imuloco.evaluate.protocols import split
-    from imuloco.io.database import load_database, load_sample
+    from imuloco.io.database import load_database, load_sample, spread
     from imuloco.methods import get_method
 
     if output.exists() and not force:
@@ -203,7 +203,7 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
         raise click.UsageError(f"--param: {e}") from None
     db = load_sample() if data is None else load_database(data, limit=limit)
     if data is None and limit is not None:
-        db = db.subset(list(range(min(limit, len(db)))))
+        db = db.subset(spread(len(db), limit))
     if split_name is not None:
         db = split(db, split_name)[0]
     placements = _csv(placement)

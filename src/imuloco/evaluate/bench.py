@@ -49,11 +49,11 @@ LATENCY_FRAMES = 300
 def load_data(data: str | Path | None, limit: int | None = None, progress: bool = False
               ) -> MotionDatabase:
     """The clips of folder ``data``, or the bundled sample when ``data`` is None."""
-    from imuloco.io.database import load_database, load_sample
+    from imuloco.io.database import load_database, load_sample, spread
 
     if data is None:
         db = load_sample(progress=progress)
-        return db.subset(list(range(min(limit, len(db))))) if limit else db
+        return db.subset(spread(len(db), limit))
     return load_database(data, limit=limit, progress=progress)
 
 

@@ -43,6 +43,14 @@ def read_labels(bvh: Path, contents: list[str] | None, styles: list[str] | None)
     return labels
 
 
+def spread(n: int, limit: int | None) -> list[int]:
+    """At most ``limit`` indices of ``range(n)``, evenly spaced, so that a quick run on a
+    folder sorted by name still sees every motion type and style."""
+    if not limit or limit >= n:
+        return list(range(n))
+    return sorted({round(i * (n - 1) / max(limit - 1, 1)) for i in range(limit)})
+
+
 def load_database(
     folder: str | Path,
     content: list[str] | None = None,
@@ -55,7 +63,8 @@ def load_database(
     Parameters
     ----------
     content, style : keep only clips with these labels (e.g. ``["walk", "run"]``).
-    limit : read at most this many clips (after filtering), for quick runs.
+    limit : read at most this many clips (after filtering, evenly spaced over the sorted
+        names: see :func:`spread`), for quick runs.
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -72,7 +81,7 @@ def load_database(
         if style and lab.get("style") not in style:
             continue
         chosen.append((f, lab))
-    chosen = chosen[:limit] if limit else chosen
+    chosen = [chosen[i] for i in spread(len(chosen), limit)]
     clips = [read_bvh(f) for f, _ in tqdm(chosen, desc="loading clips", disable=not progress,
                                           unit="clip")]
     return MotionDatabase(clips, [lab for _, lab in chosen])
