@@ -247,7 +247,11 @@ def test_exp_clamp_changes_no_bit(fitted, monkeypatch):
     for clamp in (stream_mod.EXP_CLAMP, -np.inf):
         monkeypatch.setattr(stream_mod, "EXP_CLAMP", clamp)
         st = model.stream()
-        runs.append([(st.step(x), st.alpha.copy())[1] for x in sig])
+        alphas = []
+        for x in sig:
+            st.step(x)
+            alphas.append(st.alpha.copy())
+        runs.append(alphas)
     np.testing.assert_array_equal(np.stack(runs[0]), np.stack(runs[1]))
 
 

@@ -120,37 +120,39 @@ class Topology:
             passes, no temporary).
         """
         fs, fn, fk = self.a_frame
-        if fs > 0:
-            scale, fn, fk, fs = fs, fn / fs, fk / fs, 1.0
-        else:
-            scale = 1.0
-        pred = np.empty_like(alpha) if out is None else out
-        if fs == 1.0:
-            np.copyto(pred, alpha)
-        else:
-            np.multiply(alpha, fs, out=pred)
-        tmp = np.empty_like(alpha) if work is None else work
-        for _, st, big_h, length in self.blocks:
-            for shift, w in ((1, fn), (2, fk)):  # next frame and skip: shifts by H in the block
-                if length <= shift or w == 0:
-                    continue
-                n = big_h * (length - shift)
-                src = alpha[st: st + n]
-                if w != 1.0:
-                    src = np.multiply(src, w, out=tmp[:n])
-                dst = pred[st + shift * big_h: st + big_h * length]
-                np.add(dst, src, out=dst)
+        scale = fs if (fs > 0 and not scaled) else 1.0
+        fs, fn, fk = fs / scale, fn / scale, fk / scale
         # mass that moves past the last frame ends the segment: the sums of every block's last
         # and second-to-last frame runs, all in one reduceat
         runs = np.add.reduceat(alpha, self._run_index)
         out_phase = np.zeros(self.num_phases)
         out_phase[self.phases] = runs[self._last_pos] * (fn + fk) + \
             runs[self._prev_pos] * (self._prev_w / scale)
-        entry = out_phase @ self.phase_trans
-        for h, st, big_h, _ in self.blocks:  # pi: each segment's first frame alike
-            pred[st: st + big_h] += entry[h] / big_h
-        if scaled and scale != 1.0:
-            pred *= scale
+        # Python floats: a NumPy float64 scalar would make each float32 add below a float64
+        # loop with casts (three times slower)
+        entry = (out_phase @ self.phase_trans).tolist()
+        pred = np.empty_like(alpha) if out is None else out
+        tmp = np.empty_like(alpha) if work is None else work
+
+        def weighted(src: np.ndarray, w: float) -> np.ndarray:
+            return src if w == 1.0 else np.multiply(src, w, out=tmp[:src.size])
+
+        # one pass per block and move, each writing pred from alpha (no copy of alpha first):
+        # pred = a_self alpha + entry (first frames) + a_next shift_H(alpha) + a_skip shift_2H
+        for h, st, big_h, length in self.blocks:
+            end = st + big_h * length
+            self_part = alpha
+            if fs != 1.0:
+                self_part = pred
+                np.multiply(alpha[st: end], fs, out=pred[st: end])
+            first = slice(st, st + big_h)  # pi: each segment's first frame alike
+            np.add(self_part[first], entry[h] / big_h, out=pred[first])
+            if length >= 2:  # next frame: a shift by H inside the block
+                rest = slice(st + big_h, end)
+                np.add(self_part[rest], weighted(alpha[st: end - big_h], fn), out=pred[rest])
+            if length >= 3 and fk != 0.0:  # skip a frame
+                dst = pred[st + 2 * big_h: end]
+                np.add(dst, weighted(alpha[st: end - 2 * big_h], fk), out=dst)
         return pred
 
     def dense(self) -> np.ndarray:

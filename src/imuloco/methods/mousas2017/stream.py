@@ -36,8 +36,10 @@ from imuloco.methods.base import Stream
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b for (..., 3) arrays; inline because np.cross is slow on small arrays."""
-    return a[..., [1, 2, 0]] * b[..., [2, 0, 1]] - a[..., [2, 0, 1]] * b[..., [1, 2, 0]]
+    """a x b for (..., 3) arrays; inline because np.cross is slow on small arrays (both
+    products of the formula in one multiply of 6 components)."""
+    p = a[..., [1, 2, 0, 2, 0, 1]] * b[..., [2, 0, 1, 1, 2, 0]]
+    return p[..., :3] - p[..., 3:]
 
 
 def matrix_from_6d(d: np.ndarray) -> np.ndarray:
@@ -95,7 +97,7 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     k = (m.reshape(-1, 9) @ _SHEPPERD[0] + _SHEPPERD[1]).reshape(-1, 4, 4)
     best = np.argmax(k.reshape(-1, 16)[:, ::5], axis=1)
     q = k[np.arange(len(k)), best]
-    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    q /= np.sqrt((q * q).sum(-1, keepdims=True))
     return q.reshape(lead + (4,))
 
 
@@ -113,6 +115,8 @@ def _yaw_matrix(theta: float) -> np.ndarray:
 # maxima: np.maximum is about six times slower than np.add on float32.
 EMISSION_FLOOR = float(np.exp(-40.0))
 ALPHA_FLOOR = 1e-18
+EXP_CLAMP = -60.0  # log emissions below max - 60 are clamped before exp (see _filter)
+_EXP_CLAMP_BITS = np.float32(EXP_CLAMP).view(np.uint32)
 
 
 class MousasStream(Stream):
@@ -140,6 +144,8 @@ class MousasStream(Stream):
         self._blocks = [(h, g0, st, big_h, length) for (h, *_), (g0, st, big_h, length)
                         in zip(self.lower.blocks, self.fs.blocks)]
         self._a_up = self.upper.dense()
+        # the regression (G, dx, dy) as (dx, G, dy): a run of groups is then one matrix
+        self._reg_t = np.ascontiguousarray(self.fs.reg.transpose(1, 0, 2))
         self._phase_block = {b[0]: i for i, b in enumerate(self._blocks)}
         self._ones = np.ones(max(b[3] for b in self._blocks), dtype=np.float32)
         self.alpha_up: np.ndarray | None = None
@@ -197,6 +203,15 @@ class MousasStream(Stream):
         else:
             b = fs.log_emission(y, out=self._b)
             b -= b.max()
+            if b.min() < EXP_CLAMP:
+                # exp is 4-5 times slower where its result underflows (a subnormal float32),
+                # as it does for half the states of a frame far from most. Clamping there
+                # changes nothing: e^-60 is below half an ulp of the floor added next, so the
+                # sum rounds to the floor either way. b <= 0 now, and for such floats
+                # max(b, c) is min on their bits as uint32 (+0 is 0, negatives grow with
+                # their magnitude), which is cheaper than np.maximum's NaN-aware float loop.
+                bits = b.view(np.uint32)
+                np.minimum(bits, _EXP_CLAMP_BITS, out=bits)
             np.exp(b, out=b)
             b += EMISSION_FLOOR
             bu = self._bu
@@ -213,7 +228,8 @@ class MousasStream(Stream):
             self.alpha_up = self.upper.initial() if bu is None else self._norm(
                 self.upper.initial() * bu)
             return
-        pred = low.predict(self.alpha, out=self._pred, work=self._work)
+        # unscaled: off by the common factor a_self, which the normalisation below removes
+        pred = low.predict(self.alpha, out=self._pred, work=self._work, scaled=False)
         if b is None:
             c = pred.sum()
         else:
@@ -253,13 +269,15 @@ class MousasStream(Stream):
         tot = float(w[idx].sum())
         weights = (blk[:, idx].T / tot if tot > 0 else
                    np.full((k, length), 1.0 / (k * length))).astype(np.float64)
-        rows = st + np.arange(length)[None, :] * big_h + idx[:, None]   # (K, L)
-        x = np.einsum("kl,kld->d", weights, fs.mu_x[rows])
-        self.y_bar = np.einsum("kl,kld->d", weights, fs.mu_y[rows])        # eq. 10
+        rows = (st + np.arange(length)[None, :] * big_h + idx[:, None]).ravel()  # (K L,)
+        w = weights.ravel()
+        x = w @ fs.mu_x.take(rows, axis=0)
+        mu_y = fs.mu_y.take(rows, axis=0)
+        self.y_bar = w @ mu_y                                               # eq. 10
         self.variance = weights.sum(0) @ fs.cond_var[g0: g0 + length]      # eq. 12
         if y is not None:                                                   # eq. 6, 11
-            r = np.einsum("kl,kld->ld", weights, y - fs.mu_y[rows])
-            x += np.einsum("lde,le->d", fs.reg[g0: g0 + length], r)
+            r = np.einsum("kl,kld->ld", weights, y - mu_y.reshape(k, length, -1))
+            x += self._reg_t[:, g0: g0 + length].reshape(x.size, -1) @ r.ravel()
         return x
 
     # ---- output -----------------------------------------------------------------------------
