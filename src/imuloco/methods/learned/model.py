@@ -30,12 +30,16 @@ class Reconstructor(nn.Module):
     pose_dim : D, the pose-vector length (6 J + 4).
     hidden : GRU width.
     layers : stacked GRU layers.
+    dropout : dropout after the input layer and between GRU layers while training (it has no
+        weights: models with any dropout share one file layout).
     """
 
-    def __init__(self, channels: int, pose_dim: int, hidden: int = 256, layers: int = 2) -> None:
+    def __init__(self, channels: int, pose_dim: int, hidden: int = 256, layers: int = 2,
+                 dropout: float = 0.0) -> None:
         super().__init__()
-        self.inp = nn.Sequential(nn.Linear(channels, hidden), nn.GELU())
-        self.gru = nn.GRU(hidden, hidden, layers, batch_first=True)
+        self.inp = nn.Sequential(nn.Linear(channels, hidden), nn.GELU(), nn.Dropout(dropout))
+        self.gru = nn.GRU(hidden, hidden, layers, batch_first=True,
+                          dropout=dropout if layers > 1 else 0.0)
         self.pose = nn.Linear(hidden, pose_dim)
         self.contact = nn.Linear(hidden, len(CONTACT_PARTS))
         self.logvar = nn.Linear(hidden, 1)

@@ -211,7 +211,8 @@ def batches(arrays: Arrays, wins: list[tuple[int, int]], size: int, batch: int,
 
 def train(net: Reconstructor, fk: TorchFK, train_set: Arrays, val_set: Arrays | None,
           y_mean: np.ndarray, y_std: np.ndarray, epochs: int, batch: int, window: int,
-          lr: float, weights: LossWeights, seed: int, progress: bool = False) -> list[dict]:
+          lr: float, weights: LossWeights, seed: int, progress: bool = False,
+          weight_decay: float = 1e-4) -> list[dict]:
     """Adam with a one-cycle learning-rate schedule; returns one dict of mean losses per epoch
     (training terms, and the validation position error in metres when ``val_set`` is given)."""
     rng = np.random.default_rng(seed)
@@ -220,7 +221,7 @@ def train(net: Reconstructor, fk: TorchFK, train_set: Arrays, val_set: Arrays | 
     ys = torch.as_tensor(y_std, dtype=torch.float32)
     steps = epochs * math.ceil(len(windows(train_set.lengths, train_set.starts, window, rng))
                                / batch)
-    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=1e-4)
+    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=weight_decay)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=max(steps, 1),
                                                 pct_start=0.15)
     history: list[dict] = []
