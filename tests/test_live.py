@@ -25,12 +25,9 @@ CALIB_S = 4.0
 
 
 @pytest.fixture(scope="module")
-def fitted(sample_db):
+def fitted(ridge_without_demo_clip):
     """ridge (online) fitted on the sample without the streamed clip."""
-    from imuloco.methods import get_method
-
-    keep = [i for i, lab in enumerate(sample_db.labels) if lab["name"] != CLIP]
-    return get_method("ridge").fit(sample_db.subset(keep), ["right_ankle"], "phone", 0)
+    return ridge_without_demo_clip
 
 
 @pytest.fixture(scope="module")

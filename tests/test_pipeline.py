@@ -32,12 +32,9 @@ def walks(sample_db):
 
 
 @pytest.fixture(scope="module")
-def fitted(sample_db):
+def fitted(ridge_without_demo_clip):
     """ridge fitted on the sample without the demo clip (what the fallback does)."""
-    from imuloco.methods import get_method
-
-    keep = [i for i, lab in enumerate(sample_db.labels) if lab["name"] != DEMO_CLIP]
-    return get_method("ridge").fit(sample_db.subset(keep), ["right_ankle"], "phone", 0)
+    return ridge_without_demo_clip
 
 
 @pytest.fixture(scope="module")

@@ -259,7 +259,7 @@ class Learned(Method):
                       y_std=self.y_std_, input_map=self.input_map_, frames=self.frames_)
         values = {"output_mirror": bool(self.output_mirror_), "history": self.history_,
                   "channels": int(self.x_mean_.shape[0]), "pose_dim": int(self.y_mean_.shape[0]),
-                  "protocol": getattr(self, "protocol_", {}), "features": self.features}
+                  "features": self.features}
         return arrays, values
 
     def set_state(self, arrays: dict[str, np.ndarray], values: dict[str, Any]) -> None:
@@ -269,7 +269,8 @@ class Learned(Method):
         self.output_mirror_ = bool(values["output_mirror"])
         self.features = values.get("features", "raw")  # files from before ``features``
         self.history_ = values.get("history", [])
-        self.protocol_ = values.get("protocol", {})
+        if "protocol" in values:  # files from before the base class saved the protocol
+            self.protocol_ = values["protocol"]
         self.net_ = Reconstructor(int(values["channels"]), int(values["pose_dim"]), self.hidden,
                                   self.layers, self.dropout)
         self.net_.load_state_dict({k[4:]: torch.as_tensor(v) for k, v in arrays.items()
