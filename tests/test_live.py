@@ -268,6 +268,25 @@ def _wait_for(check, timeout: float = 30.0):
     raise AssertionError("timed out")
 
 
+def test_live_page_is_served_with_the_viewers_stick_figure_script(threaded_server):
+    from imuloco.viz.html import STICKFIGURE
+
+    server, _ = threaded_server
+
+    def get(path: str) -> str:
+        url = f"http://127.0.0.1:{server.port}{path}"
+        with urllib.request.urlopen(url, timeout=10) as response:
+            return response.read().decode()
+
+    js = STICKFIGURE.read_text()
+    for path in ("/", "/live"):
+        page = get(path)
+        assert page.count(js) == 1 and "__IMULOCO_" not in page
+        assert page.index("const StickFigure") < page.index("StickFigure.projector")
+        assert "<script src" not in page  # one request, nothing else to fetch
+    assert "StickFigure" not in get("/phone")
+
+
 def test_phone_page_sends_device_motion_in_si_units(threaded_server, browser):
     from selenium.webdriver.common.by import By
 
@@ -314,6 +333,18 @@ def test_live_page_draws_the_replayed_walker(threaded_server, browser, sample_db
     state = browser.execute_script("return imuloco.state()")
     assert len(state["pose"]) == 3 * fitted_joints(server)
     assert state["floor"] < min(state["pose"][1::3]) + 0.05  # the floor under the feet
+    # the walker is drawn: the canvas holds pixels of the left (blue) and right (red) bones
+    colours = browser.execute_script("""
+        imuloco.draw();
+        const c = document.getElementById('view');
+        const px = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        let blue = 0, red = 0;
+        for (let i = 0; i < px.length; i += 4) {
+          if (px[i] === 0x1f && px[i + 1] === 0x77 && px[i + 2] === 0xb4) blue++;
+          if (px[i] === 0xd6 && px[i + 1] === 0x27 && px[i + 2] === 0x28) red++;
+        }
+        return [blue, red];""")
+    assert min(colours) > 20, colours
     browser.save_screenshot(str(tmp_path / "live.png"))
     assert (tmp_path / "live.png").stat().st_size > 5000
     assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]

@@ -106,3 +106,25 @@ def test_viewer_plays_pauses_scrubs_and_orbits(browser, page, tmp_path):
     assert browser.execute_script("return imuloco.state.speed") == 2
     errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert not errors, errors
+
+
+def test_shared_projection_matches_the_python_renderer(browser, page):
+    """StickFigure (shared with the live page) projects as imuloco.viz.skeleton.project."""
+    import numpy as np
+
+    from imuloco.viz.skeleton import project
+
+    browser.get(page.as_uri())
+    _wait(browser, "return window.imuloco && imuloco.state.framesDrawn > 0")
+    pts = np.array([[0.0, 0.0, 0.0], [0.3, 1.7, -0.2], [-1.0, 0.5, 2.0]])
+    az, el, zoom, height, floor, center = 2.1, 0.4, 1.5, 1.8, -0.05, [0.2, 9.0, -0.7]
+    panel = {"x": 100, "width": 400, "height": 600}
+    got = np.array(browser.execute_script(
+        "const proj = StickFigure.projector(arguments[0], arguments[1]);"
+        "return arguments[2].map(p => proj(...p));",
+        {"azimuth": az, "elevation": el, "zoom": zoom, "height": height, "floor": floor,
+         "center": center}, panel, pts.tolist()))
+    scale = zoom * panel["height"] / (height * 1.5)
+    screen = project(pts - [center[0], floor, center[2]], az, el) * scale
+    expected = np.stack([300 + screen[:, 0], 0.82 * 600 - screen[:, 1]], axis=1)
+    np.testing.assert_allclose(got, expected, atol=1e-9)

@@ -114,6 +114,20 @@ def test_viewer_page_is_offline_and_carries_the_motion(tmp_path, walk):
         write_viewer([walk], path)
 
 
+def test_viewer_page_inlines_the_shared_stick_figure_script(walk):
+    from imuloco.viz.html import STICKFIGURE, STICKFIGURE_MARK
+
+    page = viewer_html([walk, walk], ["a", "b"])
+    js = STICKFIGURE.read_text()
+    # the drawing code shared with the live page is in the file, before the code that uses it
+    assert "const StickFigure" in js and page.count(js) == 1
+    assert page.index("const StickFigure") < page.index("StickFigure.projector")
+    assert "__IMULOCO_" not in page  # every placeholder filled
+    # placeholders are filled once: a label that spells one comes through as it is
+    data = re.search(r"const DATA = (\{.*?\});\n", viewer_html([walk], [STICKFIGURE_MARK]))
+    assert json.loads(data.group(1))["tracks"][0]["label"] == STICKFIGURE_MARK
+
+
 def test_viewer_rejects_other_skeletons(walk, two_joint_skeleton, spinning_motion):
     with pytest.raises(ValueError, match="topology"):
         viewer_data([walk, spinning_motion])

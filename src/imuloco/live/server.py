@@ -5,7 +5,8 @@ One asyncio ``websockets`` server (the ``[live]`` extra) on one port serves
 
 * ``/phone`` (``phone.html``): the page the phone opens; it reads the browser's
   ``DeviceMotionEvent`` and sends samples to ``/ws/phone``;
-* ``/`` and ``/live`` (``live.html``): the live stick figure, fed by ``/ws/view``;
+* ``/`` and ``/live`` (``live.html``): the live stick figure, fed by ``/ws/view``, drawn by the
+  offline viewer's ``imuloco/viz/stickfigure.js``, inlined into the page as it is served;
 * ``/ws/phone``: JSON messages ``{"rows": [[t, ax, ay, az, gx, gy, gz, ...], ...]}``, time in
   seconds on the phone's clock, specific force in m/s^2 and angular velocity in rad/s in the
   phone's axes, six values per sensor of the model's placements (one for a phone);
@@ -37,6 +38,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
 from imuloco.live.session import LiveSession, frames_to_json
+from imuloco.viz.html import inline_stickfigure
 
 log = logging.getLogger(__name__)
 
@@ -109,7 +111,8 @@ class LiveServer:
         page = PAGES.get(request.path.split("?", 1)[0])
         if page is None:
             return connection.respond(http.HTTPStatus.NOT_FOUND, "not found\n")
-        response = connection.respond(http.HTTPStatus.OK, (HERE / page).read_text("utf-8"))
+        response = connection.respond(http.HTTPStatus.OK,
+                                      inline_stickfigure((HERE / page).read_text("utf-8")))
         del response.headers["Content-Type"]
         response.headers["Content-Type"] = "text/html; charset=utf-8"
         response.headers["Cache-Control"] = "no-store"

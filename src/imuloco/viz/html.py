@@ -1,15 +1,17 @@
 """A self-contained interactive HTML viewer (orbit, play/pause, scrub, speed) of motions.
 
 The page is the template ``viewer.html`` beside this module with the motions' world joint
-positions embedded as JSON (integer millimetres, Y up) and a few lines of inline JavaScript that
-project them on a 2-D canvas: no script or style is fetched from the network, so the file works
-offline and can be mailed around. Several motions play side by side on one clock.
+positions embedded as JSON (integer millimetres, Y up) and the stick-figure drawing of
+``stickfigure.js`` (shared with the live page, :mod:`imuloco.live.server`) inlined: no script or
+style is fetched from the network, so the file works offline and can be mailed around. Several
+motions play side by side on one clock.
 """
 
 from __future__ import annotations
 
 import html
 import json
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -19,8 +21,31 @@ from imuloco.core.motion import Motion
 from imuloco.viz.skeleton import follow_azimuth, joint_sides
 
 TEMPLATE = Path(__file__).with_name("viewer.html")
+STICKFIGURE = Path(__file__).with_name("stickfigure.js")
 DATA_MARK = "/*__IMULOCO_DATA__*/null"
 TITLE_MARK = "__IMULOCO_TITLE__"
+STICKFIGURE_MARK = "/*__IMULOCO_STICKFIGURE__*/"
+
+
+def _fill(page: str, values: dict[str, str]) -> str:
+    """``page`` with every placeholder (a key of ``values``) replaced in one pass, so that a
+    value holding another placeholder's text (a motion's label) is left as it is."""
+    return re.sub("|".join(map(re.escape, values)), lambda m: values[m.group(0)], page)
+
+
+def stickfigure_js() -> str:
+    """The text of ``stickfigure.js`` (defines ``StickFigure``), to inline in a ``<script>``."""
+    js = STICKFIGURE.read_text(encoding="utf-8")
+    if "</script" in js.lower():
+        raise RuntimeError(f"{STICKFIGURE}: the script cannot hold '</script'")
+    return js
+
+
+def inline_stickfigure(page: str) -> str:
+    """``page`` (HTML) with the placeholder ``/*__IMULOCO_STICKFIGURE__*/`` (inside a
+    ``<script>`` element) replaced by :func:`stickfigure_js`; a page without the placeholder
+    comes back unchanged."""
+    return _fill(page, {STICKFIGURE_MARK: stickfigure_js()})
 
 
 def viewer_data(motions: Sequence[Motion], titles: Sequence[str] | None = None,
@@ -73,11 +98,12 @@ def viewer_html(motions: Sequence[Motion], titles: Sequence[str] | None = None,
                 title: str = "imuloco") -> str:
     """The viewer page (a str of HTML) for ``motions``, see :func:`viewer_data`."""
     page = TEMPLATE.read_text(encoding="utf-8")
-    if DATA_MARK not in page or TITLE_MARK not in page:
-        raise RuntimeError(f"{TEMPLATE}: the data or title placeholder is missing")
+    if any(mark not in page for mark in (DATA_MARK, TITLE_MARK, STICKFIGURE_MARK)):
+        raise RuntimeError(f"{TEMPLATE}: the data, title or stick-figure placeholder is missing")
     data = json.dumps(viewer_data(motions, titles, title), separators=(",", ":"))
     data = data.replace("</", "<\\/")  # a label cannot close the <script> element
-    return page.replace(DATA_MARK, data).replace(TITLE_MARK, html.escape(title))
+    return _fill(page, {DATA_MARK: data, TITLE_MARK: html.escape(title),
+                        STICKFIGURE_MARK: stickfigure_js()})
 
 
 def write_viewer(motions: Sequence[Motion], path: str | Path, titles: Sequence[str] | None = None,
