@@ -1,14 +1,16 @@
-"""Post-processing shared by the methods: feet pinned during contact."""
+"""Post-processing shared by the methods: feet pinned during contact (offline and online),
+Laplacian smoothing."""
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.signal import lfilter
 
 from imuloco.core.motion import Motion
 
 
 def pin_feet(motion: Motion, contacts: np.ndarray, feet: tuple[str, ...] = ("left_ankle",
-             "right_ankle")) -> Motion:
+             "right_ankle"), smoothing: float = 1.0) -> Motion:
     """Remove foot skating by moving the root so that feet in contact do not slide.
 
     Each frame's horizontal root step is replaced by the one that keeps the contact foot's
@@ -20,22 +22,75 @@ def pin_feet(motion: Motion, contacts: np.ndarray, feet: tuple[str, ...] = ("lef
     motion : the reconstruction.
     contacts : ndarray, shape (T, len(feet)), contact probabilities or booleans per foot.
     feet : body parts whose contact is given.
+    smoothing : in (0, 1]; the correction (pinned step minus own step) goes through a causal
+        exponential moving average with this weight per frame: 1 applies each frame's own
+        correction; less spreads a contact switch over a few frames, trading a little sliding
+        for less jerk (the step from a foot's relative velocity carries the pose's jitter).
     """
+    if not 0.0 < smoothing <= 1.0:
+        raise ValueError(f"pin_feet: smoothing must be in (0, 1], got {smoothing}")
     contacts = np.asarray(contacts, dtype=np.float64)
     pos = motion.positions()
     idx = [motion.skeleton.part(f) for f in feet]
     rel = pos[:, idx, :] - motion.root[:, None, :]          # feet relative to the root (T, F, 3)
-    step = np.diff(motion.root, axis=0)                       # own root steps (T-1, 3)
+    step = np.diff(motion.root, axis=0)[:, [0, 2]]            # own horizontal root steps (T-1, 2)
     w = np.minimum(contacts[1:], contacts[:-1])               # in contact at both ends of a step
-    pinned = -np.diff(rel, axis=0)                            # root step that keeps a foot still
+    pinned = -np.diff(rel, axis=0)[..., [0, 2]]               # root step that keeps a foot still
     wsum = w.sum(axis=1, keepdims=True)
-    blend = np.clip(wsum, 0.0, 1.0)
     target = np.where(wsum > 0, (w[..., None] * pinned).sum(1) / np.maximum(wsum, 1e-9), step)
-    new_step = step.copy()
-    new_step[:, [0, 2]] = (1 - blend) * step[:, [0, 2]] + blend * target[:, [0, 2]]
+    correction = np.clip(wsum, 0.0, 1.0) * (target - step)
+    if smoothing < 1.0 and len(correction):
+        correction = lfilter([smoothing], [1.0, smoothing - 1.0], correction, axis=0)
     root = motion.root.copy()
-    root[1:, [0, 2]] = motion.root[0, [0, 2]] + np.cumsum(new_step[:, [0, 2]], axis=0)
+    root[1:, [0, 2]] = motion.root[0, [0, 2]] + np.cumsum(step + correction, axis=0)
     return Motion(motion.skeleton, motion.rotations, root, motion.fps, motion.name)
+
+
+class FootPinner:
+    """:func:`pin_feet` one frame at a time, for online methods: fed each frame's own root,
+    feet relative to it and contacts, it returns the pinned root, the offline result frame for
+    frame, with bounded state.
+
+    Parameters
+    ----------
+    smoothing : as :func:`pin_feet`.
+    """
+
+    def __init__(self, smoothing: float = 1.0) -> None:
+        self.smoothing = smoothing
+        self.prev: tuple | None = None  # own root x, z; feet x, z; contacts (Python floats)
+        self.root = np.zeros(3)
+        self.correction = [0.0, 0.0]
+
+    def step(self, raw_root: np.ndarray, rel: np.ndarray, contacts: np.ndarray) -> np.ndarray:
+        """raw_root : (3,) the frame's own root; rel : (F, 3) feet minus raw_root (world
+        axes); contacts : (F,) -> the pinned root (3,)."""
+        # Python floats, not numpy: this runs once per frame inside online methods' hot loops
+        # (a few feet), where numpy's per-call overhead was 5x the arithmetic.
+        rx, ry, rz = (float(v) for v in raw_root)
+        rel = np.asarray(rel, dtype=np.float64)
+        fx, fz = rel[:, 0].tolist(), rel[:, 2].tolist()
+        c = [float(v) for v in contacts]
+        if self.prev is None:
+            self.root = np.array([rx, ry, rz])
+        else:
+            px, pz, pfx, pfz, pc = self.prev
+            sx, sz = rx - px, rz - pz
+            w = [min(a, b) for a, b in zip(c, pc)]
+            wsum = sum(w)
+            if wsum > 0:
+                tx = sum(wi * (a - b) for wi, a, b in zip(w, pfx, fx)) / wsum
+                tz = sum(wi * (a - b) for wi, a, b in zip(w, pfz, fz)) / wsum
+            else:
+                tx, tz = sx, sz
+            blend = min(max(wsum, 0.0), 1.0)
+            a, corr = self.smoothing, self.correction
+            corr[0] += a * (blend * (tx - sx) - corr[0])
+            corr[1] += a * (blend * (tz - sz) - corr[1])
+            x, _, z = self.root.tolist()
+            self.root = np.array([x + sx + corr[0], ry, z + sz + corr[1]])
+        self.prev = (rx, rz, fx, fz, c)
+        return self.root.copy()
 
 
 def laplacian_smooth_quaternions(q: np.ndarray, lam: float = 0.5, iterations: int = 3

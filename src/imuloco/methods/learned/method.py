@@ -26,6 +26,7 @@ from imuloco.methods.base import Method, Stream, register
 from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Reconstructor, TorchFK
+from imuloco.methods.postprocess import FootPinner, pin_feet
 from imuloco.methods.training import Example
 from imuloco.ops.kinematics import fk
 from imuloco.ops.mirror import mirror, mirror_frames, mirror_pairs, mirror_rotations
@@ -307,13 +308,15 @@ def running_mean(x: np.ndarray, alpha: float, state: tuple | None = None
 
 
 PIN_PARTS = CONTACT_PARTS  # heel contact pins the ankle joint, toe contact the toe joint
+# Pinning corrections smoothed over a few frames (pin_feet's ``smoothing``): on 20 held-out
+# "exhausted" clips the shipped model's jitter fell from 221 to 198 m/s^3 while foot skate rose
+# from 9.9 to 11.4 cm/s (ground truth: 172 and 10.7; unpinned: 187 and 24.6).
+PIN_SMOOTHING = 0.7
 
 
 def pin(motion: Motion, contacts: np.ndarray) -> Motion:
     """:func:`imuloco.methods.postprocess.pin_feet` with the predicted heel and toe contacts."""
-    from imuloco.methods.postprocess import pin_feet
-
-    return pin_feet(motion, contacts, PIN_PARTS)
+    return pin_feet(motion, contacts, PIN_PARTS, PIN_SMOOTHING)
 
 
 class LearnedStream(Stream):
@@ -327,10 +330,8 @@ class LearnedStream(Stream):
         self.h = model.net_.initial_state(1)
         self.fstate: Any = None  # running-mean state of features="centered"
         self.integrator = PoseIntegrator(model.skeleton_, model.fps_)
-        sk = model.skeleton_
-        self.feet = [sk.part(p) for p in PIN_PARTS]
-        self.prev: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # raw root, rel, c
-        self.root = np.zeros(3)
+        self.feet = [model.skeleton_.part(p) for p in PIN_PARTS]
+        self.pinner = FootPinner(PIN_SMOOTHING)
         self.contacts = np.zeros(len(PIN_PARTS))
         self.sigma = float("nan")
 
@@ -344,22 +345,4 @@ class LearnedStream(Stream):
         rot, raw_root = self.integrator.step(out.vectors[0])
         sk = m.skeleton_
         _, pos = fk(rot, raw_root, sk.offsets, sk.parents)
-        rel = pos[self.feet] - raw_root
-        c = self.contacts
-        if self.prev is None:
-            self.root = raw_root.copy()
-        else:
-            # the same step rule as pin_feet, one frame at a time
-            prev_root, prev_rel, prev_c = self.prev
-            step = raw_root - prev_root
-            w = np.minimum(c, prev_c)
-            wsum = w.sum()
-            blend = min(max(wsum, 0.0), 1.0)
-            target = (w[:, None] * -(rel - prev_rel)).sum(0) / max(wsum, 1e-9) if wsum > 0 \
-                else step
-            new = step.copy()
-            new[[0, 2]] = (1 - blend) * step[[0, 2]] + blend * target[[0, 2]]
-            self.root = self.root + new
-            self.root[1] = raw_root[1]
-        self.prev = (raw_root, rel, c)
-        return rot, self.root.copy()
+        return rot, self.pinner.step(raw_root, pos[self.feet] - raw_root, self.contacts)

@@ -18,8 +18,8 @@ Each step:
    segments or phases does not jump;
 5. decoding of the root (heading integrated from the yaw rate, position from the heading-frame
    velocity, as :func:`imuloco.methods.pose.decode`) and, when enabled, the foot-skate
-   clean-up of :func:`imuloco.methods.postprocess.pin_feet`, here step by step with the same
-   arithmetic, on the predicted contacts.
+   clean-up of :func:`imuloco.methods.postprocess.pin_feet`, here step by step
+   (:class:`~imuloco.methods.postprocess.FootPinner`), on the predicted contacts.
 
 A missing sample (any NaN) skips the emission at both levels: the transitions alone move the
 forward variables (the frame "skip" and phase "exit" transitions of sec. 5.2 are what let it
@@ -33,6 +33,7 @@ import math
 import numpy as np
 
 from imuloco.methods.base import Stream
+from imuloco.methods.postprocess import FootPinner
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -154,9 +155,7 @@ class MousasStream(Stream):
         self.r_prev: np.ndarray | None = None
         self.theta = 0.0
         self.root_raw = np.zeros(3)
-        self.root_out = np.zeros(3)
-        self.rel_prev: np.ndarray | None = None
-        self.c_prev: np.ndarray | None = None
+        self.pinner = FootPinner()
         # diagnostics of the last step
         self.phase = -1
         self.phase_posterior = np.zeros(self.upper.num_phases)
@@ -313,24 +312,7 @@ class MousasStream(Stream):
         self.contacts = contacts
         if not self.pin:
             return rot, raw.copy()
-        # pin_feet, one step: the root step that keeps the feet in contact still
-        rel = self._feet_relative(rm)
-        new = raw.copy()
-        if self.rel_prev is not None:
-            w0, w1 = min(contacts[0], self.c_prev[0]), min(contacts[1], self.c_prev[1])
-            wsum = w0 + w1
-            blend = min(wsum, 1.0)
-            if wsum > 0:
-                d = (w0 * (self.rel_prev[0] - rel[0]) + w1 * (self.rel_prev[1] - rel[1])) / wsum
-                tx, tz = float(d[0]), float(d[2])
-            else:
-                tx, tz = sx, sz
-            new = self.root_out.copy()
-            new[0] += (1 - blend) * sx + blend * tx
-            new[2] += (1 - blend) * sz + blend * tz
-            new[1] = height
-        self.root_out, self.rel_prev, self.c_prev = new, rel, contacts
-        return rot, new.copy()
+        return rot, self.pinner.step(raw, self._feet_relative(rm), contacts)
 
     def _feet_relative(self, rm: np.ndarray) -> np.ndarray:
         """Ankle positions relative to the root (2, 3), world axes; rm : (J, 3, 3) local
