@@ -214,16 +214,8 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
     method.save(output, overwrite=force)
     click.echo(f"trained {method_name} on {len(db)} clips ({db.num_frames} frames) in "
                f"{seconds / 60:.1f} min; wrote {output}")
-    history = getattr(method, "history_", None)
-    if history:
-        hist_path = output.with_name(output.name + ".history.json")
-        hist_path.write_text(json.dumps(history, indent=1))
-        click.echo(f"wrote {hist_path}")
-        from imuloco.methods.learned.train import plot_history
-
-        png = plot_history(history, output.with_name(output.name + ".curves.png"))
-        if png is not None:
-            click.echo(f"wrote {png}")
+    for path in method.write_training_report(output):
+        click.echo(f"wrote {path}")
 
 
 @cli.command("export-onnx")

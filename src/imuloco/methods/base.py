@@ -128,6 +128,11 @@ class Method(ABC):
         sig = inspect.signature(type(self).__init__)
         return {k: getattr(self, k) for k in sig.parameters if k != "self"}
 
+    def write_training_report(self, model_path: str | Path) -> list[Path]:
+        """Write what the last fit recorded beside ``model_path`` (loss curves and the like)
+        and return the files written; methods without a training history write nothing."""
+        return []
+
     def save(self, path: str | Path, overwrite: bool = False) -> Path:
         """Write the fitted model to one ``.npz`` file."""
         path = Path(path)
