@@ -80,9 +80,6 @@ class Learned(Method):
         (:func:`running_mean`), which removes per-recording offsets (sensor bias, mounting, the
         wearer's mean shank tilt) that differ between people and styles.
     tau : time constant (s) of the running mean of ``features="centered"``.
-    lowpass : fraction of augmented draws whose accelerations are low-passed
-        (:func:`imuloco.methods.learned.train.smooth_acceleration`), towards a real phone's
-        smoother signals.
     threads : torch CPU threads while fitting (None: torch's default). Use 1 on a machine
         shared with other jobs: torch's thread pool stalls when its cores are taken (a batch
         took 10x longer with 2 threads than with 1 on a loaded 2-core machine).
@@ -97,8 +94,8 @@ class Learned(Method):
                  batch_size: int = 16, window: int = 120, lr: float = 4e-3, draws: int = 2,
                  speed: float = 0.15, noise_scale: float = 2.0, mirror: bool = True,
                  validation: float = 0.05, dropout: float = 0.0, weight_decay: float = 1e-4,
-                 features: str = "raw", tau: float = 2.0, lowpass: float = 0.0,
-                 threads: int | None = None, seed: int = 0) -> None:
+                 features: str = "raw", tau: float = 2.0, threads: int | None = None,
+                 seed: int = 0) -> None:
         self.hidden = hidden
         self.layers = layers
         self.epochs = epochs
@@ -114,7 +111,6 @@ class Learned(Method):
         self.weight_decay = weight_decay
         self.features = features
         self.tau = tau
-        self.lowpass = lowpass
         self.threads = threads
         self.seed = seed
 
@@ -135,8 +131,7 @@ class Learned(Method):
         except (KeyError, ValueError):
             can_mirror = False
         train_ex = tr.augment(train_ex, self.placements_, self.noise_, self.seed, self.draws,
-                              self.speed, self.noise_scale, can_mirror, progress,
-                              self.lowpass)
+                              self.speed, self.noise_scale, can_mirror, progress)
         if self.features not in FEATURES:
             raise ValueError(f"learned: features must be one of {FEATURES}, got "
                              f"{self.features!r}")

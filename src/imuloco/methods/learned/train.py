@@ -63,31 +63,11 @@ def contact_targets(motion: Motion) -> np.ndarray:
                     axis=1).astype(np.float32)
 
 
-def smooth_acceleration(signals: np.ndarray, cutoff_hz: float, fps: float) -> np.ndarray:
-    """Signals (T, 6 S) with every sensor's accelerometer channels through a causal
-    second-order Butterworth low-pass (scipy), started at rest on the first sample.
-
-    Virtual sensors differentiate 30 fps motion capture twice, so their accelerations carry
-    more high-frequency energy than a real phone's (frame-to-frame changes about twice a real
-    shin phone's while walking); a phone's own filters and the strap's damping smooth them.
-    """
-    from scipy.signal import butter, sosfilt, sosfilt_zi
-
-    out = np.array(signals, dtype=np.float64)
-    sos = butter(2, min(cutoff_hz, 0.45 * fps), fs=fps, output="sos")
-    acc = [c for k in range(0, out.shape[1], 6) for c in range(k, k + 3)]
-    zi = sosfilt_zi(sos)[..., None] * out[0, acc]            # steady state at the first sample
-    out[:, acc] = sosfilt(sos, out[:, acc], axis=0, zi=zi)[0]
-    return out
-
-
 def augment(examples: list[Example], placements: list[str], noise: str, seed: int,
             draws: int, speed: float, noise_scale: float, mirrored: bool,
-            progress: bool = False, lowpass: float = 0.0) -> list[Example]:
+            progress: bool = False) -> list[Example]:
     """The benchmark's examples plus ``draws`` augmented simulations of every clip (see the
-    module docstring). Draw ``d`` mirrors the motion when ``mirrored`` and ``d`` is odd. With
-    probability ``lowpass`` a draw's accelerations are low-passed (:func:`smooth_acceleration`,
-    cutoff log-uniform in 4-12 Hz)."""
+    module docstring). Draw ``d`` mirrors the motion when ``mirrored`` and ``d`` is odd."""
     out = list(examples)
     if draws <= 0:
         return out
@@ -106,12 +86,7 @@ def augment(examples: list[Example], placements: list[str], noise: str, seed: in
         model = scaled_noise(base, s, rng.uniform(0.5, 1.5))
         rec = simulate(motion, placements, 100.0, model,
                        clip_seed(e.labels["name"], seed + DRAW_SEED_STRIDE * d))
-        signals = to_frames(rec, motion)
-        if lowpass > 0 and rng.uniform() < lowpass:
-            signals = smooth_acceleration(np.nan_to_num(signals),
-                                          math.exp(rng.uniform(math.log(4), math.log(12))),
-                                          motion.fps)
-        out.append(Example(motion, signals, dict(e.labels, draw=str(d))))
+        out.append(Example(motion, to_frames(rec, motion), dict(e.labels, draw=str(d))))
     return out
 
 
