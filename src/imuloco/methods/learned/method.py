@@ -323,9 +323,10 @@ def running_mean(x: np.ndarray, alpha: float, state: tuple | None = None
 
 
 PIN_PARTS = CONTACT_PARTS  # heel contact pins the ankle joint, toe contact the toe joint
-# Pinning corrections smoothed over a few frames (pin_feet's ``smoothing``): on 20 held-out
-# "exhausted" clips the shipped model's jitter fell from 221 to 198 m/s^3 while foot skate rose
-# from 9.9 to 11.4 cm/s (ground truth: 172 and 10.7; unpinned: 187 and 24.6).
+# Pinning corrections smoothed over a few frames (pin_feet's ``smoothing``): on 20 "exhausted"
+# clips (phone noise, test seeds; the shipped model saw these motions in training) its jitter
+# fell from 221 to 198 m/s^3 while foot skate rose from 9.9 to 11.4 cm/s (ground truth: 172
+# and 10.7; unpinned: 187 and 24.6; smoothing 0.5: 190 and 13.5).
 PIN_SMOOTHING = 0.7
 
 
