@@ -17,8 +17,8 @@ from imuloco.methods.baselines import MeanPose
 
 REQUIRED = ("method", "split", "noise", "placements", "motion_type", "mpjpe_cm", "rmse_cm",
             "upper_cm", "lower_cm", "angle_deg", "dpv", "jitter", "foot_skate_cm_s", "train_s",
-            "offline_fps", "online_latency_ms_p50", "online_latency_ms_p99", "model_bytes",
-            "root_speed_err_cm_s", "path_err_cm", "protocol_version", "n_clips", "n_frames")
+            "offline_fps", "online_latency_ms_p50", "online_latency_ms_p99", "online_delay_ms",
+            "model_bytes", "root_speed_err_cm_s", "path_err_cm", "protocol_version", "n_clips", "n_frames")
 # measured costs: times vary between runs, and a model file records its training time and date
 TIMINGS = ("train_s", "offline_fps", "online_latency_ms_p50", "online_latency_ms_p99",
            "model_bytes")
@@ -56,6 +56,7 @@ def test_records_have_the_promised_keys(records):
         assert r["protocol_version"] == PROTOCOL_VERSION
         assert r["model_bytes"] > 0 and r["offline_fps"] > 0
         assert r["online_latency_ms_p99"] >= r["online_latency_ms_p50"] > 0
+        assert r["online_delay_ms"] == 0  # neither looks ahead
     assert {r["n_clips"] for r in recs if r["motion_type"] == "all"} == {4}
 
 
@@ -103,7 +104,7 @@ def test_offline_method_has_null_latency(monkeypatch):
     monkeypatch.setitem(REGISTRY, OfflineMean.name, OfflineMean)
     recs = run_bench([OfflineMean.name], out=None, **QUICK)
     assert all(r["online_latency_ms_p50"] is None and r["online_latency_ms_p99"] is None
-               for r in recs)
+               and r["online_delay_ms"] is None for r in recs)
 
 
 def test_unknown_method_fails_before_work():

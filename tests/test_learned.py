@@ -66,9 +66,13 @@ def test_reconstruct_shapes_and_confidence(tiny_model, test_signals):
 
 
 def assert_stream_equals_offline(model, signals):
+    """The stream, fed the signals and then the last frame ``delay_frames`` more times, gives
+    the offline frames after its first ``delay_frames`` steps."""
     offline = model.reconstruct_signals(signals)
     stream = model.stream()
-    rots, roots = zip(*(stream.step(s) for s in signals))
+    d = stream.delay_frames
+    fed = np.concatenate([signals, np.repeat(signals[-1:], d, axis=0)])
+    rots, roots = zip(*[stream.step(s) for s in fed][d:])
     dots = np.abs(np.sum(np.stack(rots) * offline.rotations, axis=-1))  # same rotation up to sign
     np.testing.assert_allclose(dots, 1.0, atol=1e-5)
     np.testing.assert_allclose(np.stack(roots), offline.root, atol=1e-4)
@@ -76,6 +80,50 @@ def assert_stream_equals_offline(model, signals):
 
 def test_stream_equals_offline(tiny_model, test_signals):
     assert_stream_equals_offline(tiny_model, test_signals)
+
+
+@pytest.fixture(scope="module")
+def lag_model(sample_db):
+    torch.manual_seed(0)
+    return get_method("learned", **TINY, lag=3).fit(sample_db.subset([0, 12]), ["right_ankle"],
+                                                    "phone", seed=0)
+
+
+def test_lag_looks_ahead_exactly_lag_frames(lag_model, test_signals):
+    base = lag_model.predict(test_signals).vectors
+    for t in (20, 50):
+        changed = test_signals.copy()
+        changed[t + 4:] += 5.0  # frames after t + lag: frame t's pose must not move
+        np.testing.assert_allclose(lag_model.predict(changed).vectors[: t + 1], base[: t + 1],
+                                   atol=1e-5)
+        changed = test_signals.copy()
+        changed[t + 3] += 5.0   # frame t + lag: it does
+        assert np.abs(lag_model.predict(changed).vectors[t] - base[t]).max() > 1e-3
+
+
+def test_lag_stream_is_late_by_lag_frames(lag_model, test_signals):
+    stream = lag_model.stream()
+    assert stream.delay_frames == 3
+    first = [stream.step(s) for s in test_signals[:3]]
+    for rot, root in first:  # the mean pose at the origin until frame 0 is due
+        np.testing.assert_allclose(rot, first[0][0])
+        np.testing.assert_allclose(root[[0, 2]], 0.0)
+    assert_stream_equals_offline(lag_model, test_signals)
+
+
+def test_a_file_from_before_the_look_ahead_loads_without_one(lag_model, tmp_path):
+    import json
+
+    path = lag_model.save(tmp_path / "m.npz")
+    with np.load(path, allow_pickle=False) as z:
+        data = {k: z[k] for k in z.files}
+    header = json.loads(bytes(data["__header__"]).decode())
+    del header["params"]["lag"]
+    data["__header__"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+    np.savez(tmp_path / "old.npz", **data)
+    assert get_method("learned").lag == 8  # the default now
+    old = load_model(tmp_path / "old.npz")
+    assert old.lag == 0 and old.stream().delay_frames == 0
 
 
 def test_save_load_round_trip(tiny_model, test_signals, tmp_path):
@@ -143,11 +191,14 @@ def test_onnx_export(tiny_model, sample_db, test_signals, tmp_path):
         ort = pytest.importorskip("onnxruntime")
         sess = ort.InferenceSession(str(path))
         h = np.zeros((model.layers, 1, model.hidden), np.float32)
-        pose_, contacts, _, _ = sess.run(None, {"signals": test_signals[None].astype(
-            np.float32), "h": h})
-        ref = model.predict(test_signals)
-        np.testing.assert_allclose(pose_[0], ref.vectors, atol=2e-3)
-        np.testing.assert_allclose(contacts[0], ref.contacts, atol=1e-4)
+        lag = int(meta["lag"])
+        assert lag == model.lag == 8
+        fed = np.concatenate([test_signals, np.repeat(test_signals[-1:], lag, axis=0)])
+        pose_, contacts, _, _ = sess.run(None, {"signals": fed[None].astype(np.float32),
+                                                "h": h})
+        ref = model.predict(test_signals)  # output frame k is input frame k - lag
+        np.testing.assert_allclose(pose_[0, lag:], ref.vectors, atol=2e-3)
+        np.testing.assert_allclose(contacts[0, lag:], ref.contacts, atol=1e-4)
 
 
 def test_cli_train_any_method(tmp_path):

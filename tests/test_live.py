@@ -103,6 +103,42 @@ def test_session_calibrates_then_streams_the_offline_reconstruction(fitted, phon
     assert np.mean(signals[:, 1]) > 0.8 * np.linalg.norm(np.mean(signals[:, :3], axis=0))
 
 
+class _Late:
+    """``fitted`` behind a stream that returns each pose two frames late, as a model with
+    look-ahead does."""
+
+    supports_online = True
+
+    def __init__(self, method) -> None:
+        self.method = method
+        self.name, self.placements_ = method.name, method.placements_
+        self.fps_, self.skeleton_ = method.fps_, method.skeleton_
+
+    def stream(self):
+        inner, queue = self.method.stream(), []
+
+        class Late:
+            delay_frames = 2
+
+            def step(self, sample):
+                queue.append(inner.step(sample))
+                return queue.pop(0) if len(queue) > 2 else queue[0]
+
+        return Late()
+
+
+def test_session_labels_a_late_streams_frames_by_the_frame_they_show(fitted, phone):
+    times, acc, gyro = phone
+    s = LiveSession(_Late(fitted), calibrate_s=0)
+    frames = [f for i in range(len(times)) for f in s.push(times[i], acc[i], gyro[i])]
+    signals = offline_frames(times, acc, gyro, fitted.fps_)
+    offline = fitted.reconstruct_signals(signals).positions()
+    assert [f.index for f in frames] == list(range(len(signals) - 2))
+    np.testing.assert_allclose(np.stack([f.positions for f in frames]), offline[:-2], atol=1e-9)
+    np.testing.assert_allclose([f.time for f in frames],
+                               times[0] + np.arange(len(frames)) / fitted.fps_, atol=1e-9)
+
+
 def test_session_refuses_offline_methods_and_drops_old_samples(fitted):
     class Offline:
         name, supports_online = "x", False

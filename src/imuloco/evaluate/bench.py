@@ -69,9 +69,10 @@ def _aggregate(clips: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def _latency(method, signals: np.ndarray) -> tuple[float | None, float | None]:
+def _latency(method, signals: np.ndarray) -> tuple[float | None, float | None, float | None]:
+    """Compute time per online step (p50, p99 ms) and the stream's delay (ms of look-ahead)."""
     if not method.supports_online:
-        return None, None
+        return None, None, None
     stream = method.stream()
     times = []
     for sample in signals[:LATENCY_FRAMES]:
@@ -79,7 +80,8 @@ def _latency(method, signals: np.ndarray) -> tuple[float | None, float | None]:
         stream.step(sample)
         times.append(time.perf_counter() - t0)
     ms = np.array(times) * 1e3
-    return float(np.percentile(ms, 50)), float(np.percentile(ms, 99))
+    delay = 1e3 * stream.delay_frames / method.fps_
+    return float(np.percentile(ms, 50)), float(np.percentile(ms, 99)), delay
 
 
 def _model_bytes(method) -> int:
@@ -100,7 +102,7 @@ def evaluate_method(
     """Fit one method and measure it on the test examples.
 
     Returns a dict with ``clips`` (per-clip metric dicts with ``name``, ``motion_type``,
-    ``n_frames``), ``cost`` (train_s, offline_fps, latencies, model_bytes), ``per_joint``
+    ``n_frames``), ``cost`` (train_s, offline_fps, latencies, the stream's look-ahead delay, model_bytes), ``per_joint``
     (mean heading-frame error per joint, cm, shape (J,)) and ``curves`` (per-frame RMSE, cm,
     of each test clip by name).
     """
@@ -124,9 +126,10 @@ def evaluate_method(
         curves[ex.labels["name"]] = np.sqrt((err[:, 1:] ** 2).mean(axis=1))
         clips.append({"name": ex.labels["name"], "motion_type": ex.labels.get("content"),
                       "n_frames": gt.num_frames, **values})
-    p50, p99 = _latency(method, test[0].signals)
+    p50, p99, delay = _latency(method, test[0].signals)
     cost = {"train_s": train_s, "offline_fps": frames / rec_s if rec_s > 0 else None,
             "online_latency_ms_p50": p50, "online_latency_ms_p99": p99,
+            "online_delay_ms": delay,
             "model_bytes": _model_bytes(method)}
     return {"clips": clips, "cost": cost, "per_joint": joint_sum / frames, "curves": curves}
 

@@ -29,6 +29,7 @@ COST_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("offline_fps", "offline fps", "{:.0f}"),
     ("online_latency_ms_p50", "online ms p50", "{:.3f}"),
     ("online_latency_ms_p99", "online ms p99", "{:.3f}"),
+    ("online_delay_ms", "online delay ms", "{:.0f}"),
     ("model_bytes", "model size", "{}"),
 )
 

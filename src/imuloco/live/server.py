@@ -100,6 +100,9 @@ class LiveServer:
         self.server: Server | None = None
         self.status = "waiting for a phone"
         self.replaying = False
+        delay_ms = 1e3 * method.stream().delay_frames / method.fps_
+        if delay_ms:  # a model with look-ahead shows each pose that much after the step
+            note = "; ".join(filter(None, [note, f"poses {delay_ms:.0f} ms late (look-ahead)"]))
         self._hello = dict(skeleton_message(method), note=note)
         self._last_status_t = -np.inf
 

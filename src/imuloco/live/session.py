@@ -118,7 +118,8 @@ class Frame:
     """One reconstructed frame.
 
     index : model frame number from the first sample; time : its time, seconds on the sender's
-    clock; trigger : time of the sample whose arrival completed it; rotations : (J, 4) local
+    clock; trigger : time of the sample whose arrival completed it (for a model with
+    look-ahead, ``delay_frames`` frames later); rotations : (J, 4) local
     quaternions x, y, z, w; root : (3,) metres; positions : (J, 3) world joint positions,
     metres, Y up.
     """
@@ -243,10 +244,13 @@ class LiveSession:
         row = np.concatenate([acc, gyro], axis=-1).reshape(-1)  # (6S,) as Recording.channels
         sk = self.method.skeleton_
         out = []
+        d = self.stream.delay_frames  # a model with look-ahead returns frame k - d
         for k, tk, x in self.resampler.push(t, row):
             rot, root = self.stream.step(x)
+            if k < d:
+                continue
             pos = fk(rot, root, sk.offsets, sk.parents)[1]
-            out.append(Frame(k, tk, t, rot, root, pos))
+            out.append(Frame(k - d, tk - d / self.resampler.fps, t, rot, root, pos))
         return out
 
 

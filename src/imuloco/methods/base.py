@@ -54,7 +54,12 @@ def register(cls: type[M]) -> type[M]:
 
 
 class Stream(ABC):
-    """Online reconstruction: one sensor frame in, one pose out, causal, bounded state."""
+    """Online reconstruction: one sensor frame in, one pose out, causal, bounded state.
+
+    ``delay_frames``: how many frames the returned pose lags the sample just read (a model
+    with look-ahead returns frame t - delay_frames after reading frame t)."""
+
+    delay_frames: int = 0
 
     @abstractmethod
     def step(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -67,6 +72,9 @@ class Method(ABC):
     name: ClassVar[str]
     summary: ClassVar[str]  # one line for ``imuloco methods``
     supports_online: ClassVar[bool] = False
+    # hyperparameters added after model files were written, with the value that reproduces
+    # those files' behaviour (not the new default) when their header lacks them
+    legacy_params: ClassVar[dict[str, Any]] = {}
 
     # ---- learning ---------------------------------------------------------------------------
     def fit(self, db: MotionDatabase, placements: Sequence[str] = ("right_ankle",),
@@ -181,7 +189,7 @@ def load_model(path: str | Path) -> Method:
     except KeyError as e:
         raise ModelFileError(f"{path}: {e.args[0]}") from None
     try:  # a header or arrays that do not fit the method: missing keys, wrong shapes
-        method = cls(**header["params"])
+        method = cls(**{**cls.legacy_params, **header["params"]})
         sk = header["skeleton"]
         method.skeleton_ = Skeleton(sk["names"], data.pop("__parents__"),
                                     data.pop("__offsets__"),

@@ -8,7 +8,8 @@ de-standardization (and, for a mirrored model, the mirroring) baked in:
 - outputs ``pose`` (1, T, 6 J + 4) pose vectors (:mod:`imuloco.methods.pose`), ``contacts``
   (1, T, 4) probabilities, ``sigma`` (1, T) metres, and ``h_out`` to feed back.
 
-T may be 1 (online, one frame per call carrying ``h``) or a whole recording. Decoding pose
+Output frame k is the pose of input frame k - ``lag`` (metadata: the model's look-ahead in
+frames; 0 for a model without). T may be 1 (online, one frame per call carrying ``h``) or a whole recording. Decoding pose
 vectors into joint rotations and the root path is left to the host (a few lines: Gram-Schmidt
 per joint and an integration of the velocity), as is foot pinning.
 """
@@ -102,7 +103,7 @@ def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Pa
             "fps": str(model.fps_), "joints": json.dumps(list(sk.names)),
             "parents": json.dumps([int(p) for p in sk.parents]),
             "offsets_m": json.dumps(np.asarray(sk.offsets).round(6).tolist()),
-            "contacts": json.dumps(list(CONTACT_PARTS)),
+            "contacts": json.dumps(list(CONTACT_PARTS)), "lag": str(int(model.lag)),
             "channels": "per sensor acc x,y,z (m/s^2) then gyro x,y,z (rad/s), sensor frame"}
     for k, v in meta.items():
         entry = proto.metadata_props.add()
