@@ -381,6 +381,14 @@ def test_live_page_draws_the_replayed_walker(threaded_server, browser, sample_db
         }
         return [blue, red];""")
     assert min(colours) > 20, colours
+    # the viewer's orbit controls: a drag turns the camera
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    before = browser.execute_script("return imuloco.view.azimuth")
+    ActionChains(browser).move_to_element(browser.find_element(By.ID, "view")).click_and_hold() \
+        .move_by_offset(120, 0).release().perform()
+    assert browser.execute_script("return imuloco.view.azimuth") == pytest.approx(before - 1.2)
     browser.save_screenshot(str(tmp_path / "live.png"))
     assert (tmp_path / "live.png").stat().st_size > 5000
     assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]

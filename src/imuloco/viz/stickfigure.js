@@ -72,5 +72,46 @@ const StickFigure = (() => {
     ctx.fill();
   }
 
-  return { SIDE_COLORS, cameraAxes, projector, fitCanvas, drawGrid, drawFigure };
+  // Orbit by dragging (mouse, pen or one finger), zoom by wheel or two fingers: updates
+  // view.azimuth, view.elevation and view.zoom, then calls onChange(). The canvas has the class
+  // "dragging" while a pointer is down.
+  function orbitControls(canvas, view, onChange) {
+    const pointers = new Map();
+    let pinch = null;
+    const zoomBy = f => { view.zoom = Math.max(0.2, Math.min(5, view.zoom * f)); };
+    canvas.addEventListener("pointerdown", e => {
+      canvas.setPointerCapture(e.pointerId);
+      pointers.set(e.pointerId, [e.clientX, e.clientY]);
+      canvas.classList.add("dragging");
+    });
+    canvas.addEventListener("pointermove", e => {
+      if (!pointers.has(e.pointerId)) return;
+      const [x0, y0] = pointers.get(e.pointerId);
+      pointers.set(e.pointerId, [e.clientX, e.clientY]);
+      if (pointers.size === 2) {
+        const [a, b] = [...pointers.values()];
+        const d = Math.hypot(a[0] - b[0], a[1] - b[1]);
+        if (pinch) zoomBy(d / pinch);
+        pinch = d;
+      } else {
+        view.azimuth -= (e.clientX - x0) * 0.01;
+        view.elevation = Math.max(-0.2, Math.min(1.5, view.elevation + (e.clientY - y0) * 0.01));
+      }
+      onChange();
+    });
+    const release = e => {
+      pointers.delete(e.pointerId);
+      pinch = null;
+      if (pointers.size === 0) canvas.classList.remove("dragging");
+    };
+    canvas.addEventListener("pointerup", release);
+    canvas.addEventListener("pointercancel", release);
+    canvas.addEventListener("wheel", e => {
+      e.preventDefault();
+      zoomBy(Math.exp(-e.deltaY * 0.001));
+      onChange();
+    }, { passive: false });
+  }
+
+  return { SIDE_COLORS, cameraAxes, projector, fitCanvas, drawGrid, drawFigure, orbitControls };
 })();
