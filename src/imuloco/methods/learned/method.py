@@ -81,7 +81,7 @@ class Learned(Method):
         t + ``lag`` have been read. Offline this costs nothing; a stream's poses come ``lag``
         frames late (:attr:`LearnedStream.delay_frames`; 8 frames = 267 ms at 30 fps). On
         held-out styles (every third clip) lag 8 gave 3.29 cm against 3.52 with none (the
-        lower body 2.98 vs 3.37) and less jitter and skate; lag 15 gave 3.48.
+        lower body 2.98 vs 3.37) and less jitter and skate; lag 4 3.35, 11 3.25, 15 3.48.
     features : network inputs: ``"raw"``, the standardized channels; ``"centered"``, those and
         the channels minus their causal running mean over about ``tau`` seconds
         (:func:`running_mean`), which removes per-recording offsets (sensor bias, mounting, the
