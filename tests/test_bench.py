@@ -18,7 +18,8 @@ from imuloco.methods.baselines import MeanPose
 REQUIRED = ("method", "split", "noise", "placements", "motion_type", "mpjpe_cm", "rmse_cm",
             "upper_cm", "lower_cm", "angle_deg", "dpv", "jitter", "foot_skate_cm_s", "train_s",
             "offline_fps", "online_latency_ms_p50", "online_latency_ms_p99", "online_delay_ms",
-            "model_bytes", "root_speed_err_cm_s", "path_err_cm", "protocol_version", "n_clips", "n_frames")
+            "model_bytes", "root_speed_err_cm_s", "path_err_cm", "protocol_version", "n_clips",
+            "n_frames")
 # measured costs: times vary between runs, and a model file records its training time and date
 TIMINGS = ("train_s", "offline_fps", "online_latency_ms_p50", "online_latency_ms_p99",
            "model_bytes")

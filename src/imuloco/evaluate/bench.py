@@ -102,9 +102,9 @@ def evaluate_method(
     """Fit one method and measure it on the test examples.
 
     Returns a dict with ``clips`` (per-clip metric dicts with ``name``, ``motion_type``,
-    ``n_frames``), ``cost`` (train_s, offline_fps, latencies, the stream's look-ahead delay, model_bytes), ``per_joint``
-    (mean heading-frame error per joint, cm, shape (J,)) and ``curves`` (per-frame RMSE, cm,
-    of each test clip by name).
+    ``n_frames``), ``cost`` (train_s, offline_fps, latencies, the stream's look-ahead delay,
+    model_bytes), ``per_joint`` (mean heading-frame error per joint, cm, shape (J,)) and
+    ``curves`` (per-frame RMSE, cm, of each test clip by name).
     """
     from imuloco.methods import get_method
 

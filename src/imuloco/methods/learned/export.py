@@ -9,9 +9,10 @@ de-standardization (and, for a mirrored model, the mirroring) baked in:
   (1, T, 4) probabilities, ``sigma`` (1, T) metres, and ``h_out`` to feed back.
 
 Output frame k is the pose of input frame k - ``lag`` (metadata: the model's look-ahead in
-frames; 0 for a model without). T may be 1 (online, one frame per call carrying ``h``) or a whole recording. Decoding pose
-vectors into joint rotations and the root path is left to the host (a few lines: Gram-Schmidt
-per joint and an integration of the velocity), as is foot pinning.
+frames; 0 for a model without). T may be 1 (online, one frame per call carrying ``h``) or a
+whole recording. Decoding pose vectors into joint rotations and the root path is left to the
+host (a few lines: Gram-Schmidt per joint and an integration of the velocity), as is foot
+pinning.
 """
 
 from __future__ import annotations

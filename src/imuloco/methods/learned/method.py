@@ -17,7 +17,7 @@ import json
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -96,14 +96,14 @@ class Learned(Method):
     name = "learned"
     summary = "imuloco's causal GRU: pose, contacts and confidence; feet pinned (torch)"
     supports_online = True
-    legacy_params = {"lag": 0}  # files from before the look-ahead
+    legacy_params: ClassVar[dict[str, Any]] = {"lag": 0}  # files from before the look-ahead
 
     def __init__(self, hidden: int = 192, layers: int = 2, epochs: int = 20,
                  batch_size: int = 16, window: int = 120, lr: float = 4e-3, draws: int = 2,
                  speed: float = 0.15, noise_scale: float = 2.0, mirror: bool = True,
                  validation: float = 0.05, dropout: float = 0.0, weight_decay: float = 1e-4,
-                 position_weight: float = 10.0, lag: int = 8, features: str = "raw", tau: float = 2.0, threads: int | None = None,
-                 seed: int = 0) -> None:
+                 position_weight: float = 10.0, lag: int = 8, features: str = "raw",
+                 tau: float = 2.0, threads: int | None = None, seed: int = 0) -> None:
         self.hidden = hidden
         self.layers = layers
         self.epochs = epochs
@@ -162,8 +162,8 @@ class Learned(Method):
         self.history_ = tr.train(self.net_, TorchFK(sk.offsets, sk.parents), train_set, val_set,
                                  self.y_mean_, self.y_std_, self.epochs, self.batch_size,
                                  self.window, self.lr,
-                                 tr.LossWeights(position=self.position_weight), self.seed, progress,
-                                 self.weight_decay)
+                                 tr.LossWeights(position=self.position_weight), self.seed,
+                                 progress, self.weight_decay)
         self.net_.eval()
 
     @property
