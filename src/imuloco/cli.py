@@ -372,8 +372,9 @@ def demo(out_dir: Path, method_name: str | None, model_path: Path | None, force:
     click.echo(f"model: {report['model']}")
     g, gt = report["gait"], report["gait_ground_truth"]
     click.echo(f"MPJPE {m['mpjpe_cm']:.1f} cm, joint angle error {m['angle_deg']:.1f} deg; "
-               f"cadence {g['cadence_rhythm_spm']} steps/min from the legs' rhythm, "
-               f"{g['cadence_spm']} from detected strikes (ground truth {gt['cadence_spm']}); "
+               f"cadence {g['cadence_rhythm_spm']:.1f} steps/min from the legs' rhythm, "
+               f"{g['cadence_spm']:.1f} from detected strikes "
+               f"(ground truth {gt['cadence_spm']:.1f}); "
                f"{report['seconds']:.0f} s")
     click.echo(f"wrote {len(report['files'])} files to {out_dir}/ (open demo.html or "
                f"demo.mp4; report.md)")
