@@ -25,6 +25,7 @@ certificate will do once accepted on the phone).
 from __future__ import annotations
 
 import asyncio
+import functools
 import http
 import json
 import logging
@@ -44,6 +45,12 @@ log = logging.getLogger(__name__)
 
 HERE = Path(__file__).parent
 PAGES = {"/": "live.html", "/live": "live.html", "/phone": "phone.html"}
+
+
+@functools.cache
+def _page(name: str) -> str:
+    """The page ``name`` as served: read once, the stick-figure script inlined."""
+    return inline_stickfigure((HERE / name).read_text("utf-8"))
 STATUS_EVERY_S = 0.5  # phone seconds between status messages
 MAX_GAP_S = 1.0  # a longer pause in the samples restarts the walker
 
@@ -90,7 +97,7 @@ class LiveServer:
     """
 
     def __init__(self, method, calibrate_s: float = 5.0, note: str = "") -> None:
-        LiveSession(method, calibrate_s)  # fail early on an offline method
+        probe = LiveSession(method, calibrate_s)  # fails early on an offline method
         self.method = method
         self.calibrate_s = calibrate_s
         self.note = note
@@ -100,7 +107,7 @@ class LiveServer:
         self.server: Server | None = None
         self.status = "waiting for a phone"
         self.replaying = False
-        delay_ms = 1e3 * method.stream().delay_frames / method.fps_
+        delay_ms = 1e3 * probe.stream.delay_frames / method.fps_
         if delay_ms:  # a model with look-ahead shows each pose that much after the step
             note = "; ".join(filter(None, [note, f"poses {delay_ms:.0f} ms late (look-ahead)"]))
         self._hello = dict(skeleton_message(method), note=note)
@@ -114,8 +121,7 @@ class LiveServer:
         page = PAGES.get(request.path.split("?", 1)[0])
         if page is None:
             return connection.respond(http.HTTPStatus.NOT_FOUND, "not found\n")
-        response = connection.respond(http.HTTPStatus.OK,
-                                      inline_stickfigure((HERE / page).read_text("utf-8")))
+        response = connection.respond(http.HTTPStatus.OK, _page(page))
         del response.headers["Content-Type"]
         response.headers["Content-Type"] = "text/html; charset=utf-8"
         response.headers["Cache-Control"] = "no-store"

@@ -174,8 +174,7 @@ class Learned(Method):
     def _featurized(self, e: Example) -> Example:
         """Training inputs: row t holds the signals of frame t + ``lag`` (the last frame's
         repeated past the end), the look-ahead the network learns to use."""
-        s = np.nan_to_num(e.signals)
-        s = np.concatenate([s[self.lag:], np.repeat(s[-1:], min(self.lag, len(s)), axis=0)])
+        s = _hold_last(np.nan_to_num(e.signals), self.lag)[self.lag:]
         return Example(e.motion, self._features(s)[0], e.labels)
 
     def _features(self, s: np.ndarray, state: tuple | None = None) -> tuple[np.ndarray, Any]:
@@ -214,8 +213,7 @@ class Learned(Method):
         if signals.ndim != 2 or signals.shape[1] != self.channels_:
             raise ValueError(f"learned: expected signals (T, {self.channels_}) for "
                              f"placements {self.placements_}, got {signals.shape}")
-        # as a stream reads them: the signals, then the last frame repeated ``lag`` times
-        signals = np.concatenate([signals, np.repeat(signals[-1:], self.lag, axis=0)])
+        signals = _hold_last(signals, self.lag)  # as a stream would be fed to get every frame
         with torch.no_grad():
             p, logit, logvar, _ = self.net_(self._inputs(signals)[0][None])
         return self._outputs(p[0, self.lag:], logit[0, self.lag:], logvar[0, self.lag:])
@@ -318,6 +316,12 @@ def _partner(placement: str) -> str:
     raise ValueError(f"placement {placement!r} has no left/right partner to mirror to")
 
 
+def _hold_last(s: np.ndarray, n: int) -> np.ndarray:
+    """``s`` (T, C) followed by its last row ``n`` more times: the look-ahead's input past the
+    end of a recording."""
+    return np.concatenate([s, np.repeat(s[-1:], n, axis=0)])
+
+
 FEATURES = ("raw", "centered")
 
 
@@ -379,10 +383,10 @@ class LearnedStream(Stream):
         with torch.no_grad():
             x, self.fstate = m._inputs(np.asarray(sample)[None], self.fstate)
             p, logit, logvar, self.h = m.net_(x[None], self.h)
-        out = m._outputs(p[0], logit[0], logvar[0])
         self.seen += 1
-        if self.seen <= self.delay_frames:
+        if self.seen <= self.delay_frames:  # frame 0 is not due yet
             return self.rest[0].copy(), self.rest[1].copy()
+        out = m._outputs(p[0], logit[0], logvar[0])
         self.contacts, self.sigma = out.contacts[0], float(out.sigma[0])
         rot, raw_root = self.integrator.step(out.vectors[0])
         sk = m.skeleton_
