@@ -241,48 +241,25 @@ def test_package_imports_without_torch():
     assert res.returncode == 0, res.stderr
 
 
-def test_running_mean_is_causal_and_streams():
-    from imuloco.methods.learned.method import running_mean
-
-    x = np.random.default_rng(3).normal(size=(60, 4)) + np.array([9.81, 0.0, -2.0, 0.5])
-    mean, _ = running_mean(x, 0.05)
-    np.testing.assert_allclose(mean[0], x[0])  # bias-corrected: the first frame is its mean
-    changed = x.copy()
-    changed[40:] += 100.0
-    np.testing.assert_array_equal(running_mean(changed, 0.05)[0][:40], mean[:40])
-    a, state = running_mean(x[:25], 0.05)
-    b, _ = running_mean(x[25:], 0.05, state)
-    np.testing.assert_allclose(np.concatenate([a, b]), mean, atol=1e-12)
-    # a constant offset (a sensor bias) is removed exactly
-    np.testing.assert_allclose(running_mean(np.full((30, 2), 3.0), 0.05)[0], 3.0)
-
-
-def test_centered_features_stream_and_file(sample_db, test_signals, tmp_path):
-    params = dict(TINY, epochs=2, features="centered", dropout=0.1)
-    model = get_method("learned", **params).fit(sample_db.subset([0, 12]), ["right_ankle"],
-                                                "phone", seed=0)
-    assert model.x_mean_.shape == (12,) and model.channels_ == 6
-    assert_stream_equals_offline(model, test_signals)
-    loaded = load_model(model.save(tmp_path / "c.npz"))
-    assert loaded.features == "centered"
-    np.testing.assert_array_equal(loaded.predict(test_signals).vectors,
-                                  model.predict(test_signals).vectors)
-
-
-def test_files_without_features_load_as_raw(tiny_model, test_signals, tmp_path):
+def test_files_with_retired_features_load_or_are_refused(tiny_model, test_signals, tmp_path):
     import json
 
-    path = tiny_model.save(tmp_path / "old.npz")
+    from imuloco.methods.base import ModelFileError
+
+    path = tiny_model.save(tmp_path / "new.npz")
     with np.load(path, allow_pickle=False) as z:  # rewrite the header as older versions did
         data = {k: z[k] for k in z.files}
     header = json.loads(bytes(data["__header__"]).decode())
-    for key in ("dropout", "weight_decay", "features", "tau"):
-        header["params"].pop(key)
-    header["params"]["features"] = "centered"  # a later default must not apply to old files
-    header["values"].pop("features")
-    data["__header__"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
-    np.savez_compressed(tmp_path / "old2.npz", **data)
-    old = load_model(tmp_path / "old2.npz")
-    assert old.features == "raw"
+
+    def rewritten(name, **params):
+        header["params"].update(params)
+        header["values"]["features"] = params["features"]
+        data["__header__"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+        np.savez_compressed(tmp_path / name, **data)
+        return tmp_path / name
+
+    old = load_model(rewritten("raw.npz", features="raw", tau=3.0))  # the shipped files' kind
     np.testing.assert_array_equal(old.predict(test_signals).vectors,
                                   tiny_model.predict(test_signals).vectors)
+    with pytest.raises(ModelFileError, match=r"centered\.npz.*features='centered'.*retrain"):
+        load_model(rewritten("centered.npz", features="centered", tau=2.0))

@@ -75,6 +75,10 @@ class Method(ABC):
     # hyperparameters added after model files were written, with the value that reproduces
     # those files' behaviour (not the new default) when their header lacks them
     legacy_params: ClassVar[dict[str, Any]] = {}
+    # hyperparameters removed from the method, with the one value the current code reproduces
+    # (None: any, it no longer matters): old files that carry it load without it, files with
+    # another value are refused (retrain them)
+    retired_params: ClassVar[dict[str, Any]] = {}
 
     # ---- learning ---------------------------------------------------------------------------
     def fit(self, db: MotionDatabase, placements: Sequence[str] = ("right_ankle",),
@@ -188,8 +192,9 @@ def load_model(path: str | Path) -> Method:
         cls = method_class(str(name))
     except KeyError as e:
         raise ModelFileError(f"{path}: {e.args[0]}") from None
+    params = _current_params(path, cls, header.get("params"))
     try:  # a header or arrays that do not fit the method: missing keys, wrong shapes
-        method = cls(**{**cls.legacy_params, **header["params"]})
+        method = cls(**{**cls.legacy_params, **params})
         sk = header["skeleton"]
         method.skeleton_ = Skeleton(sk["names"], data.pop("__parents__"),
                                     data.pop("__offsets__"),
@@ -204,3 +209,18 @@ def load_model(path: str | Path) -> Method:
         raise ModelFileError(f"{path}: {name} model file is incomplete or corrupted "
                              f"({type(e).__name__}: {e})") from None
     return method
+
+
+def _current_params(path: Path, cls: type[Method], params: object) -> dict[str, Any]:
+    """``params`` of a file's header without the method's retired hyperparameters; a file
+    trained with a retired option the code no longer has is refused."""
+    if not isinstance(params, dict):
+        raise ModelFileError(f"{path}: {cls.name} model file is incomplete or corrupted "
+                             "(its header has no parameter table)")
+    out = dict(params)
+    for key, kept in cls.retired_params.items():
+        if key in out and out.pop(key) != kept and kept is not None:
+            raise ModelFileError(f"{path}: {cls.name} model trained with {key}={params[key]!r}, "
+                                 f"an option this imuloco no longer has (only {kept!r}); "
+                                 "retrain it with `imuloco train`")
+    return out

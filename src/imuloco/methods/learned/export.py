@@ -78,10 +78,6 @@ def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Pa
     :func:`onnx.checker.check_model`."""
     import onnx
 
-    if model.features != "raw":
-        raise NotImplementedError(f"ONNX export of learned models with features="
-                                  f"{model.features!r} (a running mean) is not written yet; "
-                                  "train with features=raw to export")
     path = Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")

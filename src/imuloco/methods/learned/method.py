@@ -82,11 +82,6 @@ class Learned(Method):
         frames late (:attr:`LearnedStream.delay_frames`; 8 frames = 267 ms at 30 fps). On
         held-out styles (every third clip) lag 8 gave 3.29 cm against 3.52 with none (the
         lower body 2.98 vs 3.37) and less jitter and skate; lag 4 3.35, 11 3.25, 15 3.48.
-    features : network inputs: ``"raw"``, the standardized channels; ``"centered"``, those and
-        the channels minus their causal running mean over about ``tau`` seconds
-        (:func:`running_mean`), which removes per-recording offsets (sensor bias, mounting, the
-        wearer's mean shank tilt) that differ between people and styles.
-    tau : time constant (s) of the running mean of ``features="centered"``.
     threads : torch CPU threads while fitting (None: torch's default). Use 1 on a machine
         shared with other jobs: torch's thread pool stalls when its cores are taken (a batch
         took 10x longer with 2 threads than with 1 on a loaded 2-core machine).
@@ -97,13 +92,16 @@ class Learned(Method):
     summary = "imuloco's causal GRU: pose, contacts and confidence; feet pinned (torch)"
     supports_online = True
     legacy_params: ClassVar[dict[str, Any]] = {"lag": 0}  # files from before the look-ahead
+    # inputs centred by a causal running mean (``features="centered"``, time constant ``tau``)
+    # measured worse (4.06 vs 3.94 cm, docs/results/learned/experiments.md) and were removed
+    retired_params: ClassVar[dict[str, Any]] = {"features": "raw", "tau": None}
 
     def __init__(self, hidden: int = 192, layers: int = 2, epochs: int = 20,
                  batch_size: int = 16, window: int = 120, lr: float = 4e-3, draws: int = 2,
                  speed: float = 0.15, noise_scale: float = 2.0, mirror: bool = True,
                  validation: float = 0.05, dropout: float = 0.0, weight_decay: float = 1e-4,
-                 position_weight: float = 10.0, lag: int = 8, features: str = "raw",
-                 tau: float = 2.0, threads: int | None = None, seed: int = 0) -> None:
+                 position_weight: float = 10.0, lag: int = 8, threads: int | None = None,
+                 seed: int = 0) -> None:
         self.hidden = hidden
         self.layers = layers
         self.epochs = epochs
@@ -119,8 +117,6 @@ class Learned(Method):
         self.weight_decay = weight_decay
         self.position_weight = position_weight
         self.lag = lag
-        self.features = features
-        self.tau = tau
         self.threads = threads
         self.seed = seed
 
@@ -142,9 +138,6 @@ class Learned(Method):
             can_mirror = False
         train_ex = tr.augment(train_ex, self.placements_, self.noise_, self.seed, self.draws,
                               self.speed, self.noise_scale, can_mirror, progress)
-        if self.features not in FEATURES:
-            raise ValueError(f"learned: features must be one of {FEATURES}, got "
-                             f"{self.features!r}")
         train_ex = [self._featurized(e) for e in train_ex]
         val_ex = [self._featurized(e) for e in val_ex]
         x, y, c, pos, lengths = tr.stack(train_ex)
@@ -169,21 +162,13 @@ class Learned(Method):
     @property
     def channels_(self) -> int:
         """Sensor channels (6 per sensor) the model reads."""
-        return int(self.x_mean_.shape[0]) // (2 if self.features == "centered" else 1)
+        return int(self.x_mean_.shape[0])
 
     def _featurized(self, e: Example) -> Example:
         """Training inputs: row t holds the signals of frame t + ``lag`` (the last frame's
         repeated past the end), the look-ahead the network learns to use."""
         s = _hold_last(np.nan_to_num(e.signals), self.lag)[self.lag:]
-        return Example(e.motion, self._features(s)[0], e.labels)
-
-    def _features(self, s: np.ndarray, state: tuple | None = None) -> tuple[np.ndarray, Any]:
-        """Network inputs (T, C') of signals (T, C), before standardization, and the running
-        state to pass with the next block (streaming)."""
-        if self.features == "raw":
-            return s, state
-        mean, state = running_mean(s, 1.0 / (self.tau * self.fps_), state)
-        return np.concatenate([s, s - mean], axis=-1), state
+        return Example(e.motion, s, e.labels)
 
     def _arrays(self, x: np.ndarray, y: np.ndarray, c: np.ndarray, pos: np.ndarray,
                 lengths: np.ndarray) -> tr.Arrays:
@@ -193,11 +178,10 @@ class Learned(Method):
                          starts, lengths)
 
     # ---- reconstruction ---------------------------------------------------------------------
-    def _inputs(self, signals: np.ndarray, state: tuple | None = None
-                ) -> tuple[torch.Tensor, Any]:
+    def _inputs(self, signals: np.ndarray) -> torch.Tensor:
+        """Standardized network inputs of signals (T, 6 S) in this leg's sensor axes."""
         s = np.nan_to_num(np.asarray(signals, dtype=np.float64)) @ self.input_map_.T
-        s, state = self._features(s, state)
-        return torch.as_tensor((s - self.x_mean_) / self.x_std_, dtype=torch.float32), state
+        return torch.as_tensor((s - self.x_mean_) / self.x_std_, dtype=torch.float32)
 
     def _outputs(self, p: torch.Tensor, logit: torch.Tensor, logvar: torch.Tensor) -> Prediction:
         vectors = p.numpy().astype(np.float64) * self.y_std_ + self.y_mean_
@@ -215,7 +199,7 @@ class Learned(Method):
                              f"placements {self.placements_}, got {signals.shape}")
         signals = _hold_last(signals, self.lag)  # as a stream would be fed to get every frame
         with torch.no_grad():
-            p, logit, logvar, _ = self.net_(self._inputs(signals)[0][None])
+            p, logit, logvar, _ = self.net_(self._inputs(signals)[None])
         return self._outputs(p[0, self.lag:], logit[0, self.lag:], logvar[0, self.lag:])
 
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
@@ -289,8 +273,7 @@ class Learned(Method):
         arrays.update(x_mean=self.x_mean_, x_std=self.x_std_, y_mean=self.y_mean_,
                       y_std=self.y_std_, input_map=self.input_map_, frames=self.frames_)
         values = {"output_mirror": bool(self.output_mirror_), "history": self.history_,
-                  "channels": int(self.x_mean_.shape[0]), "pose_dim": int(self.y_mean_.shape[0]),
-                  "features": self.features}
+                  "channels": int(self.x_mean_.shape[0]), "pose_dim": int(self.y_mean_.shape[0])}
         return arrays, values
 
     def set_state(self, arrays: dict[str, np.ndarray], values: dict[str, Any]) -> None:
@@ -298,7 +281,6 @@ class Learned(Method):
         self.y_mean_, self.y_std_ = arrays["y_mean"], arrays["y_std"]
         self.input_map_, self.frames_ = arrays["input_map"], arrays["frames"]
         self.output_mirror_ = bool(values["output_mirror"])
-        self.features = values.get("features", "raw")  # files from before ``features``
         self.history_ = values.get("history", [])
         if "protocol" in values:  # files from before the base class saved the protocol
             self.protocol_ = values["protocol"]
@@ -320,27 +302,6 @@ def _hold_last(s: np.ndarray, n: int) -> np.ndarray:
     """``s`` (T, C) followed by its last row ``n`` more times: the look-ahead's input past the
     end of a recording."""
     return np.concatenate([s, np.repeat(s[-1:], n, axis=0)])
-
-
-FEATURES = ("raw", "centered")
-
-
-def running_mean(x: np.ndarray, alpha: float, state: tuple | None = None
-                 ) -> tuple[np.ndarray, tuple]:
-    """Causal running mean of ``x`` (T, C): an exponential moving average with weight
-    ``alpha`` per frame, bias-corrected as in Adam (so the first frames average what has been
-    seen), and the state ``(ema (C,), frames seen)`` to continue it on the next block.
-
-    scipy's ``lfilter`` runs the recursion ``ema_t = (1 - alpha) ema_{t-1} + alpha x_t``.
-    """
-    from scipy.signal import lfilter
-
-    x = np.asarray(x, dtype=np.float64)
-    ema0, n0 = state if state is not None else (np.zeros(x.shape[1]), 0)
-    ema, _ = lfilter([alpha], [1.0, alpha - 1.0], x, axis=0, zi=((1 - alpha) * ema0)[None])
-    n = n0 + np.arange(1, len(x) + 1)
-    mean = ema / (1.0 - (1.0 - alpha) ** n)[:, None]
-    return mean, (ema[-1].copy() if len(x) else ema0, int(n0 + len(x)))
 
 
 PIN_PARTS = CONTACT_PARTS  # heel contact pins the ankle joint, toe contact the toe joint
@@ -371,7 +332,6 @@ class LearnedStream(Stream):
         self.rest = PoseIntegrator(model.skeleton_, model.fps_).step(
             (model._mirror_vectors(mean) if model.output_mirror_ else mean)[0])
         self.h = model.net_.initial_state(1)
-        self.fstate: Any = None  # running-mean state of features="centered"
         self.integrator = PoseIntegrator(model.skeleton_, model.fps_)
         self.feet = [model.skeleton_.part(p) for p in PIN_PARTS]
         self.pinner = FootPinner(PIN_SMOOTHING)
@@ -381,7 +341,7 @@ class LearnedStream(Stream):
     def step(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         m = self.model
         with torch.no_grad():
-            x, self.fstate = m._inputs(np.asarray(sample)[None], self.fstate)
+            x = m._inputs(np.asarray(sample)[None])
             p, logit, logvar, self.h = m.net_(x[None], self.h)
         self.seen += 1
         if self.seen <= self.delay_frames:  # frame 0 is not due yet
