@@ -140,7 +140,7 @@ class LossWeights:
 
     position: float = 10.0
     smooth: float = 30.0
-    accel: float = 30.0
+    accel: float = 150.0
     contact: float = 0.5
     confidence: float = 0.1
 
