@@ -21,9 +21,8 @@ from imuloco.io.bvh import read_bvh
 from imuloco.io.sensorlog import write_generic_csv
 from imuloco.ops.rotations import from_rotvec, qrot
 from imuloco.phases import gait_phases
+from imuloco.pipeline import DEMO_CLIP
 from imuloco.sensors.simulate import simulate
-
-DEMO_CLIP = "dataset-2_walk_normal_001"
 
 
 @pytest.fixture(scope="module")
