@@ -80,7 +80,7 @@ class Learned(Method):
     accel_weight : weight of the term that matches the joints' frame-to-frame accelerations
         to the ground truth's (against jitter). On held-out styles (every third clip) 150
         instead of 30 gave jitter 173 vs 198 m/s^3 and foot skate 7.2 vs 7.7 cm/s at the same
-        MPJPE (3.29 vs 3.32 cm, within the spread of seeds, 3.18-3.32).
+        MPJPE (3.29 vs 3.32 cm; four runs of one configuration spread over 3.18-3.32).
     lag : look-ahead in frames: the pose of frame t is output once the signals up to frame
         t + ``lag`` have been read. Offline this costs nothing; a stream's poses come ``lag``
         frames late (:attr:`LearnedStream.delay_frames`; 8 frames = 267 ms at 30 fps). On
@@ -144,8 +144,8 @@ class Learned(Method):
             can_mirror = False
         train_ex = tr.augment(train_ex, self.placements_, self.noise_, self.seed, self.draws,
                               self.speed, self.noise_scale, can_mirror, progress)
-        train_ex = [self._featurized(e) for e in train_ex]
-        val_ex = [self._featurized(e) for e in val_ex]
+        train_ex = [self._looking_ahead(e) for e in train_ex]
+        val_ex = [self._looking_ahead(e) for e in val_ex]
         x, y, c, pos, lengths = tr.stack(train_ex)
         self.x_mean_, self.x_std_ = x.mean(0), np.maximum(x.std(0), 1e-3)
         self.y_mean_ = y.mean(0)
@@ -172,7 +172,7 @@ class Learned(Method):
         """Sensor channels (6 per sensor) the model reads."""
         return int(self.x_mean_.shape[0])
 
-    def _featurized(self, e: Example) -> Example:
+    def _looking_ahead(self, e: Example) -> Example:
         """Training inputs: row t holds the signals of frame t + ``lag`` (the last frame's
         repeated past the end), the look-ahead the network learns to use."""
         s = _hold_last(np.nan_to_num(e.signals), self.lag)[self.lag:]
