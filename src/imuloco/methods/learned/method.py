@@ -153,18 +153,21 @@ class Learned(Method):
         self.y_std_ = np.maximum(y.std(0), 0.05)
         train_set = self._arrays(x, y, c, pos, lengths)
         val_set = self._arrays(*tr.stack(val_ex)) if val_ex else None
-        torch.manual_seed(self.seed)  # the initial weights are part of a reproducible fit
-        self.net_ = Reconstructor(x.shape[1], y.shape[1], self.hidden, self.layers,
-                                  self.dropout)
         self.input_map_ = np.eye(self.channels_)
         self.output_mirror_ = False
         self.frames_ = np.tile(np.eye(3), (sk.num_joints, 1, 1))
-        self.history_ = tr.train(self.net_, TorchFK(sk.offsets, sk.parents), train_set, val_set,
-                                 self.y_mean_, self.y_std_, self.epochs, self.batch_size,
-                                 self.window, self.lr,
-                                 tr.LossWeights(position=self.position_weight,
-                                                 accel=self.accel_weight), self.seed,
-                                 progress, self.weight_decay)
+        # seeded initial weights and batches (a reproducible fit) without touching the
+        # caller's global torch generator
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(self.seed)
+            self.net_ = Reconstructor(x.shape[1], y.shape[1], self.hidden, self.layers,
+                                      self.dropout)
+            self.history_ = tr.train(self.net_, TorchFK(sk.offsets, sk.parents), train_set,
+                                     val_set, self.y_mean_, self.y_std_, self.epochs,
+                                     self.batch_size, self.window, self.lr,
+                                     tr.LossWeights(position=self.position_weight,
+                                                    accel=self.accel_weight), self.seed,
+                                     progress, self.weight_decay)
         self.net_.eval()
 
     @property
