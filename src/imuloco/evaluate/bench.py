@@ -80,8 +80,8 @@ def _latency(method, signals: np.ndarray) -> tuple[float | None, float | None, f
         stream.step(sample)
         times.append(time.perf_counter() - t0)
     ms = np.array(times) * 1e3
-    delay = 1e3 * stream.delay_frames / method.fps_
-    return float(np.percentile(ms, 50)), float(np.percentile(ms, 99)), delay
+    return (float(np.percentile(ms, 50)), float(np.percentile(ms, 99)),
+            stream.delay_ms(method.fps_))
 
 
 def _model_bytes(method) -> int:

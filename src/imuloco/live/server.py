@@ -45,14 +45,14 @@ log = logging.getLogger(__name__)
 
 HERE = Path(__file__).parent
 PAGES = {"/": "live.html", "/live": "live.html", "/phone": "phone.html"}
+STATUS_EVERY_S = 0.5  # phone seconds between status messages
+MAX_GAP_S = 1.0  # a longer pause in the samples restarts the walker
 
 
 @functools.cache
 def _page(name: str) -> str:
     """The page ``name`` as served: read once, the stick-figure script inlined."""
     return inline_stickfigure((HERE / name).read_text("utf-8"))
-STATUS_EVERY_S = 0.5  # phone seconds between status messages
-MAX_GAP_S = 1.0  # a longer pause in the samples restarts the walker
 
 
 def skeleton_message(method) -> dict:
@@ -107,7 +107,7 @@ class LiveServer:
         self.server: Server | None = None
         self.status = "waiting for a phone"
         self.replaying = False
-        delay_ms = 1e3 * probe.stream.delay_frames / method.fps_
+        delay_ms = probe.stream.delay_ms(method.fps_)
         if delay_ms:  # a model with look-ahead shows each pose that much after the step
             note = "; ".join(filter(None, [note, f"poses {delay_ms:.0f} ms late (look-ahead)"]))
         self._hello = dict(skeleton_message(method), note=note)

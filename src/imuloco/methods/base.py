@@ -61,6 +61,10 @@ class Stream(ABC):
 
     delay_frames: int = 0
 
+    def delay_ms(self, fps: float) -> float:
+        """``delay_frames`` in milliseconds at ``fps`` frames per second."""
+        return 1e3 * self.delay_frames / fps
+
     @abstractmethod
     def step(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """sample : (6 S,) one frame of signals -> (local rotations (J, 4), root (3,))."""
