@@ -94,8 +94,8 @@ def browser():
 @pytest.fixture(scope="session")
 def ridge_without_demo_clip(sample_db):
     """ridge (online) fitted on the sample without the demo clip, as the pipeline's fallback."""
+    from imuloco.app.pipeline import DEMO_CLIP
     from imuloco.methods import get_method
-    from imuloco.pipeline import DEMO_CLIP
 
     keep = [i for i, lab in enumerate(sample_db.labels) if lab["name"] != DEMO_CLIP]
     return get_method("ridge").fit(sample_db.subset(keep), ["right_ankle"], "phone", 0)

@@ -10,8 +10,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from imuloco.core.bodymap import PARTS, resolve_body_map
+from imuloco.errors import FormatError
 from imuloco.io.asf_amc import find_asf, read_asf, read_asf_amc
-from imuloco.io.errors import FormatError
 from imuloco.io.motionfile import read_motion
 
 U = 0.0254 / 0.45  # metres per CMU length unit

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from imuloco.batch import find_recordings, output_names, run_batch
+from imuloco.app.batch import find_recordings, output_names, run_batch
 from imuloco.cli import cli
 from imuloco.evaluate.gait import gait_parameters
 from imuloco.io.bvh import read_bvh

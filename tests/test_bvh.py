@@ -11,8 +11,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from imuloco.core.motion import Motion
+from imuloco.errors import FormatError
 from imuloco.io.bvh import UNITS, read_bvh, write_bvh
-from imuloco.io.errors import FormatError
 from imuloco.ops.kinematics import point_on_segment
 from imuloco.ops.rotations import (
     from_6d,

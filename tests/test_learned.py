@@ -9,12 +9,12 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from imuloco.core.mirror import _reflection, mirror, mirror_frames, mirror_pairs
 from imuloco.methods import get_method, load_model
 from imuloco.methods.learned.model import Reconstructor, TorchFK, rotation_from_6d
 from imuloco.methods.training import synthesize
 from imuloco.ops.heading import heading_from_hips
 from imuloco.ops.kinematics import fk
-from imuloco.ops.mirror import _reflection, mirror, mirror_frames, mirror_pairs
 from imuloco.ops.rotations import from_6d, to_6d
 
 TINY = {"hidden": 24, "layers": 1, "epochs": 8, "batch_size": 8, "window": 40, "lr": 1e-2,
@@ -265,7 +265,7 @@ def test_package_imports_without_torch():
         "        if name == 'torch' or name.startswith('torch.'):\n"
         "            raise ModuleNotFoundError(\"No module named 'torch'\", name='torch')\n"
         "sys.meta_path.insert(0, Block())\n"
-        "import imuloco.methods, imuloco.cli, imuloco.ops.mirror\n"
+        "import imuloco.methods, imuloco.cli, imuloco.core.mirror\n"
         "found = imuloco.methods.available_methods()\n"
         "assert 'learned' not in found and 'mean' in found\n"
     )
@@ -274,7 +274,7 @@ def test_package_imports_without_torch():
 
 
 def test_files_with_retired_features_load_or_are_refused(tiny_model, test_signals, tmp_path):
-    from imuloco.methods.base import ModelFileError
+    from imuloco.errors import ModelFileError
 
     # the shipped files' kind: features="raw" (and its unused tau) in the header
     old = load_model(rewrite_params(tiny_model, tmp_path / "raw.npz", features="raw", tau=3.0))

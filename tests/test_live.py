@@ -9,13 +9,13 @@ import urllib.request
 import numpy as np
 import pytest
 
-from imuloco.core.recording import Recording
-from imuloco.live.session import (
+from imuloco.app.live.session import (
     KernelResampler,
     LiveSession,
     kernel_resample,
     offline_frames,
 )
+from imuloco.core.recording import Recording
 from imuloco.ops.rotations import from_rotvec, qrot
 from imuloco.sensors.calibration import calibrate
 from imuloco.sensors.simulate import simulate
@@ -154,7 +154,7 @@ def test_session_refuses_offline_methods_and_drops_old_samples(fitted):
 async def _stream_through_server(fitted, phone, n_samples: int, timeout: float = 60.0):
     from websockets.asyncio.client import connect
 
-    from imuloco.live.server import LiveServer
+    from imuloco.app.live.server import LiveServer
 
     times, acc, gyro = phone
     rows = np.concatenate([times[:n_samples, None], acc[:n_samples, 0], gyro[:n_samples, 0]], 1)
@@ -217,7 +217,7 @@ def test_server_streams_poses_equal_to_the_offline_method(fitted, phone):
 async def _replay(fitted, path, timeout: float = 60.0):
     from websockets.asyncio.client import connect
 
-    from imuloco.live.server import LiveServer
+    from imuloco.app.live.server import LiveServer
 
     server = LiveServer(fitted, calibrate_s=CALIB_S)
     await server.start("127.0.0.1", 0)
@@ -255,7 +255,7 @@ def test_replay_streams_a_recorded_file(fitted, sample_db, tmp_path):
 
 def test_a_pause_restarts_the_walker_with_the_same_calibration(fitted, phone):
     pytest.importorskip("websockets")
-    from imuloco.live.server import LiveServer
+    from imuloco.app.live.server import LiveServer
 
     times, acc, gyro = phone
     rows = np.concatenate([times[:, None], acc[:, 0], gyro[:, 0]], 1)
@@ -278,7 +278,7 @@ def threaded_server(fitted):
     pytest.importorskip("websockets")
     import threading
 
-    from imuloco.live.server import LiveServer
+    from imuloco.app.live.server import LiveServer
 
     loop = asyncio.new_event_loop()
     thread = threading.Thread(target=loop.run_forever, daemon=True)

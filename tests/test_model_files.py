@@ -9,8 +9,9 @@ import zipfile
 import numpy as np
 import pytest
 
+from imuloco.errors import ModelFileError
 from imuloco.methods import get_method, load_model
-from imuloco.methods.base import FORMAT_VERSION, ModelFileError
+from imuloco.methods.modelfile import FORMAT_VERSION
 from imuloco.methods.training import TEST_SEED_OFFSET, synthesize
 
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from imuloco.app.pipeline import DEMO_CLIP
 from imuloco.cli import cli
 from imuloco.core.recording import Recording
 from imuloco.evaluate.gait import (
@@ -21,7 +22,6 @@ from imuloco.io.bvh import read_bvh
 from imuloco.io.sensorlog import write_generic_csv
 from imuloco.ops.rotations import from_rotvec, qrot
 from imuloco.phases import gait_phases
-from imuloco.pipeline import DEMO_CLIP
 from imuloco.sensors.simulate import simulate
 
 
@@ -107,7 +107,7 @@ def test_plausibility_of_captured_motion(walks):
 
 # ---- the pipeline -----------------------------------------------------------------------------
 def test_choose_method_falls_back_to_a_baseline_fitted_on_the_sample(monkeypatch):
-    from imuloco import pipeline
+    from imuloco.app import pipeline
 
     monkeypatch.setattr(pipeline, "shipped_model", lambda method, placement: None)
     method, note = pipeline.choose_method(exclude=[DEMO_CLIP])
@@ -119,7 +119,7 @@ def test_choose_method_falls_back_to_a_baseline_fitted_on_the_sample(monkeypatch
 
 
 def test_the_shipped_learned_model_is_the_default():
-    from imuloco import pipeline
+    from imuloco.app import pipeline
 
     path = pipeline.shipped_model("learned", "right_ankle")
     if path is None:
@@ -130,8 +130,8 @@ def test_the_shipped_learned_model_is_the_default():
 
 
 def test_reconstruct_file_gives_a_walk_on_the_training_skeleton(log_file, fitted, demo_clip):
+    from imuloco.app.pipeline import reconstruct_file
     from imuloco.evaluate.metrics import mpjpe
-    from imuloco.pipeline import reconstruct_file
 
     motion, report = reconstruct_file(log_file, fitted=fitted)
     assert motion.skeleton.names == fitted.skeleton_.names
@@ -154,8 +154,8 @@ def test_reconstruct_file_gives_a_walk_on_the_training_skeleton(log_file, fitted
 
 def test_calibration_makes_the_phone_orientation_irrelevant(fitted, demo_clip):
     """A phone strapped turned gives the same reconstruction once calibrated."""
+    from imuloco.app.pipeline import reconstruct_recording
     from imuloco.evaluate.metrics import mpjpe
-    from imuloco.pipeline import reconstruct_recording
 
     rec = simulate(demo_clip, ["right_ankle"], rate=100.0, noise="phone", seed=4)
     q = from_rotvec(np.array([0.0, 0.0, np.pi / 2]) + 0.2)  # screen turned a quarter and more
@@ -207,8 +207,8 @@ def test_bvh_parses_in_an_independent_reader(tmp_path, fitted, log_file):
     """The written BVH, read by bvhio (a second, unrelated BVH implementation), gives the
     same world joint positions as our forward kinematics."""
     bvhio = pytest.importorskip("bvhio")
+    from imuloco.app.pipeline import reconstruct_file
     from imuloco.io.bvh import write_bvh
-    from imuloco.pipeline import reconstruct_file
 
     motion, _ = reconstruct_file(log_file, fitted=fitted)
     motion = motion.slice(0, 40)
@@ -264,7 +264,7 @@ def test_demo_writes_everything(tmp_path, read_mp4):
 @pytest.mark.shared
 def test_real_shin_recording_gives_a_plausible_walk(shared_dir):
     """60 s of the RealWorld shin recording (a real phone, irregular timestamps)."""
-    from imuloco.pipeline import choose_method, reconstruct_recording
+    from imuloco.app.pipeline import choose_method, reconstruct_recording
     from imuloco.sensors.reallog import read_log
 
     acc = shared_dir.parent / "realworld-shin" / "acc_walking_shin.csv"

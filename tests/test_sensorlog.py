@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from imuloco.core.recording import Recording
-from imuloco.io.errors import FormatError
+from imuloco.errors import FormatError
 from imuloco.io.sensorlog import detect_format, write_generic_csv
 from imuloco.sensors.calibration import still_mask
 from imuloco.sensors.reallog import read_log

@@ -319,9 +319,9 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
     accelerometer file and a gyroscope file (a RealWorld acc_*.csv finds its gyroscope_*.csv).
     """
+    from imuloco.app.pipeline import reconstruct_file, render_outputs
+    from imuloco.errors import FormatError
     from imuloco.io.bvh import write_bvh
-    from imuloco.io.errors import FormatError
-    from imuloco.pipeline import reconstruct_file, render_outputs
 
     _refuse_existing([output, video, html_path, report_path], force)
     source = recording[0] if len(recording) == 1 else list(recording)
@@ -361,7 +361,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 def demo(out_dir: Path, method_name: str | None, model_path: Path | None, force: bool) -> None:
     """Simulate a phone on the right ankle of a bundled walk, reconstruct it and write the
     BVH, a side-by-side video (MP4, GIF), the HTML viewer, plots and a report."""
-    from imuloco.pipeline import demo as run_demo
+    from imuloco.app.pipeline import demo as run_demo
 
     try:
         report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
@@ -396,8 +396,8 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
     """Render a MOTION file (BVH, ...) as stick-figure video, HTML viewer or frame strip."""
     import numpy as np
 
+    from imuloco.app.pipeline import render_outputs
     from imuloco.io.motionfile import read_motion
-    from imuloco.pipeline import render_outputs
     from imuloco.viz.skeleton import frame_strip
 
     bad = [str(p) for p in outputs if p.suffix.lower() not in (".mp4", ".gif", ".html", ".png")]
@@ -446,7 +446,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
           no_calibrate: bool, force: bool) -> None:
     """Reconstruct many RECORDINGS (one walker each) in parallel: a BVH and a gait report
     per recording, and a summary.csv / summary.json of cadence, speed and step length."""
-    from imuloco.batch import find_recordings, run_batch
+    from imuloco.app.batch import find_recordings, run_batch
 
     paths = find_recordings(recordings, patterns)
     if not paths:
@@ -507,11 +507,11 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
     import asyncio
 
     try:
-        from imuloco.live.server import LiveServer, run, ssl_context
+        from imuloco.app.live.server import LiveServer, run, ssl_context
     except ImportError as e:
         raise click.ClickException(f"live mode needs websockets: pip install imuloco[live] "
                                    f"({e})") from None
-    from imuloco.pipeline import choose_method
+    from imuloco.app.pipeline import choose_method
 
     try:
         fitted, note = choose_method(method_name, model_path, placement, progress=True)

@@ -1,5 +1,5 @@
 """Reading and writing motion and sensor files. Every parser raises :class:`FormatError`."""
 
-from imuloco.io.errors import FormatError
+from imuloco.errors import FormatError
 
 __all__ = ["FormatError"]

@@ -33,7 +33,7 @@ import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
-from imuloco.io.errors import FormatError
+from imuloco.errors import FormatError
 from imuloco.ops.rotations import IDENTITY, from_euler, qinv, qmul
 
 INCH = 0.0254

@@ -27,7 +27,7 @@ import numpy as np
 from imuloco.core.bodymap import resolve_body_map
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
-from imuloco.io.errors import FormatError
+from imuloco.errors import FormatError
 from imuloco.ops.rotations import IDENTITY, from_euler, qmul, qrot, to_euler
 
 # Metres per file unit. "cmu": the CMU motion capture unit, (1 / 0.45) inch.

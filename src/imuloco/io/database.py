@@ -13,8 +13,8 @@ from pathlib import Path
 from tqdm.auto import tqdm
 
 from imuloco.core.motion import MotionDatabase
+from imuloco.errors import FormatError
 from imuloco.io.bvh import read_bvh
-from imuloco.io.errors import FormatError
 
 
 def _label_names(folder: Path, kind: str) -> list[str] | None:

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imuloco.io.errors import FormatError
+from imuloco.errors import FormatError
 
 GENERIC_COLUMNS = ("acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z")
 FORMATS = ("generic", "realworld", "phyphox", "sensorlogger")

@@ -1,4 +1,4 @@
-"""The interface every reconstruction method implements, its registry and its file format.
+"""The interface every reconstruction method implements.
 
 A method is an estimator: ``__init__`` stores hyperparameters, :meth:`Method.fit` synthesizes
 sensor signals for a MotionDatabase and learns, :meth:`Method.reconstruct` turns a Recording
@@ -6,51 +6,28 @@ into a Motion, and :meth:`Method.stream` (for online methods) takes one sensor f
 Signals reach a method at its model rate (the training motion's frame rate) as rows of
 ``6 S`` channels (per sensor acc x,y,z then gyro x,y,z), see :mod:`imuloco.methods.training`.
 
-A new method is one module with one subclass decorated by :func:`register`; importing
-``imuloco.methods`` then makes it available to ``bench``, ``train``, ``reconstruct`` and
-``live``.
-
-Models are saved as one ``.npz`` (no pickle): the learned arrays plus a JSON header with the
-format version, the method name, its hyperparameters and the skeleton.
+A new method is one module with one subclass, named in the ``imuloco.methods`` entry-point
+group (:mod:`imuloco.methods.registry`); it is then available to ``bench``, ``train``,
+``reconstruct`` and ``live``. Fitted methods are saved by :mod:`imuloco.methods.modelfile`.
 """
 
 from __future__ import annotations
 
 import datetime
 import inspect
-import json
 import os
 import platform
 import time
-import zipfile
-import zlib
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, ClassVar, Self, TypeVar
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
 from imuloco.core.motion import Motion, MotionDatabase
 from imuloco.core.recording import Recording
-from imuloco.core.skeleton import Skeleton
 from imuloco.methods.training import Example, synthesize, to_frames
-
-FORMAT_VERSION = 1
-REGISTRY: dict[str, type[Method]] = {}
-M = TypeVar("M", bound="Method")
-
-
-class ModelFileError(ValueError):
-    """A model file that cannot be loaded: corrupted, of another format version or method."""
-
-
-def register(cls: type[M]) -> type[M]:
-    """Class decorator: make a method available under ``cls.name``."""
-    if cls.name in REGISTRY and REGISTRY[cls.name] is not cls:
-        raise ValueError(f"method name {cls.name!r} is registered twice")
-    REGISTRY[cls.name] = cls
-    return cls
 
 
 class Stream(ABC):
@@ -150,81 +127,7 @@ class Method(ABC):
         return []
 
     def save(self, path: str | Path, overwrite: bool = False) -> Path:
-        """Write the fitted model to one ``.npz`` file."""
-        path = Path(path)
-        if path.exists() and not overwrite:
-            raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
-        arrays, values = self.get_state()
-        sk = self.skeleton_
-        header = {
-            "format_version": FORMAT_VERSION, "method": self.name, "params": self.get_params(),
-            "placements": self.placements_, "noise": self.noise_, "fps": self.fps_,
-            "skeleton": {"names": sk.names, "body_map": sk.body_map,
-                         "end_sites": {str(k): v.tolist() for k, v in sk.end_sites.items()}},
-            "protocol": getattr(self, "protocol_", {}), "values": values,
-        }
-        blob = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path, "wb") as f:
-            np.savez_compressed(f, __header__=blob, __parents__=sk.parents,
-                                __offsets__=sk.offsets, **arrays)
-        return path
+        """Write the fitted model to one ``.npz`` file (:mod:`imuloco.methods.modelfile`)."""
+        from imuloco.methods.modelfile import save_model
 
-
-def load_model(path: str | Path) -> Method:
-    """Load a model saved by :meth:`Method.save`. Never unpickles anything."""
-    path = Path(path)
-    try:
-        # open the file here: np.load leaks its own handle when the zip is truncated
-        with open(path, "rb") as f, np.load(f, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-        header = json.loads(bytes(data.pop("__header__")).decode())
-    except FileNotFoundError:
-        raise
-    except (zipfile.BadZipFile, zlib.error, ValueError, KeyError, OSError, EOFError) as e:
-        raise ModelFileError(f"{path}: not an imuloco model file or corrupted ({e})") from None
-    if not isinstance(header, dict):
-        raise ModelFileError(f"{path}: not an imuloco model file (header is not a JSON object)")
-    version = header.get("format_version")
-    if version != FORMAT_VERSION:
-        raise ModelFileError(f"{path}: model file format version {version}, this imuloco reads "
-                             f"version {FORMAT_VERSION}; retrain with `imuloco train`")
-    from imuloco.methods import method_class
-
-    name = header.get("method")
-    try:
-        cls = method_class(str(name))
-    except KeyError as e:
-        raise ModelFileError(f"{path}: {e.args[0]}") from None
-    params = _current_params(path, cls, header.get("params"))
-    try:  # a header or arrays that do not fit the method: missing keys, wrong shapes
-        method = cls(**{**cls.legacy_params, **params})
-        sk = header["skeleton"]
-        method.skeleton_ = Skeleton(sk["names"], data.pop("__parents__"),
-                                    data.pop("__offsets__"),
-                                    {int(k): np.array(v) for k, v in sk["end_sites"].items()},
-                                    sk["body_map"])
-        method.placements_ = header["placements"]
-        method.noise_ = header["noise"]
-        method.fps_ = header["fps"]
-        method.protocol_ = header.get("protocol", {})
-        method.set_state(data, header["values"])
-    except (KeyError, TypeError, ValueError, AttributeError) as e:
-        raise ModelFileError(f"{path}: {name} model file is incomplete or corrupted "
-                             f"({type(e).__name__}: {e})") from None
-    return method
-
-
-def _current_params(path: Path, cls: type[Method], params: object) -> dict[str, Any]:
-    """``params`` of a file's header without the method's retired hyperparameters; a file
-    trained with a retired option the code no longer has is refused."""
-    if not isinstance(params, dict):
-        raise ModelFileError(f"{path}: {cls.name} model file is incomplete or corrupted "
-                             "(its header has no parameter table)")
-    out = dict(params)
-    for key, kept in cls.retired_params.items():
-        if key in out and out.pop(key) != kept and kept is not None:
-            raise ModelFileError(f"{path}: {cls.name} model trained with {key}={params[key]!r}, "
-                                 f"an option this imuloco no longer has (only {kept!r}); "
-                                 "retrain it with `imuloco train`")
-    return out
+        return save_model(self, path, overwrite=overwrite)

@@ -13,7 +13,7 @@ import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
-from imuloco.methods.base import Method, Stream, register
+from imuloco.methods.base import Method, Stream
 from imuloco.methods.features import (
     PoseIntegrator,
     WindowBuffer,
@@ -21,6 +21,7 @@ from imuloco.methods.features import (
     standardize,
     windows,
 )
+from imuloco.methods.registry import register
 from imuloco.methods.training import Example
 
 

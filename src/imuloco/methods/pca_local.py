@@ -30,7 +30,8 @@ from sklearn.neighbors import NearestNeighbors
 
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
-from imuloco.methods.base import Method, register
+from imuloco.methods.base import Method
+from imuloco.methods.registry import register
 from imuloco.methods.training import Example
 from imuloco.ops.rotations import about_y, from_6d, qmul, qrot
 from imuloco.sensors.placement import anatomical_frame, get_placement

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from imuloco.core.recording import Recording
-from imuloco.io.errors import FormatError
+from imuloco.errors import FormatError
 from imuloco.io.sensorlog import (
     Stream,
     detect_format,

@@ -2,7 +2,7 @@
 
 The page is the template ``viewer.html`` beside this module with the motions' world joint
 positions embedded as JSON (integer millimetres, Y up) and the stick-figure drawing of
-``stickfigure.js`` (shared with the live page, :mod:`imuloco.live.server`) inlined: no script or
+``stickfigure.js`` (shared with the live page, :mod:`imuloco.app.live.server`) inlined: no script or
 style is fetched from the network, so the file works offline and can be mailed around. Several
 motions play side by side on one clock.
 """

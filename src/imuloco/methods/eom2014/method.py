@@ -63,11 +63,12 @@ import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
-from imuloco.methods.base import Method, Stream, register
+from imuloco.methods.base import Method, Stream
 from imuloco.methods.eom2014 import hmm as hmm_mod
 from imuloco.methods.eom2014 import mlp as mlp_mod
 from imuloco.methods.eom2014.gplvm import GPLVM, fit_gplvm
 from imuloco.methods.postprocess import laplacian_smooth, laplacian_smooth_quaternions, pin_feet
+from imuloco.methods.registry import register
 from imuloco.methods.training import Example
 from imuloco.ops.filters import gaussian_smooth
 from imuloco.ops.rotations import (

@@ -25,9 +25,9 @@ import numpy as np
 import torch
 from torch import nn
 
+from imuloco.core.mirror import mirror_pairs
 from imuloco.methods.learned.method import CONTACT_SWAP, Learned
 from imuloco.methods.learned.model import CONTACT_PARTS, rotation_from_6d
-from imuloco.ops.mirror import mirror_pairs
 
 
 class _Exported(nn.Module):

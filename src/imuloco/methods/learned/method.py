@@ -22,16 +22,17 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 
+from imuloco.core.mirror import mirror, mirror_frames, mirror_pairs, mirror_rotations
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
-from imuloco.methods.base import Method, Stream, register
+from imuloco.methods.base import Method, Stream
 from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Reconstructor, TorchFK
 from imuloco.methods.postprocess import FootPinner, pin_feet
+from imuloco.methods.registry import register
 from imuloco.methods.training import Example
 from imuloco.ops.kinematics import fk
-from imuloco.ops.mirror import mirror, mirror_frames, mirror_pairs, mirror_rotations
 from imuloco.ops.rotations import from_6d, to_6d
 
 HEADING_REFLECTION = np.diag([-1.0, 1.0, 1.0])  # left is +X in the heading frame

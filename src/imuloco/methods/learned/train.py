@@ -5,7 +5,7 @@ every clip is simulated again ``draws`` times, each time with its own seed, a ra
 change (the motion time-resampled by a factor in ``1 +- speed`` before simulating), the noise
 preset's levels scaled by a log-uniform factor up to ``noise_scale`` (white noise, biases,
 timestamp jitter, misalignment, placement offset), and every other draw left/right mirrored
-(:func:`imuloco.ops.mirror.mirror`), so that a model learns both legs' gaits from one sensor.
+(:func:`imuloco.core.mirror.mirror`), so that a model learns both legs' gaits from one sensor.
 """
 
 from __future__ import annotations
@@ -19,13 +19,13 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from imuloco.core.mirror import mirror, mirror_frames
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
 from imuloco.methods.learned.model import Reconstructor, TorchFK, rotation_from_6d
 from imuloco.methods.training import Example, clip_seed, to_frames
 from imuloco.ops.filters import resample_linear
 from imuloco.ops.kinematics import fk
-from imuloco.ops.mirror import mirror, mirror_frames
 from imuloco.ops.rotations import from_6d, slerp
 from imuloco.phases.contacts import foot_contacts
 from imuloco.sensors.noise import NoiseModel, get_noise

@@ -11,7 +11,7 @@ from tqdm.auto import tqdm
 
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
-from imuloco.methods.base import Method, register
+from imuloco.methods.base import Method
 from imuloco.methods.mousas2017.features import (
     layout,
     motion_features,
@@ -27,6 +27,7 @@ from imuloco.methods.mousas2017.registration import (
 )
 from imuloco.methods.mousas2017.stream import MousasStream
 from imuloco.methods.postprocess import pin_feet
+from imuloco.methods.registry import register
 from imuloco.methods.training import Example
 from imuloco.sensors.resample import resample
 

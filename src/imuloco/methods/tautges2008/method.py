@@ -39,7 +39,8 @@ from scipy.optimize import least_squares
 
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
-from imuloco.methods.base import Method, register
+from imuloco.methods.base import Method
+from imuloco.methods.registry import register
 from imuloco.methods.tautges2008.align import eq17_distance, world_acceleration
 from imuloco.methods.tautges2008.tensor import (
     MotionModel,

@@ -1,6 +1,6 @@
 """Many recordings at once: one walker per phone log, reconstructed in parallel.
 
-:func:`run_batch` runs :func:`imuloco.pipeline.reconstruct_file` on every recording with one
+:func:`run_batch` runs :func:`imuloco.app.pipeline.reconstruct_file` on every recording with one
 model, in ``jobs`` worker processes (joblib, the ``[dist]`` extra; serially without it), and
 writes per recording ``NAME.bvh`` and ``NAME.json`` (the reconstruction report: import,
 calibration, gait parameters, plausibility checks), then ``summary.csv`` and ``summary.json``
@@ -83,8 +83,8 @@ def reconstruct_one(recording: str | Path, out_dir: str | Path, name: str, model
 
     Returns its summary row (see :data:`COLUMNS`); errors are caught and reported in the row.
     """
+    from imuloco.app.pipeline import reconstruct_file
     from imuloco.io.bvh import write_bvh
-    from imuloco.pipeline import reconstruct_file
 
     t0 = time.perf_counter()
     row: dict[str, Any] = {"name": name, "recording": str(recording)}
@@ -134,8 +134,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
     recordings : log files (see :func:`imuloco.sensors.reallog.read_log`), one walker each.
     out_dir : folder for the outputs (created).
     jobs : worker processes (``-1``: one per CPU; ``1``: in this process).
-    model, method, placement : the model, as :func:`imuloco.pipeline.choose_method` picks it.
-    fmt, calibrate : see :func:`imuloco.pipeline.reconstruct_file`.
+    model, method, placement : the model, as :func:`imuloco.app.pipeline.choose_method` picks it.
+    fmt, calibrate : see :func:`imuloco.app.pipeline.reconstruct_file`.
     overwrite : replace existing outputs (otherwise refuse before starting).
     progress : a progress bar (tqdm) on stderr.
     fitted : an already fitted method (skips the choice).
@@ -148,7 +148,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
     """
     from tqdm.auto import tqdm
 
-    from imuloco.pipeline import choose_method
+    from imuloco.app.pipeline import choose_method
 
     paths = [Path(p) for p in recordings]
     if not paths:

@@ -1,5 +1,5 @@
 """One live walker: raw phone samples in, calibrated model-rate frames through an online method,
-joint positions out. No I/O here: :mod:`imuloco.live.server` feeds it from a websocket or a
+joint positions out. No I/O here: :mod:`imuloco.app.live.server` feeds it from a websocket or a
 replayed file, and tests feed it directly.
 
 Resampling is causal: frame ``k`` (time ``t0 + k / fps``) is the local linear Gaussian kernel

@@ -70,8 +70,8 @@ def choose_method(method: str | None = None, model: str | Path | None = None,
     -------
     (Method, str)
     """
+    from imuloco.errors import ModelFileError
     from imuloco.methods import get_method, load_model, method_class
-    from imuloco.methods.base import ModelFileError
 
     if model is not None:
         fitted = load_model(model)

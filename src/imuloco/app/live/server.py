@@ -11,10 +11,10 @@ One asyncio ``websockets`` server (the ``[live]`` extra) on one port serves
   seconds on the phone's clock, specific force in m/s^2 and angular velocity in rad/s in the
   phone's axes, six values per sensor of the model's placements (one for a phone);
 * ``/ws/view``: a ``skeleton`` message on connection, then ``status``, ``reset`` and ``pose``
-  messages (:func:`imuloco.live.session.frames_to_json`).
+  messages (:func:`imuloco.app.live.session.frames_to_json`).
 
 One phone streams at a time; each phone connection starts a fresh
-:class:`~imuloco.live.session.LiveSession`. :meth:`LiveServer.replay` streams a recorded log at
+:class:`~imuloco.app.live.session.LiveSession`. :meth:`LiveServer.replay` streams a recorded log at
 real time through the same path instead of a phone.
 
 Browsers expose motion sensors to secure pages only: ``http://localhost`` is one, but a phone
@@ -38,7 +38,7 @@ from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
-from imuloco.live.session import LiveSession, frames_to_json
+from imuloco.app.live.session import LiveSession, frames_to_json
 from imuloco.viz.html import inline_stickfigure
 
 log = logging.getLogger(__name__)

@@ -1,0 +1,53 @@
+"""Writing outputs so that a reader never sees half a file and no input is overwritten.
+
+:func:`atomic_write` writes to a temporary file in the target's folder and renames it over the
+target only when the writing succeeded (``os.replace`` is atomic on one file system), so an
+interrupted run leaves the old file or none, never a truncated one. :func:`check_output`
+refuses a target that exists (unless ``force``) or that is one of the inputs.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from imuloco.errors import ImulocoError, OutputExistsError
+
+
+def check_output(path: str | Path, force: bool = False,
+                 inputs: Iterable[str | Path] = ()) -> Path:
+    """``path`` as a Path when it may be written: not an input, and new unless ``force``."""
+    path = Path(path)
+    resolved = path.resolve()
+    for inp in inputs:
+        if Path(inp).resolve() == resolved:
+            raise ImulocoError(f"{path}: the output would overwrite an input; choose another "
+                               "output path")
+    if path.exists() and not force:
+        raise OutputExistsError(f"{path} exists; pass --force to replace it")
+    return path
+
+
+@contextmanager
+def atomic_write(path: str | Path, mode: str = "wb") -> Iterator:
+    """Open a temporary file beside ``path`` for writing; rename it to ``path`` on success.
+
+    ``mode`` is ``"wb"`` or ``"w"`` (text, UTF-8). On an exception the temporary file is
+    removed and ``path`` is left as it was."""
+    if mode not in ("wb", "w"):
+        raise ValueError(f"atomic_write: mode must be 'wb' or 'w', not {mode!r}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, mode, **({"encoding": "utf-8"} if mode == "w" else {})) as f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
