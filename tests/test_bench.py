@@ -153,7 +153,7 @@ def test_cli_evaluate_rejects_other_skeletons(tmp_path, sample_db, spinning_moti
 
 
 def test_method_spec_carries_hyperparameters():
-    from imuloco.evaluate.bench import parse_method_spec
+    from imuloco.methods.registry import parse_method_spec
 
     assert parse_method_spec("ridge") == ("ridge", {})
     assert parse_method_spec("eom2014[variant=mlp-no-hmm;context=7]") == (

@@ -1,20 +1,127 @@
 """The ``imuloco`` command line: parses arguments and calls library functions.
 
 Each command is a thin wrapper; the work lives in the library so that tests call it too.
+Errors the user can cause are the library's (:mod:`imuloco.errors`); :class:`Commands` turns
+any of them into one ``Error: ...`` line. Options several commands share are declared once
+below. A command that writes one file takes ``-o FILE``, one that writes a folder ``--out DIR``.
+
+Importing this module imports click and the standard library only (``imuloco --help`` and
+``imuloco methods`` stay fast); each command imports what it needs.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 
+from imuloco.errors import ImulocoError
 
-@click.group()
+
+class Commands(click.Group):
+    """The command group: an :class:`~imuloco.errors.ImulocoError` raised by any command ends
+    it with ``Error: <message>`` on a line of its own (after any progress bar) and exit
+    status 1, instead of a traceback."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except ImulocoError as e:
+            _end_progress_bars()
+            raise click.ClickException(str(e)) from None
+
+
+def _end_progress_bars() -> None:
+    """Close the progress bars an error interrupted, so that the error starts a new line."""
+    import sys
+
+    tqdm = sys.modules.get("tqdm.std")
+    if tqdm is not None:  # a bar can only be open when tqdm was imported
+        for bar in list(getattr(tqdm.tqdm, "_instances", ())):
+            bar.close()
+
+
+@click.group(cls=Commands)
 @click.version_option(package_name="imuloco")
 def cli() -> None:
     """Full-body locomotion reconstruction from one body-worn inertial sensor."""
+
+
+def _options(*decorators: Callable) -> Callable:
+    """One decorator applying ``decorators`` in order (options shared by several commands)."""
+    def apply(f: Callable) -> Callable:
+        for d in reversed(decorators):
+            f = d(f)
+        return f
+    return apply
+
+
+class _LogFormat(click.Choice):
+    """``auto`` or one of :data:`imuloco.io.sensorlog.FORMATS`, read on first use (importing
+    sensorlog, hence numpy, at start-up would slow down ``imuloco --help``)."""
+
+    def __init__(self) -> None:
+        self.case_sensitive = True
+
+    @property
+    def choices(self) -> tuple[str, ...]:  # type: ignore[override]
+        from imuloco.io.sensorlog import FORMATS
+
+        return ("auto", *FORMATS)
+
+
+def _existing_file(**kw: Any) -> click.Path:
+    return click.Path(exists=True, dir_okay=False, path_type=Path, **kw)
+
+
+def _file(**kw: Any) -> click.Path:
+    return click.Path(dir_okay=False, path_type=Path, **kw)
+
+
+def _folder(**kw: Any) -> click.Path:
+    return click.Path(file_okay=False, path_type=Path, **kw)
+
+
+SPLITS = ("random-clips", "heldout-styles")
+NOISES = ("clean", "phone", "imu")
+
+force_option = click.option("--force", is_flag=True, help="Replace existing output files.")
+placement_option = click.option("--placement", default="right_ankle", show_default=True,
+                                help="Sensor placement preset(s), comma separated.")
+noise_option = click.option("--noise", type=click.Choice(NOISES), default="phone",
+                            show_default=True, help="Noise preset of the simulated sensors.")
+data_options = _options(
+    click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
+                 default=None, help="Folder of clips [default: the bundled sample]."),
+    click.option("--limit", type=int, default=None, help="Read at most N clips (quick runs)."),
+    click.option("--seed", type=int, default=0, show_default=True),
+)
+# the model a reconstruction uses (reconstruct, batch, demo, live): imuloco.app.pipeline
+model_options = _options(
+    click.option("--model", "model_path", type=_existing_file(), default=None,
+                 help="Model file from `imuloco train` [default: the shipped pretrained "
+                      "model]."),
+    click.option("--method", "method_name", default=None,
+                 help="Method to use without --model (its shipped model, or fitted on the "
+                      "bundled sample) [default: learned, else the best available baseline]."),
+)
+# reading phone logs (reconstruct, batch, live --replay): imuloco.sensors.reallog
+log_options = _options(
+    click.option("--placement", default="right_ankle", show_default=True,
+                 help="Where the phone was worn (placement preset)."),
+    click.option("--format", "fmt", default="auto", show_default=True, type=_LogFormat(),
+                 help="Sensor log format."),
+)
+calibrate_option = click.option("--no-calibrate", is_flag=True,
+                                help="Skip the phone-on-leg calibration.")
+
+
+def _num(value: float | None, digits: int) -> str:
+    """A number rounded to what it means (``digits`` decimals), ``–`` when unknown."""
+    return "–" if value is None else f"{value:.{digits}f}"
 
 
 @cli.command()
@@ -89,24 +196,19 @@ def _csv(value: str | None) -> list[str]:
 @click.option("--method", "method_names", required=True,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
                    "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm].")
-@click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
-              default="random-clips", show_default=True)
-@click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
+@click.option("--split", "split_name", type=click.Choice(SPLITS), default="random-clips",
               show_default=True)
-@click.option("--placement", default="right_ankle", show_default=True,
-              help="Sensor placement preset(s), comma separated.")
-@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
-              default=None, help="Folder of clips [default: the bundled sample].")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
+@noise_option
+@placement_option
+@data_options
+@click.option("--out", type=_folder(), required=True,
               help="Folder for results.json and results.md.")
-@click.option("--limit", type=int, default=None, help="Read at most N clips (quick runs).")
-@click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--speed", is_flag=True,
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
 def bench(method_names: str, split_name: str, noise: str, placement: str, data: Path | None,
-          out: Path, limit: int | None, seed: int, speed: bool, db_frames: str | None) -> None:
+          limit: int | None, seed: int, out: Path, speed: bool, db_frames: str | None) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
     names = _csv(method_names)
     if speed:
@@ -118,28 +220,22 @@ def bench(method_names: str, split_name: str, noise: str, placement: str, data: 
     from imuloco.evaluate.bench import run_bench
     from imuloco.evaluate.report import COLUMNS, table
 
-    try:
-        records = run_bench(names, split_name, noise, _csv(placement), data, out, limit, seed,
-                            progress=True)
-    except KeyError as e:
-        raise click.UsageError(str(e.args[0])) from None
+    records = run_bench(names, split_name, noise, _csv(placement), data, out, limit, seed,
+                        progress=True)
     click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
     click.echo(f"wrote {out / 'results.json'} and {out / 'results.md'}")
 
 
 @cli.command()
-@click.argument("ground_truth", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.argument("reconstructed", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("ground_truth", type=_existing_file())
+@click.argument("reconstructed", type=_existing_file())
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
 def evaluate(ground_truth: Path, reconstructed: Path, as_json: bool) -> None:
     """Print the metrics of a RECONSTRUCTED motion against its GROUND_TRUTH (same skeleton;
     the longer is cut to the shorter's length)."""
     from imuloco.evaluate.metrics import evaluate_files
 
-    try:
-        values, note = evaluate_files(ground_truth, reconstructed)
-    except ValueError as e:
-        raise click.ClickException(str(e)) from None
+    values, note = evaluate_files(ground_truth, reconstructed)
     if note:
         click.echo(note, err=True)
     if as_json:
@@ -149,40 +245,20 @@ def evaluate(ground_truth: Path, reconstructed: Path, as_json: bool) -> None:
         click.echo(f"{key:>20}: {value:.4g}")
 
 
-def _param(items: tuple[str, ...]) -> dict:
-    """``key=value`` pairs; values parsed as JSON when they can be (numbers, true, null)."""
-    out = {}
-    for item in items:
-        if "=" not in item:
-            raise click.BadParameter(f"expected key=value, got {item!r}", param_hint="--param")
-        key, value = item.split("=", 1)
-        try:
-            out[key.strip()] = json.loads(value)
-        except json.JSONDecodeError:
-            out[key.strip()] = value
-    return out
-
-
 @cli.command()
 @click.option("--method", "method_name", required=True, help="Method name (`imuloco methods`).")
-@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
-              default=None, help="Folder of clips [default: the bundled sample].")
-@click.option("--placement", default="right_ankle", show_default=True,
-              help="Sensor placement preset(s), comma separated.")
-@click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
-              show_default=True)
-@click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
-              default=None, help="Train on this split's training part only [default: all].")
+@data_options
+@placement_option
+@noise_option
+@click.option("--split", "split_name", type=click.Choice(SPLITS), default=None,
+              help="Train on this split's training part only [default: all].")
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE",
               help="A hyperparameter of the method (repeatable), e.g. --param epochs=4.")
-@click.option("--limit", type=int, default=None, help="Read at most N clips (quick runs).")
-@click.option("--seed", type=int, default=0, show_default=True)
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="Model file to write (.npz).")
-@click.option("--force", is_flag=True, help="Overwrite the output file.")
-def train(method_name: str, data: Path | None, placement: str, noise: str,
-          split_name: str | None, params: tuple[str, ...], limit: int | None, seed: int,
-          output: Path, force: bool) -> None:
+@click.option("-o", "--output", type=_file(), required=True, help="Model file to write (.npz).")
+@force_option
+def train(method_name: str, data: Path | None, limit: int | None, seed: int, placement: str,
+          noise: str, split_name: str | None, params: tuple[str, ...], output: Path,
+          force: bool) -> None:
     """Fit a method on motion clips with simulated sensors and save the model.
 
     Writes OUTPUT, and for methods that keep a training history (``learned``) its losses per
@@ -190,17 +266,13 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
     """
 
     from imuloco.evaluate.protocols import split
+    from imuloco.io.atomic import check_output
     from imuloco.io.database import load_database, load_sample, spread
-    from imuloco.methods import get_method
+    from imuloco.methods import method_class
+    from imuloco.methods.registry import parse_params
 
-    if output.exists() and not force:
-        raise click.UsageError(f"{output} exists; pass --force to replace it")
-    try:
-        method = get_method(method_name, **_param(params))
-    except KeyError as e:
-        raise click.UsageError(str(e.args[0])) from None
-    except TypeError as e:
-        raise click.UsageError(f"--param: {e}") from None
+    check_output(output, force)
+    method = method_class(method_name)().set_params(**parse_params(params, "--param"))
     db = load_sample() if data is None else load_database(data, limit=limit)
     if data is None and limit is not None:
         db = db.subset(spread(len(db), limit))
@@ -211,7 +283,7 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
     method.protocol_.update(data="bundled sample" if data is None else Path(data).name,
                             split=split_name or "all")
     seconds = method.protocol_["train_seconds"]
-    method.save(output, overwrite=force)
+    method.save(output, overwrite=True)  # checked before training
     click.echo(f"trained {method_name} on {len(db)} clips ({db.num_frames} frames) in "
                f"{seconds / 60:.1f} min; wrote {output}")
     for path in method.write_training_report(output):
@@ -219,97 +291,78 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
 
 
 @cli.command("export-onnx")
-@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
-                                                       path_type=Path), required=True,
-              help="A model file written by `imuloco train` (method learned).")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="ONNX file to write.")
-@click.option("--force", is_flag=True, help="Overwrite the output file.")
-def export_onnx_command(model_path: Path, output: Path, force: bool) -> None:
+@click.option("--model", "model_path", type=_existing_file(), default=None,
+              help="A model file written by `imuloco train` (method learned) [default: the "
+                   "shipped learned_right_ankle.npz].")
+@click.option("-o", "--output", type=_file(), required=True, help="ONNX file to write.")
+@force_option
+def export_onnx_command(model_path: Path | None, output: Path, force: bool) -> None:
     """Export a learned model to ONNX (per-frame network with its recurrent state)."""
+    from imuloco.app.pipeline import shipped_model
+    from imuloco.io.atomic import check_output
     from imuloco.methods import load_model
 
+    check_output(output, force, inputs=[model_path] if model_path else [])
+    if model_path is None:
+        model_path = shipped_model("learned", "right_ankle")
+        if model_path is None:
+            raise click.UsageError("no shipped learned model in this installation: give "
+                                   "--model")
     model = load_model(model_path)
     if model.name != "learned":
         raise click.UsageError(f"{model_path}: method {model.name!r} has no ONNX export; "
                                "only `learned` models do")
     from imuloco.methods.learned.export import export_onnx
 
-    try:
-        path = export_onnx(model, output, overwrite=force)
-    except FileExistsError as e:
-        raise click.UsageError(str(e)) from None
-    click.echo(f"wrote {path}")
+    path = export_onnx(model, output, overwrite=True)  # checked above
+    click.echo(f"wrote {path} (from {model_path})")
 
 
 @cli.command()
-@click.argument("motion_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--placement", default="right_ankle", show_default=True,
-              help="Sensor placement(s), comma separated (e.g. right_ankle,pelvis).")
-@click.option("--noise", default="phone", show_default=True,
-              help="Noise preset: clean, phone or imu.")
+@click.argument("motion_file", type=_existing_file())
+@placement_option
+@noise_option
 @click.option("--rate", default=100.0, show_default=True, type=float, help="Sampling rate, Hz.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the noise draws.")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("-o", "--output", required=True, type=_file(),
               help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s).")
-@click.option("--force", is_flag=True, help="Replace OUTPUT if it exists.")
+@force_option
 def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: int,
              output: Path, force: bool) -> None:
     """Simulate body-worn phone sensors on MOTION_FILE and write them as generic CSV."""
+    from imuloco.io.atomic import check_output
     from imuloco.io.motionfile import read_motion
     from imuloco.io.sensorlog import write_generic_csv
-    from imuloco.sensors.noise import NOISE_PRESETS
-    from imuloco.sensors.placement import PRESETS
+    from imuloco.sensors.placement import get_placement
     from imuloco.sensors.simulate import simulate as simulate_sensors
 
     places = _csv(placement)
-    unknown = [p for p in places if p not in PRESETS]
-    if unknown:
-        raise click.BadParameter(f"unknown placement(s) {unknown}; presets: {sorted(PRESETS)}",
-                                 param_hint="--placement")
-    if noise not in NOISE_PRESETS:
-        raise click.BadParameter(f"unknown noise {noise!r}; presets: {sorted(NOISE_PRESETS)}",
-                                 param_hint="--noise")
-    if output.exists() and not force:
-        raise click.ClickException(f"{output} exists; pass --force to replace it")
+    for p in places:
+        get_placement(p)  # an unknown preset is refused before reading anything
+    check_output(output, force, inputs=[motion_file])
     rec = simulate_sensors(read_motion(motion_file), places, rate=rate, noise=noise, seed=seed)
     write_generic_csv(rec, output, overwrite=True)
     click.echo(f"wrote {output}: {rec.num_samples} samples, {len(places)} sensor(s) "
                f"({', '.join(places)}), {rec.times[-1] - rec.times[0]:.2f} s, noise {noise}")
 
 
-def _refuse_existing(paths: list[Path | None], force: bool) -> None:
-    taken = [str(p) for p in paths if p is not None and p.exists()]
-    if taken and not force:
-        raise click.UsageError(f"{', '.join(taken)} exist(s); pass --force to replace")
-
-
 @cli.command()
 @click.argument("recording", nargs=-1, required=True,
                 type=click.Path(exists=True, path_type=Path))
-@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
-                                                       path_type=Path), default=None,
-              help="Model file from `imuloco train` [default: the shipped pretrained model].")
-@click.option("--method", "method_name", default=None,
-              help="Method to use without --model (its shipped model, or fitted on the "
-                   "bundled sample) [default: learned, else the best available baseline].")
-@click.option("--placement", default="right_ankle", show_default=True,
-              help="Where the phone was worn (placement preset).")
-@click.option("--format", "fmt", default="auto", show_default=True,
-              type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
-              help="Sensor log format.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+@model_options
+@log_options
+@click.option("-o", "--output", type=_file(), required=True,
               help="BVH file to write (on the model's training skeleton).")
-@click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--video", type=_file(), default=None,
               help="Also render a stick-figure video (.mp4 or .gif).")
 @click.option("--video-seconds", type=float, default=None,
               help="Render only the first seconds into --video.")
-@click.option("--html", "html_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Also write the interactive HTML viewer.")
-@click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
-              default=None, help="Also write the report (gait, checks) as JSON.")
-@click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
-@click.option("--force", is_flag=True, help="Replace existing output files.")
+@click.option("--html", "html_path", type=_file(), default=None,
+              help="Also write the interactive HTML viewer.")
+@click.option("--report", "report_path", type=_file(), default=None,
+              help="Also write the report (gait, checks) as JSON.")
+@calibrate_option
+@force_option
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
@@ -320,104 +373,105 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     accelerometer file and a gyroscope file (a RealWorld acc_*.csv finds its gyroscope_*.csv).
     """
     from imuloco.app.pipeline import reconstruct_file, render_outputs
-    from imuloco.errors import FormatError
+    from imuloco.io.atomic import atomic_write, check_outputs
     from imuloco.io.bvh import write_bvh
 
-    _refuse_existing([output, video, html_path, report_path], force)
+    check_outputs([output, video, html_path, report_path], force,
+                  inputs=[*recording, *([model_path] if model_path else [])])
     source = recording[0] if len(recording) == 1 else list(recording)
-    try:
-        motion, report = reconstruct_file(source, model=model_path, method=method_name,
-                                          placement=placement, fmt=fmt,
-                                          calibrate=not no_calibrate, progress=True)
-    except (FormatError, KeyError, ValueError) as e:
-        raise click.ClickException(str(e.args[0] if isinstance(e, KeyError) else e)) from None
+    motion, report = reconstruct_file(source, model=model_path, method=method_name,
+                                      placement=placement, fmt=fmt, calibrate=not no_calibrate,
+                                      progress=True)
     click.echo(f"model: {report['model']}", err=True)
-    write_bvh(motion, output, overwrite=force)
+    write_bvh(motion, output, overwrite=True)  # checked above
     written = [output]
     if video or html_path:
         written += render_outputs([motion], [f"{motion.name} ({report['method']})"],
-                                  [video] if video else [], html_path, overwrite=force,
+                                  [video] if video else [], html_path, overwrite=True,
                                   progress=True, max_seconds=video_seconds)
     if report_path:
-        report_path.write_text(json.dumps(report, indent=2) + "\n")
+        with atomic_write(report_path, "w") as f:
+            f.write(json.dumps(report, indent=2) + "\n")
         written.append(report_path)
     g = report["gait"]
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
-               f"cadence {g['cadence_rhythm_spm']} steps/min from the legs' rhythm (raw "
-               f"signal: {report['signal_cadence_spm']}), {g['cadence_spm']} from "
-               f"{int(g['steps'] or 0)} detected strikes; speed {g['speed_mps']} m/s")
+               f"cadence {_num(g['cadence_rhythm_spm'], 1)} steps/min from the legs' rhythm "
+               f"(raw signal: {_num(report['signal_cadence_spm'], 1)}), "
+               f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} detected strikes; "
+               f"speed {_num(g['speed_mps'], 2)} m/s")
     click.echo("wrote " + ", ".join(str(p) for p in written))
 
 
 @cli.command()
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
-              default=Path("imuloco-demo"), show_default=True, help="Folder for the outputs.")
-@click.option("--method", "method_name", default=None,
-              help="Method to use [default: learned, else the best available baseline].")
-@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
-                                                       path_type=Path), default=None,
-              help="Model file from `imuloco train`.")
-@click.option("--force", is_flag=True, help="Replace existing output files.")
-def demo(out_dir: Path, method_name: str | None, model_path: Path | None, force: bool) -> None:
+@click.option("--out", "out_dir", type=_folder(), default=Path("imuloco-demo"),
+              show_default=True, help="Folder for the outputs.")
+@model_options
+@force_option
+def demo(out_dir: Path, model_path: Path | None, method_name: str | None, force: bool) -> None:
     """Simulate a phone on the right ankle of a bundled walk, reconstruct it and write the
     BVH, a side-by-side video (MP4, GIF), the HTML viewer, plots and a report."""
     from imuloco.app.pipeline import demo as run_demo
 
-    try:
-        report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
-                          progress=True)
-    except FileExistsError as e:
-        raise click.UsageError(str(e)) from None
+    report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
+                      progress=True)
     m = report["metrics"]
     click.echo(f"model: {report['model']}")
     g, gt = report["gait"], report["gait_ground_truth"]
-    click.echo(f"MPJPE {m['mpjpe_cm']:.1f} cm, joint angle error {m['angle_deg']:.1f} deg; "
-               f"cadence {g['cadence_rhythm_spm']:.1f} steps/min from the legs' rhythm, "
-               f"{g['cadence_spm']:.1f} from detected strikes "
-               f"(ground truth {gt['cadence_spm']:.1f}); "
+    click.echo(f"MPJPE {_num(m['mpjpe_cm'], 1)} cm, joint angle error "
+               f"{_num(m['angle_deg'], 1)} deg; cadence {_num(g['cadence_rhythm_spm'], 1)} "
+               f"steps/min from the legs' rhythm, {_num(g['cadence_spm'], 1)} from detected "
+               f"strikes (ground truth {_num(gt['cadence_spm'], 1)}); "
                f"{report['seconds']:.0f} s")
     click.echo(f"wrote {len(report['files'])} files to {out_dir}/ (open demo.html or "
                f"demo.mp4; report.md)")
 
 
+RENDER_TYPES = (".mp4", ".gif", ".html", ".png")
+
+
 @cli.command()
-@click.argument("motion_file", metavar="MOTION", type=click.Path(exists=True, dir_okay=False,
-                                                                 path_type=Path))
-@click.option("--ground-truth", "gt_file", type=click.Path(exists=True, dir_okay=False,
-                                                           path_type=Path), default=None,
+@click.argument("motion_file", metavar="MOTION", type=_existing_file())
+@click.option("--ground-truth", "gt_file", type=_existing_file(), default=None,
               help="A ground-truth motion drawn on the left, side by side.")
-@click.option("-o", "--output", "outputs", multiple=True, required=True,
-              type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--out", "out_dir", type=_folder(), default=None,
+              help="Folder for MOTION.mp4, MOTION.gif and MOTION.html (video, GIF and viewer).")
+@click.option("-o", "--output", "outputs", multiple=True, type=_file(),
               help="File(s) to write: .mp4, .gif, .html or .png (a strip of frames).")
 @click.option("--seconds", type=float, default=None, help="Only the first seconds (videos).")
-@click.option("--force", is_flag=True, help="Replace existing output files.")
-def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
-           seconds: float | None, force: bool) -> None:
-    """Render a MOTION file (BVH, ...) as stick-figure video, HTML viewer or frame strip."""
+@force_option
+def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
+           outputs: tuple[Path, ...], seconds: float | None, force: bool) -> None:
+    """Render a MOTION file (BVH, ...) as stick-figure video, HTML viewer or frame strip:
+    into a folder (--out DIR) and/or to named files (-o FILE, repeatable)."""
     import numpy as np
 
     from imuloco.app.pipeline import render_outputs
+    from imuloco.io.atomic import check_outputs
     from imuloco.io.motionfile import read_motion
     from imuloco.viz.skeleton import frame_strip
 
-    bad = [str(p) for p in outputs if p.suffix.lower() not in (".mp4", ".gif", ".html", ".png")]
+    if out_dir is None and not outputs:
+        raise click.UsageError("give --out DIR or -o FILE")
+    outputs = (*outputs, *(out_dir / f"{motion_file.stem}{ext}" for ext in RENDER_TYPES[:3]
+                           if out_dir is not None))
+    bad = [str(p) for p in outputs if p.suffix.lower() not in RENDER_TYPES]
     if bad:
         raise click.BadParameter(f"unsupported output type(s) {bad}: use .mp4, .gif, .html "
                                  "or .png", param_hint="--output")
-    _refuse_existing(list(outputs), force)
+    check_outputs(outputs, force, inputs=[motion_file, *([gt_file] if gt_file else [])])
     motion = read_motion(motion_file)
     motions, titles = [motion], [motion.name or motion_file.stem]
     if gt_file is not None:
         motions, titles = [read_motion(gt_file), motion], ["ground truth", titles[0]]
     videos = [p for p in outputs if p.suffix.lower() in (".mp4", ".gif")]
     html = next((p for p in outputs if p.suffix.lower() == ".html"), None)
-    written = render_outputs(motions, titles, videos, html, overwrite=force, progress=True,
+    written = render_outputs(motions, titles, videos, html, overwrite=True, progress=True,
                              max_seconds=seconds)
     for p in outputs:
         if p.suffix.lower() == ".png":
             span = motion.duration if seconds is None else min(seconds, motion.duration)
             written.append(frame_strip(motions, np.linspace(0, span, 8), p, titles,
-                                       overwrite=force))
+                                       overwrite=True))
     click.echo("wrote " + ", ".join(str(p) for p in written))
 
 
@@ -425,22 +479,14 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
 @click.argument("recordings", nargs=-1, type=click.Path(exists=True, path_type=Path))
 @click.option("--glob", "patterns", multiple=True, metavar="PATTERN",
               help="Recordings matching a glob pattern, e.g. 'logs/*.csv' (repeatable).")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
-              required=True, help="Folder for NAME.bvh, NAME.json and summary.csv/.json.")
+@click.option("--out", "out_dir", type=_folder(), required=True,
+              help="Folder for NAME.bvh, NAME.json and summary.csv/.json.")
 @click.option("-j", "--jobs", type=int, default=1, show_default=True,
               help="Worker processes (-1: one per CPU; needs joblib, the [dist] extra).")
-@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
-                                                       path_type=Path), default=None,
-              help="Model file from `imuloco train` [default: the shipped pretrained model].")
-@click.option("--method", "method_name", default=None,
-              help="Method to use without --model [default: learned, else a baseline].")
-@click.option("--placement", default="right_ankle", show_default=True,
-              help="Where the phones were worn (placement preset).")
-@click.option("--format", "fmt", default="auto", show_default=True,
-              type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
-              help="Sensor log format.")
-@click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
-@click.option("--force", is_flag=True, help="Replace existing output files.")
+@model_options
+@log_options
+@calibrate_option
+@force_option
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path, jobs: int,
           model_path: Path | None, method_name: str | None, placement: str, fmt: str,
           no_calibrate: bool, force: bool) -> None:
@@ -451,19 +497,13 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     paths = find_recordings(recordings, patterns)
     if not paths:
         raise click.UsageError("no recordings: give files or --glob PATTERN")
-    try:
-        summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
-                            calibrate=not no_calibrate, overwrite=force, progress=True)
-    except (FileExistsError, KeyError, ValueError) as e:
-        raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
+    summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
+                        calibrate=not no_calibrate, overwrite=force, progress=True)
     click.echo(f"model: {summary['model']}", err=True)
     click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
-    def fmt_v(v: float | None, digits: int) -> str:
-        return "–" if v is None else f"{v:.{digits}f}"
-
     for r in summary["recordings"]:
-        click.echo(f"{r['name'][:28]:<28} {fmt_v(r['cadence_spm'], 1):>8} "
-                   f"{fmt_v(r['speed_mps'], 2):>6} {fmt_v(r['step_length_m'], 2):>6}  "
+        click.echo(f"{r['name'][:28]:<28} {_num(r['cadence_spm'], 1):>8} "
+                   f"{_num(r['speed_mps'], 2):>6} {_num(r['step_length_m'], 2):>6}  "
                    f"{r['status'] if r['status'] == 'ok' else r['error']}")
     rate = len(paths) / max(summary["seconds"], 1e-9) * 60
     click.echo(f"{summary['ok']} of {len(paths)} reconstructed in {summary['seconds']:.1f} s "
@@ -478,20 +518,13 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Interface to listen on (0.0.0.0 lets a phone on the network connect).")
 @click.option("--port", default=8765, show_default=True, type=int)
-@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
-                                                       path_type=Path), default=None,
-              help="Model file from `imuloco train` (an online method).")
-@click.option("--method", "method_name", default=None,
-              help="Online method to use without --model [default: learned, else a baseline].")
-@click.option("--placement", default="right_ankle", show_default=True,
-              help="Where the phone is worn (placement preset).")
+@model_options
+@log_options
 @click.option("--calibrate-seconds", type=float, default=5.0, show_default=True,
               help="Seconds of samples to calibrate the phone on the leg (0: none).")
 @click.option("--replay", type=click.Path(exists=True, path_type=Path), default=None,
-              help="Stream this recorded log at real time instead of waiting for a phone.")
-@click.option("--format", "fmt", default="auto", show_default=True,
-              type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
-              help="Format of the --replay log.")
+              help="Stream this recorded log (of --format) at real time instead of waiting "
+                   "for a phone.")
 @click.option("--speed", type=float, default=1.0, show_default=True,
               help="Replay speed factor.")
 @click.option("--loop", is_flag=True, help="Replay the recording over and over.")
@@ -506,18 +539,18 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
     browser shows the reconstruction as it walks (open /live). Ctrl-C stops."""
     import asyncio
 
-    try:
-        from imuloco.app.live.server import LiveServer, run, ssl_context
-    except ImportError as e:
-        raise click.ClickException(f"live mode needs websockets: pip install imuloco[live] "
-                                   f"({e})") from None
-    from imuloco.app.pipeline import choose_method
+    from imuloco.errors import MissingExtraError
 
     try:
-        fitted, note = choose_method(method_name, model_path, placement, progress=True)
-        server = LiveServer(fitted, calibrate_seconds, note)
-    except (KeyError, ValueError) as e:
-        raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
+        from imuloco.app.live.server import LiveServer, run, ssl_context
+    except ModuleNotFoundError as e:
+        if e.name != "websockets":
+            raise
+        raise MissingExtraError("live mode", "websockets", "live") from None
+    from imuloco.app.pipeline import choose_method
+
+    fitted, note = choose_method(method_name, model_path, placement, progress=True)
+    server = LiveServer(fitted, calibrate_seconds, note)
     ssl = ssl_context(certfile, keyfile) if certfile else None
     scheme = "https" if ssl else "http"
     shown = "localhost" if host in ("127.0.0.1", "0.0.0.0", "::") else host

@@ -30,6 +30,11 @@ class FormatError(ImulocoError, ValueError):
         super().__init__(f"{where}: {message}")
 
 
+class InputError(ImulocoError, ValueError):
+    """An input that is well formed but cannot be used as asked: a model trained for another
+    placement, motions that cannot be compared, a recording that cannot be calibrated."""
+
+
 class ModelFileError(ImulocoError, ValueError):
     """A model file that cannot be loaded: corrupted, of another format version or method."""
 

@@ -113,7 +113,7 @@ def _results(tasks: list[dict], jobs: int) -> Iterator[dict]:
         try:
             from joblib import Parallel, delayed
         except ImportError:
-            log.warning("joblib is not installed (pip install imuloco[dist]): running serially")
+            log.warning("joblib is not installed (pip install 'imuloco[dist]'): running serially")
         else:
             yield from Parallel(n_jobs=jobs, return_as="generator_unordered")(
                 delayed(reconstruct_one)(**t) for t in tasks)
@@ -149,6 +149,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
     from tqdm.auto import tqdm
 
     from imuloco.app.pipeline import choose_method
+    from imuloco.io.atomic import check_outputs
 
     paths = [Path(p) for p in recordings]
     if not paths:
@@ -157,10 +158,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
     out = Path(out_dir)
     files = [out / f"{n}{ext}" for n in names for ext in (".bvh", ".json")]
     files += [out / "summary.csv", out / "summary.json"]
-    taken = [str(p) for p in files if p.exists()]
-    if taken and not overwrite:
-        raise FileExistsError(f"{', '.join(taken[:5])}{' ...' if len(taken) > 5 else ''} "
-                              "exist(s); pass overwrite=True (--force) to replace")
+    check_outputs(files, overwrite, inputs=paths)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     if fitted is None:

@@ -28,6 +28,7 @@ import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
+from imuloco.errors import UnknownNameError
 
 log = logging.getLogger(__name__)
 
@@ -38,9 +39,6 @@ DEFAULT_METHOD = "learned"
 # knn's jittery output gives 160-200.
 FALLBACK = "ridge"
 DEMO_CLIP = "dataset-2_walk_normal_001"
-# Methods that pin their feet themselves with the contacts they predict (better than the
-# contacts the pipeline would detect on their output), so the pipeline does not pin again.
-SELF_PINNING = ("learned",)
 DEMO_SEED = 7
 
 
@@ -70,13 +68,13 @@ def choose_method(method: str | None = None, model: str | Path | None = None,
     -------
     (Method, str)
     """
-    from imuloco.errors import ModelFileError
+    from imuloco.errors import InputError, ModelFileError
     from imuloco.methods import get_method, load_model, method_class
 
     if model is not None:
         fitted = load_model(model)
         if placement not in fitted.placements_:
-            raise ValueError(f"{model}: the model was trained for {fitted.placements_}, not "
+            raise InputError(f"{model}: the model was trained for {fitted.placements_}, not "
                              f"{placement!r}")
         return fitted, f"model file {model} (method {fitted.name!r})"
     wanted = [method] if method is not None else [DEFAULT_METHOD]
@@ -116,14 +114,14 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
     calibrate : rotate leg sensors into their segment's anatomical frame first
         (:func:`imuloco.sensors.calibration.calibrate`).
     pin : move the root so that feet in contact (detected on the reconstruction) do not slide;
-        ``None``: unless the method pins its feet itself (:data:`SELF_PINNING`).
+        ``None``: unless the method pins its feet itself (``method.pins_feet``: it knows its
+        contacts better than a detection on its output).
 
     Returns
     -------
     The motion at the model's frame rate and a dict with the calibration found.
     """
-    from imuloco.methods.postprocess import pin_feet
-    from imuloco.phases import foot_contacts
+    from imuloco.methods.postprocess import pin_detected_contacts
 
     info: dict[str, Any] = {}
     rec = rec.select(method.placements_)
@@ -139,12 +137,10 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
             for p, m in zip(rec.placements, mounts)]
     motion = method.reconstruct(rec)
     if pin is None:
-        pin = method.name not in SELF_PINNING
-    info["feet_pinned_by"] = "pipeline" if pin else (
-        "method" if method.name in SELF_PINNING else "none")
+        pin = not method.pins_feet
+    info["feet_pinned_by"] = "pipeline" if pin else ("method" if method.pins_feet else "none")
     if pin:
-        c = foot_contacts(motion)
-        motion = pin_feet(motion, np.stack([c["left_foot"], c["right_foot"]], axis=1))
+        motion = pin_detected_contacts(motion)
     return motion, info
 
 
@@ -222,23 +218,17 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     return motion, report
 
 
-def _check_free(paths: Sequence[Path], overwrite: bool) -> None:
-    taken = [str(p) for p in paths if p.exists()]
-    if taken and not overwrite:
-        raise FileExistsError(f"{', '.join(taken)} exist(s); pass --force (overwrite=True) to "
-                              "replace")
-
-
 def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequence[Path] = (),
                    html: Path | None = None, overwrite: bool = False, progress: bool = False,
                    max_seconds: float | None = None) -> list[Path]:
     """Write the stick-figure video(s) (``.mp4``/``.gif``, frames drawn once; one video is
     streamed to its encoder, as a long recording's frames do not fit in memory) and the HTML
     viewer of ``motions`` side by side."""
+    from imuloco.io.atomic import check_outputs
     from imuloco.viz.html import write_viewer
     from imuloco.viz.skeleton import StickRenderer, write_video
 
-    _check_free([*video, *([html] if html else [])], overwrite)
+    check_outputs([*video, html], overwrite)
     out = []
     if video:
         renderer = StickRenderer(motions, titles)
@@ -280,6 +270,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
 
     from imuloco.evaluate.gait import gait_parameters, to_json
     from imuloco.evaluate.metrics import evaluate
+    from imuloco.io.atomic import atomic_write, check_outputs
     from imuloco.io.bvh import write_bvh
     from imuloco.io.database import load_sample
     from imuloco.io.sensorlog import write_generic_csv
@@ -292,7 +283,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     names = ["recording.csv", "reconstruction.bvh", "demo.mp4", "demo.gif", "demo.html",
              "signals.png", "phases.png", "errors.png", "report.md", "report.json"]
     paths = {n: out / n for n in names}
-    _check_free(list(paths.values()), overwrite)
+    check_outputs(paths.values(), overwrite)
     out.mkdir(parents=True, exist_ok=True)
     bar = tqdm(total=5, desc="demo", unit="step", disable=not progress)
 
@@ -300,7 +291,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     db = load_sample()
     matches = [c for c in db.clips if c.name == clip]
     if not matches:
-        raise KeyError(f"no clip {clip!r} in the bundled sample; it has "
+        raise UnknownNameError(f"no clip {clip!r} in the bundled sample; it has "
                        f"{[c.name for c in db.clips]}")
     gt = matches[0]
     rec = simulate(gt, ["right_ankle"], rate=100.0, noise="phone", seed=DEMO_SEED)
@@ -338,8 +329,10 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     report["gait_ground_truth"] = to_json(gait_parameters(gt_cut))
     report["files"] = names
     report["seconds"] = round(time.perf_counter() - t0, 2)
-    paths["report.json"].write_text(json.dumps(report, indent=2) + "\n")
-    paths["report.md"].write_text(demo_markdown(report))
+    with atomic_write(paths["report.json"], "w") as f:
+        f.write(json.dumps(report, indent=2) + "\n")
+    with atomic_write(paths["report.md"], "w") as f:
+        f.write(demo_markdown(report))
     bar.update()
     bar.close()
     return report

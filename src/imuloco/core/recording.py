@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imuloco.errors import UnknownNameError
+
 
 @dataclass(eq=False)
 class Recording:
@@ -54,7 +56,7 @@ class Recording:
         """The signals of the named placements only, in that order."""
         missing = [p for p in placements if p not in self.placements]
         if missing:
-            raise KeyError(f"recording has no sensor at {missing}; it has {self.placements}")
+            raise UnknownNameError(f"recording has no sensor at {missing}; it has {self.placements}")
         idx = [self.placements.index(p) for p in placements]
         ori = None if self.orientation is None else self.orientation[:, idx]
         return Recording(self.times, self.acc[:, idx], self.gyro[:, idx], list(placements), ori)

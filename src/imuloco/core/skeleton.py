@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imuloco.core.bodymap import BodyMap, resolve_body_map
+from imuloco.errors import UnknownNameError
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,13 +56,13 @@ class Skeleton:
         try:
             return self.names.index(name)
         except ValueError:
-            raise KeyError(f"skeleton has no joint named {name!r}; joints: {self.names}") from None
+            raise UnknownNameError(f"skeleton has no joint named {name!r}; joints: {self.names}") from None
 
     def part(self, part: str) -> int:
         """Index of the joint that stands for a canonical body part such as ``"right_knee"``."""
         assert self.body_map is not None
         if part not in self.body_map:
-            raise KeyError(
+            raise UnknownNameError(
                 f"body part {part!r} is not mapped on this skeleton; mapped parts: "
                 f"{sorted(self.body_map)}. Give a map with imuloco.core.bodymap.resolve_body_map."
             )

@@ -134,26 +134,6 @@ def evaluate_method(
     return {"clips": clips, "cost": cost, "per_joint": joint_sum / frames, "curves": curves}
 
 
-def parse_method_spec(spec: str) -> tuple[str, dict[str, Any]]:
-    """``"eom2014[variant=mlp-no-hmm;context=7]"`` -> ``("eom2014", {"variant": "mlp-no-hmm",
-    "context": 7})``: a method name with hyperparameters, values parsed as JSON when they can
-    be. Lets one bench compare variants of a method (e.g. the 2014 paper's ablation)."""
-    name, _, rest = spec.partition("[")
-    params: dict[str, Any] = {}
-    if rest:
-        if not rest.endswith("]"):
-            raise KeyError(f"method {spec!r}: expected NAME[key=value;key=value]")
-        for item in filter(None, rest[:-1].split(";")):
-            key, eq, value = item.partition("=")
-            if not eq:
-                raise KeyError(f"method {spec!r}: expected key=value, got {item!r}")
-            try:
-                params[key.strip()] = json.loads(value)
-            except json.JSONDecodeError:
-                params[key.strip()] = value.strip()
-    return name.strip(), params
-
-
 def run_bench(
     methods: Sequence[str],
     split_name: str = "random-clips",
@@ -170,7 +150,7 @@ def run_bench(
     Parameters
     ----------
     methods : registry names, each optionally with hyperparameters as
-        ``NAME[key=value;key=value]`` (see :func:`parse_method_spec`); records keep the spec
+        ``NAME[key=value;key=value]`` (see :func:`imuloco.methods.registry.parse_method_spec`); records keep the spec
         as their ``method``.
     split_name : ``"random-clips"`` or ``"heldout-styles"``.
     noise : sensor noise preset for training and test signals.
@@ -182,6 +162,7 @@ def run_bench(
     seed : training seed; test recordings use ``seed + TEST_SEED_OFFSET``.
     """
     from imuloco.methods import method_class
+    from imuloco.methods.registry import parse_method_spec
 
     specs = {m: parse_method_spec(m) for m in methods}
     for name, _ in specs.values():  # fail before any work on an unknown or uninstalled method

@@ -334,20 +334,21 @@ def evaluate_files(ground_truth: str | Path, reconstructed: str | Path,
     The skeletons must have the same joint names, parents and offsets (within ``offset_tol``
     metres) and the same frame rate; the longer motion is cut to the shorter's length.
     """
+    from imuloco.errors import InputError
     from imuloco.io.motionfile import read_motion
 
     gt, rec = read_motion(ground_truth), read_motion(reconstructed)
     a, b = gt.skeleton, rec.skeleton
     if a.names != b.names or not np.array_equal(a.parents, b.parents):
-        raise ValueError(f"{reconstructed}: its skeleton differs from {ground_truth}'s "
+        raise InputError(f"{reconstructed}: its skeleton differs from {ground_truth}'s "
                          f"(joints {b.names} vs {a.names})")
     worst = float(np.abs(a.offsets - b.offsets).max())
     if worst > offset_tol:
         j = int(np.abs(a.offsets - b.offsets).max(axis=1).argmax())
-        raise ValueError(f"{reconstructed}: bone offsets differ from {ground_truth}'s "
+        raise InputError(f"{reconstructed}: bone offsets differ from {ground_truth}'s "
                          f"(joint {a.names[j]!r} by {worst * CM:.2f} cm)")
     if abs(gt.fps - rec.fps) > 1e-3 * gt.fps:
-        raise ValueError(f"{reconstructed}: {rec.fps:g} fps, but {ground_truth} has "
+        raise InputError(f"{reconstructed}: {rec.fps:g} fps, but {ground_truth} has "
                          f"{gt.fps:g} fps; resample one first")
     n = min(gt.num_frames, rec.num_frames)
     note = ""

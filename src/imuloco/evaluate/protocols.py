@@ -13,6 +13,7 @@ from __future__ import annotations
 import zlib
 
 from imuloco.core.motion import MotionDatabase
+from imuloco.errors import UnknownNameError
 
 PROTOCOL_VERSION = 1
 SPLITS = ("random-clips", "heldout-styles")
@@ -33,7 +34,7 @@ def split(db: MotionDatabase, name: str) -> tuple[MotionDatabase, MotionDatabase
     elif name == "heldout-styles":
         test = [lab.get("style") in HELDOUT_STYLES for lab in db.labels]
     else:
-        raise KeyError(f"unknown split {name!r}; splits: {list(SPLITS)}")
+        raise UnknownNameError(f"unknown split {name!r}; splits: {list(SPLITS)}")
     train_idx = [i for i, t in enumerate(test) if not t]
     test_idx = [i for i, t in enumerate(test) if t]
     if not train_idx or not test_idx:

@@ -138,7 +138,7 @@ def _plots(out: Path, per_joint, joint_names, curves, curve_clip: str, fps: floa
         import matplotlib.pyplot as plt
     except ImportError:
         return ["## Plots", "", ("_Plots skipped: matplotlib is not installed "
-                                 "(`pip install imuloco[viz]`)._"), ""]
+                                 "(`pip install 'imuloco[viz]'`)._"), ""]
     lines = ["## Plots", ""]
     if per_joint and joint_names is not None:
         names = list(joint_names)[1:]

@@ -135,17 +135,13 @@ def _prefix(examples: list[Example], frames: int) -> tuple[list[Example], dict[s
 
 def _fit(name: str, params: dict[str, Any], examples: list[Example], placements: list[str],
          noise: str):
-    """A method fitted on already simulated examples (what :meth:`Method.fit` does after its
-    simulation step), so that every size and method shares one simulation."""
+    """A method fitted on already simulated examples (:meth:`Method.fit_set`), so that every
+    size and method shares one simulation."""
     from imuloco.methods import get_method
+    from imuloco.methods.training import TrainingSet
 
-    method = get_method(name, **params)
-    method.placements_ = list(placements)
-    method.noise_ = noise
-    method.skeleton_ = examples[0].motion.skeleton
-    method.fps_ = float(examples[0].motion.fps)
-    method.fit_examples(examples)
-    return method
+    return get_method(name, **params).fit_set(TrainingSet.from_examples(examples, placements,
+                                                                        noise))
 
 
 def speed_benchmark(

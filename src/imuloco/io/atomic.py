@@ -31,6 +31,20 @@ def check_output(path: str | Path, force: bool = False,
     return path
 
 
+def check_outputs(paths: Iterable[str | Path | None], force: bool = False,
+                  inputs: Iterable[str | Path] = ()) -> list[Path]:
+    """:func:`check_output` for several targets (``None`` skipped), naming every existing one
+    in one error."""
+    inputs = list(inputs)
+    out = [check_output(p, True, inputs) for p in paths if p is not None]
+    taken = [str(p) for p in out if p.exists()]
+    if taken and not force:
+        shown = ", ".join(taken[:5]) + (" ..." if len(taken) > 5 else "")
+        raise OutputExistsError(f"{shown} exist{'s' if len(taken) == 1 else ''}; pass --force "
+                                "to replace " + ("it" if len(taken) == 1 else "them"))
+    return out
+
+
 @contextmanager
 def atomic_write(path: str | Path, mode: str = "wb") -> Iterator:
     """Open a temporary file beside ``path`` for writing; rename it to ``path`` on success.

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from imuloco.core.motion import Motion
+from imuloco.errors import FormatError
 from imuloco.io.bvh import read_bvh
 
 
@@ -18,4 +19,5 @@ def read_motion(path: str | Path) -> Motion:
         from imuloco.io.asf_amc import find_asf, read_asf_amc
 
         return read_asf_amc(find_asf(path), path)
-    raise ValueError(f"{path}: unsupported motion file type {suffix!r}; expected .bvh or .amc")
+    raise FormatError(path, None, f"unsupported motion file type {suffix!r}; expected .bvh or "
+                      ".amc")

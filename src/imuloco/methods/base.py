@@ -1,8 +1,19 @@
 """The interface every reconstruction method implements.
 
-A method is an estimator: ``__init__`` stores hyperparameters, :meth:`Method.fit` synthesizes
-sensor signals for a MotionDatabase and learns, :meth:`Method.reconstruct` turns a Recording
-into a Motion, and :meth:`Method.stream` (for online methods) takes one sensor frame at a time.
+A method is an estimator in scikit-learn's manner: ``__init__`` stores hyperparameters
+(:meth:`Method.get_params` / :meth:`Method.set_params` read and change them), learned state ends
+with an underscore and exists only after fitting (reading it before raises
+:class:`~imuloco.errors.NotFittedError`).
+
+- :meth:`Method.fit` synthesizes sensor signals for a MotionDatabase (a
+  :class:`~imuloco.methods.training.TrainingSet`) and calls :meth:`Method.fit_set`;
+- :meth:`Method.fit_set` calls the method's learning step :meth:`Method.learn` with that one
+  explicit input, then records what the method was fitted on (``skeleton_``, ``fps_``,
+  ``placements_``, ``noise_``, ``protocol_``);
+- :meth:`Method.reconstruct` turns a Recording into a Motion, :meth:`Method.stream` (online
+  methods) takes one sensor frame at a time; :attr:`Method.pins_feet` says whether the method
+  pins its own feet (then the pipeline does not).
+
 Signals reach a method at its model rate (the training motion's frame rate) as rows of
 ``6 S`` channels (per sensor acc x,y,z then gyro x,y,z), see :mod:`imuloco.methods.training`.
 
@@ -15,6 +26,7 @@ from __future__ import annotations
 
 import datetime
 import inspect
+import math
 import os
 import platform
 import time
@@ -27,7 +39,9 @@ import numpy as np
 
 from imuloco.core.motion import Motion, MotionDatabase
 from imuloco.core.recording import Recording
-from imuloco.methods.training import Example, synthesize, to_frames
+from imuloco.core.skeleton import Skeleton
+from imuloco.errors import NotFittedError
+from imuloco.methods.training import TrainingSet, model_frames
 
 
 class Stream(ABC):
@@ -53,6 +67,9 @@ class Method(ABC):
     name: ClassVar[str]
     summary: ClassVar[str]  # one line for ``imuloco methods``
     supports_online: ClassVar[bool] = False
+    # frames inside a gap of a recording reach reconstruct_signals as rows of NaN (methods
+    # that model missing samples) instead of interpolated
+    gaps_missing: ClassVar[bool] = False
     # hyperparameters added after model files were written, with the value that reproduces
     # those files' behaviour (not the new default) when their header lacks them
     legacy_params: ClassVar[dict[str, Any]] = {}
@@ -61,26 +78,37 @@ class Method(ABC):
     # another value are refused (retrain them)
     retired_params: ClassVar[dict[str, Any]] = {}
 
+    @property
+    def pins_feet(self) -> bool:
+        """Whether :meth:`reconstruct` pins the feet during their contacts itself (with
+        contacts it predicts); the pipeline then does not pin them again."""
+        return False
+
     # ---- learning ---------------------------------------------------------------------------
     def fit(self, db: MotionDatabase, placements: Sequence[str] = ("right_ankle",),
             noise: str = "phone", seed: int = 0, progress: bool = False) -> Self:
-        """Synthesize ``placements`` with ``noise`` on ``db`` and learn from it.
+        """Synthesize ``placements`` with ``noise`` on ``db`` and learn from it
+        (:meth:`TrainingSet.synthesize <imuloco.methods.training.TrainingSet.synthesize>`
+        then :meth:`fit_set`).
 
         Records what it was trained on in ``protocol_`` (saved with the model): clips, frames,
-        placements, noise, seed, seconds, date and machine; callers may add to it (the
-        ``train`` command adds the data folder and split)."""
-        if len(db) == 0:
-            raise ValueError("cannot fit on an empty database")
-        self.placements_ = list(placements)
-        self.noise_ = noise
-        self.skeleton_ = db.skeleton
-        self.fps_ = float(db.clips[0].fps)
+        placements, noise, seed, seconds (simulation included), date and machine; callers may
+        add to it (the ``train`` command adds the data folder and split)."""
         start = time.perf_counter()
-        self.fit_examples(synthesize(db, placements, noise, seed, progress=progress),
-                          progress=progress)
+        self.fit_set(TrainingSet.synthesize(db, placements, noise, seed, progress=progress),
+                     progress=progress)
+        self.protocol_["train_seconds"] = round(time.perf_counter() - start, 1)
+        return self
+
+    def fit_set(self, data: TrainingSet, progress: bool = False) -> Self:
+        """Learn from an already synthesized :class:`~imuloco.methods.training.TrainingSet`
+        (:meth:`learn`) and record what the method was fitted on."""
+        start = time.perf_counter()
+        self.learn(data, progress=progress)
+        self.set_setup(data.skeleton, data.fps, data.placements, data.noise)
         self.protocol_ = {
-            "clips": len(db), "frames": int(db.num_frames), "placements": list(placements),
-            "noise": noise, "seed": seed,
+            "clips": len(data.examples), "frames": int(data.num_frames),
+            "placements": list(data.placements), "noise": data.noise, "seed": data.seed,
             "train_seconds": round(time.perf_counter() - start, 1),
             "trained_at": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
             "machine": f"{platform.machine()}, {os.cpu_count()} CPUs",
@@ -88,16 +116,40 @@ class Method(ABC):
         return self
 
     @abstractmethod
-    def fit_examples(self, examples: list[Example], progress: bool = False) -> None:
-        """Learn from clips with their signals at the model rate."""
+    def learn(self, data: TrainingSet, progress: bool = False) -> None:
+        """The learning step: set the learned state from ``data`` alone (its clips, skeleton,
+        rate, placements and noise); called by :meth:`fit_set`, which records the setup
+        after it."""
+
+    def set_setup(self, skeleton: Skeleton, fps: float, placements: Sequence[str],
+                  noise: str) -> None:
+        """Record what the method reads and writes: the output ``skeleton_`` at ``fps_``
+        frames per second, from signals of ``placements_`` simulated with ``noise_`` (set by
+        :meth:`fit_set` and by :func:`~imuloco.methods.modelfile.load_model`)."""
+        self.skeleton_ = skeleton
+        self.fps_ = float(fps)
+        self.placements_ = list(placements)
+        self.noise_ = noise
+
+    def __getattr__(self, attr: str) -> Any:
+        # only called for attributes that do not exist: a learned one (trailing underscore)
+        # that does not exist yet means the method was not fitted
+        if attr.endswith("_") and not attr.startswith("__"):
+            raise NotFittedError(
+                f"method {getattr(type(self), 'name', type(self).__name__)!r} is not fitted "
+                f"yet (no {attr}): call fit() or load a model file (imuloco.methods.load_model)")
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {attr!r}")
+
+    def check_fitted(self) -> None:
+        """Raise :class:`~imuloco.errors.NotFittedError` unless the method was fitted."""
+        self.placements_  # noqa: B018  (raises through __getattr__)
 
     # ---- reconstruction ---------------------------------------------------------------------
     def reconstruct(self, rec: Recording) -> Motion:
-        """Reconstruct a Motion at the model rate from a recording of the fitted placements."""
+        """Reconstruct a Motion at the model rate from a recording of the fitted placements
+        (its signals on the model-rate grid, :func:`imuloco.methods.training.model_frames`)."""
         rec = rec.select(self.placements_)
-        frames = round((rec.times[-1] - rec.times[0]) * self.fps_) + 1
-        times = np.arange(frames) / self.fps_
-        return self.reconstruct_signals(to_frames(rec, times, self.fps_))
+        return self.reconstruct_signals(model_frames(rec, self.fps_, self.gaps_missing))
 
     @abstractmethod
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
@@ -106,6 +158,39 @@ class Method(ABC):
     def stream(self) -> Stream:
         """A fresh online reconstruction session (online methods only)."""
         raise NotImplementedError(f"method {self.name!r} has no online mode")
+
+    # ---- hyperparameters (scikit-learn's estimator conventions) -----------------------------
+    @classmethod
+    def _param_names(cls) -> list[str]:
+        sig = inspect.signature(cls.__init__)
+        return [k for k, p in sig.parameters.items()
+                if k != "self" and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """Hyperparameters: the ``__init__`` arguments, read back from attributes (``deep`` is
+        accepted for scikit-learn's ``clone``; methods hold no nested estimators)."""
+        return {k: getattr(self, k) for k in self._param_names()}
+
+    def set_params(self, **params: Any) -> Self:
+        """Change hyperparameters (refit afterwards); unknown names raise
+        :class:`~imuloco.errors.UnknownNameError`."""
+        from imuloco.errors import UnknownNameError
+
+        valid = self._param_names()
+        for key, value in params.items():
+            if key not in valid:
+                raise UnknownNameError(f"method {self.name!r} has no hyperparameter {key!r}; "
+                                       f"it has {valid}")
+            setattr(self, key, value)
+        return self
+
+    def __repr__(self) -> str:
+        """``Class(param=value, ...)`` with the hyperparameters that differ from the
+        defaults, as scikit-learn prints estimators."""
+        sig = inspect.signature(type(self).__init__)
+        changed = [f"{k}={v!r}" for k, v in self.get_params().items()
+                   if not _same(v, sig.parameters[k].default)]
+        return f"{type(self).__name__}({', '.join(changed)})"
 
     # ---- persistence ------------------------------------------------------------------------
     @abstractmethod
@@ -116,11 +201,6 @@ class Method(ABC):
     def set_state(self, arrays: dict[str, np.ndarray], values: dict[str, Any]) -> None:
         """Restore what :meth:`get_state` returned."""
 
-    def get_params(self) -> dict[str, Any]:
-        """Hyperparameters: the ``__init__`` arguments, read back from attributes."""
-        sig = inspect.signature(type(self).__init__)
-        return {k: getattr(self, k) for k in sig.parameters if k != "self"}
-
     def write_training_report(self, model_path: str | Path) -> list[Path]:
         """Write what the last fit recorded beside ``model_path`` (loss curves and the like)
         and return the files written; methods without a training history write nothing."""
@@ -130,4 +210,17 @@ class Method(ABC):
         """Write the fitted model to one ``.npz`` file (:mod:`imuloco.methods.modelfile`)."""
         from imuloco.methods.modelfile import save_model
 
+        self.check_fitted()
         return save_model(self, path, overwrite=overwrite)
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal hyperparameter values (NaN equals NaN; a tuple equals the same list)."""
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return list(a) == list(b)
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):
+        return a is b

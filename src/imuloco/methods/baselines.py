@@ -7,6 +7,7 @@ offline reconstruction and their online stream give the same frames.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -22,7 +23,7 @@ from imuloco.methods.features import (
     windows,
 )
 from imuloco.methods.registry import register
-from imuloco.methods.training import Example
+from imuloco.methods.training import Example, TrainingSet
 
 
 class _ConstantStream(Stream):
@@ -49,8 +50,8 @@ class MeanPose(Method):
     def __init__(self) -> None:
         pass
 
-    def fit_examples(self, examples: list[Example], progress: bool = False) -> None:
-        self.mean_ = np.concatenate([pose.encode(e.motion) for e in examples]).mean(axis=0)
+    def learn(self, data: TrainingSet, progress: bool = False) -> None:
+        self.mean_ = np.concatenate([pose.encode(e.motion) for e in data.examples]).mean(axis=0)
 
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
         return pose.decode(np.tile(self.mean_, (len(signals), 1)), self.skeleton_, self.fps_)
@@ -65,7 +66,7 @@ class MeanPose(Method):
         self.mean_ = arrays["mean"]
 
 
-def _training_arrays(examples: list[Example], window: int) -> tuple[np.ndarray, np.ndarray]:
+def _training_arrays(examples: Sequence[Example], window: int) -> tuple[np.ndarray, np.ndarray]:
     """Causal windows of every clip's signals (N, window * 6S) and its pose vectors (N, D)."""
     x = np.concatenate([windows(e.signals, window) for e in examples])
     y = np.concatenate([pose.encode(e.motion) for e in examples])
@@ -120,10 +121,10 @@ class RidgePose(_Windowed):
         self.window = window  # samples per causal window (0.5 s at 30 fps); not in the paper
         self.alpha = alpha  # L2 penalty on standardized features; the paper uses none
 
-    def fit_examples(self, examples: list[Example], progress: bool = False) -> None:
+    def learn(self, data: TrainingSet, progress: bool = False) -> None:
         from sklearn.linear_model import Ridge
 
-        x, y = _training_arrays(examples, self.window)
+        x, y = _training_arrays(data.examples, self.window)
         self.x_mean_, self.x_scale_ = fit_standardizer(x)
         self.y_mean_, self.y_scale_ = fit_standardizer(y)
         model = Ridge(alpha=self.alpha).fit(standardize(x, self.x_mean_, self.x_scale_),
@@ -158,8 +159,8 @@ class KnnPose(_Windowed):
         self.k = k  # neighbours averaged
         self.stride = stride  # keep every stride-th training frame
 
-    def fit_examples(self, examples: list[Example], progress: bool = False) -> None:
-        x, y = _training_arrays(examples, self.window)
+    def learn(self, data: TrainingSet, progress: bool = False) -> None:
+        x, y = _training_arrays(data.examples, self.window)
         x, y = x[:: self.stride], y[:: self.stride]
         self.x_mean_, self.x_scale_ = fit_standardizer(x)
         self.features_ = standardize(x, self.x_mean_, self.x_scale_).astype(np.float32)

@@ -18,7 +18,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from imuloco.core.skeleton import Skeleton
-from imuloco.errors import ModelFileError, OutputExistsError, UnknownNameError
+from imuloco.errors import ModelFileError, UnknownNameError
+from imuloco.io.atomic import atomic_write, check_output
 
 if TYPE_CHECKING:
     from imuloco.methods.base import Method
@@ -29,8 +30,7 @@ FORMAT_VERSION = 1
 def save_model(method: Method, path: str | Path, overwrite: bool = False) -> Path:
     """Write the fitted ``method`` to one ``.npz`` file at ``path`` and return the path."""
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
+    check_output(path, overwrite)
     arrays, values = method.get_state()
     sk = method.skeleton_
     header = {
@@ -41,8 +41,7 @@ def save_model(method: Method, path: str | Path, overwrite: bool = False) -> Pat
         "protocol": getattr(method, "protocol_", {}), "values": values,
     }
     blob = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "wb") as f:
+    with atomic_write(path) as f:
         np.savez_compressed(f, __header__=blob, __parents__=sk.parents,
                             __offsets__=sk.offsets, **arrays)
     return path
@@ -77,13 +76,10 @@ def load_model(path: str | Path) -> Method:
     try:  # a header or arrays that do not fit the method: missing keys, wrong shapes
         method = cls(**{**cls.legacy_params, **params})
         sk = header["skeleton"]
-        method.skeleton_ = Skeleton(sk["names"], data.pop("__parents__"),
-                                    data.pop("__offsets__"),
-                                    {int(k): np.array(v) for k, v in sk["end_sites"].items()},
-                                    sk["body_map"])
-        method.placements_ = header["placements"]
-        method.noise_ = header["noise"]
-        method.fps_ = header["fps"]
+        method.set_setup(Skeleton(sk["names"], data.pop("__parents__"), data.pop("__offsets__"),
+                                  {int(k): np.array(v) for k, v in sk["end_sites"].items()},
+                                  sk["body_map"]),
+                         header["fps"], header["placements"], header["noise"])
         method.protocol_ = header.get("protocol", {})
         method.set_state(data, header["values"])
     except (KeyError, TypeError, ValueError, AttributeError) as e:

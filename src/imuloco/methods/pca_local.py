@@ -32,7 +32,7 @@ from imuloco.core.motion import Motion
 from imuloco.methods import pose
 from imuloco.methods.base import Method
 from imuloco.methods.registry import register
-from imuloco.methods.training import Example
+from imuloco.methods.training import TrainingSet
 from imuloco.ops.rotations import about_y, from_6d, qmul, qrot
 from imuloco.sensors.placement import anatomical_frame, get_placement
 from imuloco.sensors.simulate import GRAVITY, attached_trajectories
@@ -65,9 +65,9 @@ class PCALocal(Method):
         self.max_nfev = max_nfev
         self.stride = stride
 
-    def fit_examples(self, examples: list[Example], progress: bool = False) -> None:
-        vec = [pose.encode(e.motion)[:: self.stride] for e in examples]
-        sig = [e.signals[:: self.stride] for e in examples]
+    def learn(self, data: TrainingSet, progress: bool = False) -> None:
+        vec = [pose.encode(e.motion)[:: self.stride] for e in data.examples]
+        sig = [e.signals[:: self.stride] for e in data.examples]
         self.poses_ = np.concatenate(vec).astype(np.float32)
         self.signals_ = np.concatenate(sig).astype(np.float32)
         self.scale_ = self.poses_.std(axis=0) + 1e-6

@@ -14,6 +14,18 @@ def _check_smoothing(smoothing: float) -> None:
         raise ValueError(f"foot pinning: smoothing must be in (0, 1], got {smoothing}")
 
 
+def pin_detected_contacts(motion: Motion) -> Motion:
+    """:func:`pin_feet` on the foot contacts detected on ``motion`` itself
+    (:func:`imuloco.phases.foot_contacts`: feet low and slow); motions under two frames are
+    returned as they are."""
+    from imuloco.phases.contacts import foot_contacts
+
+    if motion.num_frames < 2:
+        return motion
+    c = foot_contacts(motion)
+    return pin_feet(motion, np.stack([c["left_foot"], c["right_foot"]], axis=1))
+
+
 def pin_feet(motion: Motion, contacts: np.ndarray, feet: tuple[str, ...] = ("left_ankle",
              "right_ankle"), smoothing: float = 1.0) -> Motion:
     """Remove foot skating by moving the root so that feet in contact do not slide.

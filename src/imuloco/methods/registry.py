@@ -9,8 +9,10 @@ be registered by hand with :func:`register` (tests, notebooks).
 
 from __future__ import annotations
 
+import json
+from collections.abc import Iterable
 from importlib.metadata import EntryPoint, entry_points
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from imuloco.errors import MissingExtraError, UnknownNameError
 
@@ -78,3 +80,30 @@ def available_methods() -> dict[str, type[Method]]:
 def get_method(name: str, **params) -> Method:
     """A new, unfitted method by name."""
     return method_class(name)(**params)
+
+
+def parse_params(items: Iterable[str], where: str = "parameter") -> dict[str, Any]:
+    """``key=value`` strings -> a dict of hyperparameters; values parsed as JSON when they can
+    be (numbers, ``true``, ``null``, lists), else kept as stripped strings.
+
+    Raises :class:`UnknownNameError` naming ``where`` for an item without ``=``."""
+    params: dict[str, Any] = {}
+    for item in items:
+        key, eq, value = item.partition("=")
+        if not eq or not key.strip():
+            raise UnknownNameError(f"{where}: expected key=value, got {item!r}")
+        try:
+            params[key.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            params[key.strip()] = value.strip()
+    return params
+
+
+def parse_method_spec(spec: str) -> tuple[str, dict[str, Any]]:
+    """``"eom2014[variant=mlp-no-hmm;context=7]"`` -> ``("eom2014", {"variant": "mlp-no-hmm",
+    "context": 7})``: a method name with hyperparameters (:func:`parse_params`). Lets one
+    bench compare variants of a method (e.g. the 2014 paper's ablation)."""
+    name, _, rest = spec.partition("[")
+    if rest and not rest.endswith("]"):
+        raise UnknownNameError(f"method {spec!r}: expected NAME[key=value;key=value]")
+    return name.strip(), parse_params(filter(None, rest[:-1].split(";")), f"method {spec!r}")

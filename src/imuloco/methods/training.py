@@ -1,4 +1,10 @@
-"""Training and test signals: every method synthesizes its sensor data the same way."""
+"""Training and test signals: every method synthesizes its sensor data the same way, and
+every method reads a recording on the same model-rate frame grid.
+
+A method learns from one explicit input, a :class:`TrainingSet`: the clips with their
+signals, the skeleton and frame rate of the output, and the placements and noise the signals
+were simulated with (:meth:`TrainingSet.synthesize`).
+"""
 
 from __future__ import annotations
 
@@ -11,6 +17,7 @@ from tqdm.auto import tqdm
 
 from imuloco.core.motion import Motion, MotionDatabase
 from imuloco.core.recording import Recording
+from imuloco.core.skeleton import Skeleton
 from imuloco.sensors.resample import resample
 from imuloco.sensors.simulate import simulate
 
@@ -35,9 +42,87 @@ class Example:
     labels: dict[str, str]
 
 
+@dataclass(frozen=True, eq=False)
+class TrainingSet:
+    """Everything a method learns from (:meth:`imuloco.methods.base.Method.fit_set`).
+
+    examples : the clips with their signals (at least one), all on ``skeleton`` at ``fps``.
+    skeleton : the skeleton the method will reconstruct on.
+    fps : the model rate, frames per second (the clips' frame rate).
+    placements : the sensor placements of the signals, 6 channels each, in this order.
+    noise : the noise preset the signals were simulated with.
+    seed : the seed of the simulation, when known (recorded with the model).
+    """
+
+    examples: tuple[Example, ...]
+    skeleton: Skeleton
+    fps: float
+    placements: tuple[str, ...]
+    noise: str
+    seed: int | None = None
+
+    def __post_init__(self) -> None:
+        if not self.examples:
+            raise ValueError("cannot fit on an empty database")
+        object.__setattr__(self, "examples", tuple(self.examples))
+        object.__setattr__(self, "placements", tuple(self.placements))
+        object.__setattr__(self, "fps", float(self.fps))
+        width = 6 * len(self.placements)
+        bad = [e.labels.get("name", i) for i, e in enumerate(self.examples)
+               if e.signals.ndim != 2 or e.signals.shape[1] != width]
+        if bad:
+            raise ValueError(f"training signals of clip(s) {bad[:3]} are not (T, {width}) "
+                             f"for placements {list(self.placements)}")
+
+    @classmethod
+    def from_examples(cls, examples: Sequence[Example], placements: Sequence[str],
+                      noise: str, seed: int | None = None) -> TrainingSet:
+        """A set of already simulated examples; skeleton and rate from the first clip."""
+        if not examples:
+            raise ValueError("cannot fit on an empty database")
+        first = examples[0].motion
+        return cls(tuple(examples), first.skeleton, first.fps, tuple(placements), noise, seed)
+
+    @classmethod
+    def synthesize(cls, db: MotionDatabase, placements: Sequence[str], noise: str = "phone",
+                   seed: int = 0, progress: bool = False) -> TrainingSet:
+        """Simulate ``placements`` with ``noise`` on every clip of ``db`` (:func:`synthesize`)."""
+        if len(db) == 0:
+            raise ValueError("cannot fit on an empty database")
+        return cls(tuple(synthesize(db, placements, noise, seed, progress=progress)),
+                   db.skeleton, float(db.clips[0].fps), tuple(placements), noise, seed)
+
+    @property
+    def num_frames(self) -> int:
+        """Frames of all clips together."""
+        return sum(e.motion.num_frames for e in self.examples)
+
+
+def frame_times(rec: Recording, fps: float) -> np.ndarray:
+    """The model-rate time grid of a recording, shape (T,), seconds on the recording's clock:
+    frames ``1 / fps`` apart from its first sample to (the nearest frame of) its last."""
+    frames = round((rec.times[-1] - rec.times[0]) * fps) + 1
+    return rec.times[0] + np.arange(frames) / fps
+
+
+def model_frames(rec: Recording, fps: float, gaps_missing: bool = False) -> np.ndarray:
+    """A recording's signals on its model-rate grid (:func:`frame_times`), shape (T, 6 S).
+
+    ``gaps_missing``: frames inside a gap of the recording (no sample for more than 0.1 s,
+    :func:`imuloco.sensors.resample.find_gaps`) are rows of NaN instead of interpolated."""
+    times = frame_times(rec, fps)
+    res, gaps = resample(rec, fps, new_times=times)
+    signals = res.channels()
+    if gaps_missing:
+        for g in gaps:
+            signals[(times > g.start) & (times < g.stop)] = np.nan
+    return signals
+
+
 def to_frames(rec: Recording, motion_or_times: Motion | np.ndarray, rate: float | None = None
               ) -> np.ndarray:
-    """A recording's signals resampled onto a motion's frame times, shape (T, 6 S)."""
+    """A recording's signals resampled onto a motion's frame times (or ``times``, seconds
+    from the recording's first sample), shape (T, 6 S)."""
     times = motion_or_times.times if isinstance(motion_or_times, Motion) else motion_or_times
     r = rate or 1.0 / np.median(np.diff(times))
     return resample(rec, r, new_times=np.asarray(times) + rec.times[0])[0].channels()

@@ -43,6 +43,7 @@ from scipy.signal import find_peaks
 from scipy.stats import skew
 
 from imuloco.core.recording import Recording
+from imuloco.errors import InputError
 from imuloco.ops.filters import gaussian_smooth, resample_linear
 from imuloco.ops.rotations import from_matrix, qinv, qmul, qrot
 from imuloco.sensors.noise import G
@@ -110,19 +111,19 @@ def estimate_mounting(rec: Recording, placement: str | int | None = None,
     """
     if placement is None:
         if len(rec.placements) != 1:
-            raise ValueError(f"recording has sensors {rec.placements}: name one")
+            raise InputError(f"recording has sensors {rec.placements}: name one")
         k = 0
     else:
         k = placement if isinstance(placement, int) else rec.placements.index(placement)
     name = rec.placements[k]
     if not any(p in name for p in LEG_PLACEMENTS):
-        raise ValueError(f"calibration needs a leg placement ({', '.join(LEG_PLACEMENTS)}), "
+        raise InputError(f"calibration needs a leg placement ({', '.join(LEG_PLACEMENTS)}), "
                          f"got {name!r}: the swing of the leg defines the medio-lateral axis")
     rate = 100.0
     _, acc = _uniform(rec.times, rec.acc[:, k], rate)
     _, gyro = _uniform(rec.times, rec.gyro[:, k], rate)
     if len(acc) < rate:
-        raise ValueError("calibration needs at least 1 s of recording")
+        raise InputError("calibration needs at least 1 s of recording")
     still = still_mask(acc, gyro, rate)
     still_s = float(np.count_nonzero(still) / rate)
     # first guess of up: the average specific force (gravity up to the walk's mean inclination)
@@ -131,7 +132,7 @@ def estimate_mounting(rec: Recording, placement: str | int | None = None,
     # medio-lateral axis: principal axis of the gyroscope, off the up axis
     moving = ~still
     if np.count_nonzero(moving) < 3:
-        raise ValueError(f"{name}: the phone never moves in this recording; calibration needs "
+        raise InputError(f"{name}: the phone never moves in this recording; calibration needs "
                          "the leg to swing (walk a few steps)")
     w = gyro[moving] - np.outer(gyro[moving] @ up, up)
     _, sv, vt = np.linalg.svd(w, full_matrices=False)

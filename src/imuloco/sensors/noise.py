@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imuloco.errors import UnknownNameError
+
 G = 9.81
 
 
@@ -53,7 +55,7 @@ def get_noise(name: str | NoiseModel) -> NoiseModel:
     if isinstance(name, NoiseModel):
         return name
     if name not in NOISE_PRESETS:
-        raise KeyError(f"unknown noise preset {name!r}; presets: {sorted(NOISE_PRESETS)}")
+        raise UnknownNameError(f"unknown noise preset {name!r}; presets: {sorted(NOISE_PRESETS)}")
     return NOISE_PRESETS[name]
 
 

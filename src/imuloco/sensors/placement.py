@@ -16,6 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imuloco.core.skeleton import Skeleton
+from imuloco.errors import UnknownNameError
 from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import IDENTITY, from_matrix, qinv, qmul, qrot
 
@@ -74,7 +75,7 @@ def get_placement(name: str | Placement) -> Placement:
     if isinstance(name, Placement):
         return name
     if name not in PRESETS:
-        raise KeyError(f"unknown sensor placement {name!r}; presets: {sorted(PRESETS)}")
+        raise UnknownNameError(f"unknown sensor placement {name!r}; presets: {sorted(PRESETS)}")
     return PRESETS[name]
 
 

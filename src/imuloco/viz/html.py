@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from imuloco.core.motion import Motion
+from imuloco.io.atomic import check_output
 from imuloco.viz.skeleton import follow_azimuth, joint_sides
 
 TEMPLATE = Path(__file__).with_name("viewer.html")
@@ -111,8 +112,7 @@ def write_viewer(motions: Sequence[Motion], path: str | Path, titles: Sequence[s
     """Write the viewer of ``motions`` to ``path`` (``.html``). Refuses to replace an existing
     file unless ``overwrite``."""
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
+    check_output(path, overwrite)
     page = viewer_html(motions, titles, title or motions[0].name or "imuloco")
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(page, encoding="utf-8")

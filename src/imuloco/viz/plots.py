@@ -12,6 +12,7 @@ import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
+from imuloco.io.atomic import check_output
 from imuloco.phases.gait import GAIT8, GaitPhases
 
 
@@ -29,8 +30,7 @@ def _figure(width: float, height: float):
 
 def _save(fig, path: str | Path, overwrite: bool) -> Path:
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
+    check_output(path, overwrite)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     return path

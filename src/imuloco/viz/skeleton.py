@@ -15,6 +15,7 @@ import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
+from imuloco.io.atomic import check_output
 from imuloco.ops.heading import heading_from_hips
 
 SIDE_COLORS = {"left": "#1f77b4", "right": "#d62728", "center": "#444444"}
@@ -217,8 +218,7 @@ def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path, fps
     import imageio_ffmpeg
 
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
+    check_output(path, overwrite)
     suffix = path.suffix.lower()
     if isinstance(frames, np.ndarray) and (
             frames.ndim != 4 or frames.shape[-1] != 3 or len(frames) == 0):
@@ -265,8 +265,7 @@ def render_video(motions: Sequence[Motion], path: str | Path, titles: Sequence[s
     max_seconds : only the first seconds of the motions.
     """
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
+    check_output(path, overwrite)
     renderer = StickRenderer(motions, titles)
     if fps is None:
         fps = 15.0 if path.suffix.lower() == ".gif" else renderer.fps
@@ -284,8 +283,7 @@ def frame_strip(motions: Sequence[Motion], times: Sequence[float], path: str | P
     import imageio.v3 as iio
 
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
+    check_output(path, overwrite)
     renderer = StickRenderer(motions, titles)
     images = [renderer.frame(round(t * renderer.fps)) for t in times]
     blank = np.full_like(images[0], 255)

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imuloco.core.recording import Recording
+from imuloco.errors import InputError
 from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import qrot
 
@@ -161,7 +162,7 @@ class LiveSession:
     def __init__(self, method, calibrate_s: float = 5.0, sigma_s: float | None = None,
                  radius_s: float | None = None, calibration: Calibration | None = None) -> None:
         if not getattr(method, "supports_online", False):
-            raise ValueError(f"method {method.name!r} has no online mode; live needs one of "
+            raise InputError(f"method {method.name!r} has no online mode; live needs one of "
                              "the methods `imuloco methods` lists as online")
         self.method = method
         self.placements = list(method.placements_)

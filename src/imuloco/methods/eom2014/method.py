@@ -67,9 +67,13 @@ from imuloco.methods.base import Method, Stream
 from imuloco.methods.eom2014 import hmm as hmm_mod
 from imuloco.methods.eom2014 import mlp as mlp_mod
 from imuloco.methods.eom2014.gplvm import GPLVM, fit_gplvm
-from imuloco.methods.postprocess import laplacian_smooth, laplacian_smooth_quaternions, pin_feet
+from imuloco.methods.postprocess import (
+    laplacian_smooth,
+    laplacian_smooth_quaternions,
+    pin_detected_contacts,
+)
 from imuloco.methods.registry import register
-from imuloco.methods.training import Example
+from imuloco.methods.training import TrainingSet
 from imuloco.ops.filters import gaussian_smooth
 from imuloco.ops.rotations import (
     about_y,
@@ -182,15 +186,15 @@ class Eom2014(Method):
         return smooth[idx].reshape(t, -1)
 
     # ---- learning ------------------------------------------------------------------------
-    def fit_examples(self, examples: list[Example], progress: bool = False) -> None:
+    def learn(self, data: TrainingSet, progress: bool = False) -> None:
         from imuloco.phases import gait_phases
 
         if self.variant not in VARIANTS:
             raise ValueError(f"eom2014: unknown variant {self.variant!r}; expected {VARIANTS}")
         t0 = time.perf_counter()
-        j = self.skeleton_.num_joints
+        j = data.skeleton.num_joints
         clips = []
-        for e in examples:
+        for e in data.examples:
             enc = pose.encode(e.motion)
             clips.append({
                 "y": enc[:, :6 * j + 1], "root": enc[:, 6 * j + 1:],
@@ -205,14 +209,13 @@ class Eom2014(Method):
         for k, typ in enumerate(self.types_):
             t1 = time.perf_counter()
             self.models_.append(self._fit_model([c for c in clips if c["type"] == typ],
-                                                self.seed + k))
+                                                data.fps, self.seed + k))
             self.fit_seconds_.append(time.perf_counter() - t1)
             if progress:
                 print(f"eom2014: model {typ!r} in {self.fit_seconds_[-1]:.1f} s")
         self.fit_total_seconds_ = time.perf_counter() - t0
 
-    def _fit_model(self, clips: list[dict[str, Any]], seed: int) -> _Model:
-        fps = self.fps_
+    def _fit_model(self, clips: list[dict[str, Any]], fps: float, seed: int) -> _Model:
         # active set: whole phase segments in farthest-point order of their poses
         y_all = np.concatenate([c["y"] for c in clips])
         scale = 1.0 / np.maximum(y_all.std(0), 1e-6)
@@ -271,6 +274,10 @@ class Eom2014(Method):
             regs = [mlp_mod.fit_linear(feats, x_all)]
         return _Model(gp, [int(p) for p in kept], hmms, regs)
 
+    @property
+    def pins_feet(self) -> bool:
+        return self.foot_cleanup
+
     # ---- reconstruction ------------------------------------------------------------------
     def _choose(self, codes: np.ndarray) -> _Model:
         if len(self.models_) == 1:
@@ -313,12 +320,7 @@ class Eom2014(Method):
         rot = laplacian_smooth_quaternions(motion.rotations, self.smooth_lambda,
                                            self.smooth_iterations)
         motion = Motion(motion.skeleton, rot, motion.root, motion.fps, motion.name)
-        if self.foot_cleanup and len(motion.root) >= 2:
-            from imuloco.phases import foot_contacts
-
-            c = foot_contacts(motion)
-            motion = pin_feet(motion, np.stack([c["left_foot"], c["right_foot"]], axis=1))
-        return motion
+        return pin_detected_contacts(motion) if self.foot_cleanup else motion
 
     def stream(self) -> Stream:
         return _Eom2014Stream(self)

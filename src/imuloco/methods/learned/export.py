@@ -26,6 +26,7 @@ import torch
 from torch import nn
 
 from imuloco.core.mirror import mirror_pairs
+from imuloco.io.atomic import check_output
 from imuloco.methods.learned.method import CONTACT_SWAP, Learned
 from imuloco.methods.learned.model import CONTACT_PARTS, rotation_from_6d
 
@@ -79,8 +80,7 @@ def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Pa
     import onnx
 
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
+    check_output(path, overwrite)
     module = _Exported(model).eval()
     c = model.x_mean_.shape[0]
     x = torch.zeros(1, 5, c)

@@ -31,7 +31,7 @@ from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Reconstructor, TorchFK
 from imuloco.methods.postprocess import FootPinner, pin_feet
 from imuloco.methods.registry import register
-from imuloco.methods.training import Example
+from imuloco.methods.training import Example, TrainingSet
 from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import from_6d, to_6d
 
@@ -128,7 +128,8 @@ class Learned(Method):
         self.seed = seed
 
     # ---- learning ---------------------------------------------------------------------------
-    def fit_examples(self, examples: list[Example], progress: bool = False) -> None:
+    def learn(self, data: TrainingSet, progress: bool = False) -> None:
+        examples = data.examples
         if self.threads:
             torch.set_num_threads(int(self.threads))
         val_mask = [zlib.crc32(e.labels["name"].encode()) < self.validation * 2**32
@@ -137,13 +138,13 @@ class Learned(Method):
             val_mask = [False] * len(examples)
         train_ex = [e for e, v in zip(examples, val_mask) if not v]
         val_ex = [e for e, v in zip(examples, val_mask) if v]
-        sk = self.skeleton_
+        sk = data.skeleton
         try:
             mirror_pairs(sk)
             can_mirror = self.mirror
         except (KeyError, ValueError):
             can_mirror = False
-        train_ex = tr.augment(train_ex, self.placements_, self.noise_, self.seed, self.draws,
+        train_ex = tr.augment(train_ex, list(data.placements), data.noise, self.seed, self.draws,
                               self.speed, self.noise_scale, can_mirror, progress)
         train_ex = [self._looking_ahead(e) for e in train_ex]
         val_ex = [self._looking_ahead(e) for e in val_ex]
@@ -222,6 +223,11 @@ class Learned(Method):
     def stream(self) -> LearnedStream:
         return LearnedStream(self)
 
+    @property
+    def pins_feet(self) -> bool:
+        """Always: the feet are pinned on the contacts the network predicts."""
+        return True
+
     # ---- the other leg ----------------------------------------------------------------------
     def _mirror_vectors(self, vectors: np.ndarray) -> np.ndarray:
         sk = self.skeleton_
@@ -259,8 +265,7 @@ class Learned(Method):
         rows = np.argmax(np.abs(fit), axis=1)
         cmap[np.arange(c), rows] = np.sign(fit[np.arange(c), rows])
         new = Learned(**self.get_params())
-        new.skeleton_, new.fps_, new.noise_ = self.skeleton_, self.fps_, self.noise_
-        new.placements_ = other
+        new.set_setup(self.skeleton_, self.fps_, other, self.noise_)
         arrays, values = self.get_state()
         new.set_state(arrays, values)
         new.input_map_ = cmap @ self.input_map_

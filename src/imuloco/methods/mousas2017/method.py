@@ -10,7 +10,6 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from imuloco.core.motion import Motion
-from imuloco.core.recording import Recording
 from imuloco.methods.base import Method
 from imuloco.methods.mousas2017.features import (
     layout,
@@ -28,8 +27,7 @@ from imuloco.methods.mousas2017.registration import (
 from imuloco.methods.mousas2017.stream import MousasStream
 from imuloco.methods.postprocess import pin_feet
 from imuloco.methods.registry import register
-from imuloco.methods.training import Example
-from imuloco.sensors.resample import resample
+from imuloco.methods.training import TrainingSet
 
 
 @register
@@ -84,6 +82,11 @@ class Mousas2017(Method):
     summary = "hierarchical multivariate HMM + reactive interpolation (Mousas 2017), online"
     supports_online = True
 
+    # frames inside a gap of a recording (no sample for more than 0.1 s) reach the model as
+    # missing: the forward pass then only propagates its transitions there (sec. 5.2, device
+    # dropout)
+    gaps_missing = True
+
     def __init__(
         self,
         K: int = 5,                      # sec. 5.3
@@ -115,12 +118,13 @@ class Mousas2017(Method):
         self.sigma_scale = sigma_scale
 
     # ---- learning ---------------------------------------------------------------------------
-    def fit_examples(self, examples: list[Example], progress: bool = False) -> None:
+    def learn(self, data: TrainingSet, progress: bool = False) -> None:
         if not 0.0 < self.blend <= 1.0:
             raise ValueError(f"mousas2017: blend must be in (0, 1], got {self.blend}")
         if self.K < 1:
             raise ValueError(f"mousas2017: K must be >= 1, got {self.K}")
-        max_len = max(2, round(self.max_segment_s * self.fps_))
+        examples = data.examples
+        max_len = max(2, round(self.max_segment_s * data.fps))
         segs: list[Segment] = []
         xs, ys, regs = [], [], []
         follows = np.zeros((NUM_PHASES, NUM_PHASES))
@@ -156,36 +160,26 @@ class Mousas2017(Method):
         self.block_count_ = np.array([x.shape[0] for x in rx], dtype=np.int64)
         self.block_length_ = np.array([x.shape[1] for x in rx], dtype=np.int64)
         self.next_phase_ = follows
-        self._build()
+        self._build(data.skeleton.num_joints)
 
-    def _build(self) -> None:
-        """Derived structures: both levels' topologies."""
+    def _build(self, num_joints: int) -> None:
+        """Derived structures: both levels' topologies, the pose layout of ``num_joints``."""
         a_phase = (self.a_self_phase, self.a_next_phase, self.a_exit_phase)
         a_frame = (self.a_self_frame, self.a_next_frame, self.a_skip_frame)
         self.lower_ = Topology(self.block_phase_, self.block_count_, self.block_length_,
                                self.next_phase_, a_frame, a_phase, dtype=np.float32)
         self.upper_ = Topology(self.block_phase_, np.ones_like(self.block_count_),
                                self.block_length_, self.next_phase_, a_frame, a_phase)
-        self.layout_ = layout(self.skeleton_.num_joints)
+        self.layout_ = layout(num_joints)
+
+    @property
+    def pins_feet(self) -> bool:
+        return self.foot_cleanup
 
     # ---- reconstruction ---------------------------------------------------------------------
     def stream(self, pin: bool | None = None) -> MousasStream:
         """A fresh online session; ``pin`` overrides ``foot_cleanup``."""
         return MousasStream(self, self.foot_cleanup if pin is None else pin)
-
-    def reconstruct(self, rec: Recording) -> Motion:
-        """As :meth:`Method.reconstruct`, but frames inside a gap of the recording (no sample
-        for more than 0.1 s, :func:`imuloco.sensors.resample.find_gaps`) reach the model as
-        missing (NaN) instead of interpolated: the forward pass then only propagates its
-        transitions there (sec. 5.2, device dropout)."""
-        rec = rec.select(self.placements_)
-        frames = int(round((rec.times[-1] - rec.times[0]) * self.fps_)) + 1  # noqa: RUF046  (numpy floats)
-        times = rec.times[0] + np.arange(frames) / self.fps_
-        res, gaps = resample(rec, self.fps_, new_times=times)
-        signals = res.channels()
-        for g in gaps:
-            signals[(times > g.start) & (times < g.stop)] = np.nan
-        return self.reconstruct_signals(signals)
 
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
         """Run the online stream over every frame (rows of NaN: missing samples), then pin the
@@ -216,4 +210,4 @@ class Mousas2017(Method):
         self.block_count_ = arrays["block_count"]
         self.block_length_ = arrays["block_length"]
         self.next_phase_ = arrays["next_phase"]
-        self._build()
+        self._build(self.skeleton_.num_joints)

@@ -50,7 +50,7 @@ from imuloco.methods.tautges2008.tensor import (
     gait_cycles,
     register_cycle,
 )
-from imuloco.methods.training import Example
+from imuloco.methods.training import TrainingSet
 from imuloco.ops.rotations import about_y, qinv, qrot
 from imuloco.sensors.placement import anatomical_frame, get_placement
 from imuloco.sensors.simulate import GRAVITY, attached_trajectories
@@ -98,9 +98,9 @@ class Tautges2008(Method):
         self.frame = frame
 
     # ---- learning ---------------------------------------------------------------------------
-    def fit_examples(self, examples: list[Example], progress: bool = False) -> None:
+    def learn(self, data: TrainingSet, progress: bool = False) -> None:
         by_content: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
-        for ex in examples:
+        for ex in data.examples:
             for a, b in gait_cycles(ex.motion):
                 rot, root = register_cycle(ex.motion, a, b, self.frames)
                 by_content[ex.labels.get("content", "all")][ex.labels.get("style", "all")] \
