@@ -129,3 +129,62 @@ def test_the_pipeline_pins_only_methods_that_do_not_pin_themselves(small_set, re
     assert info["feet_pinned_by"] == "pipeline"
     _, info = reconstruct_recording(recording, plain, calibrate=False, pin=False)
     assert info["feet_pinned_by"] == "none"
+
+
+def test_each_method_takes_its_name_from_its_entry_point():
+    from importlib.metadata import entry_points
+
+    from imuloco.methods.base import Method
+
+    for ep in entry_points(group="imuloco.methods"):
+        cls = method_class(ep.name)
+        assert cls.name == ep.name and cls().name == ep.name
+    assert _SelfPinningMean.name == "self-pinning-mean"  # stated by hand, wins
+
+    class Tweaked(MeanPose):  # a subclass answers to its registered parent's name
+        pass
+
+    assert Tweaked.name == "mean"
+
+    class Stray(Method):
+        pass
+
+    with pytest.raises(AttributeError, match="no name: give it an entry point"):
+        Stray.name  # noqa: B018
+
+
+def test_listing_methods_imports_none_of_them():
+    """``imuloco methods`` reads each method's summary from its source: neither numpy nor any
+    method module (nor torch) is imported, which is what keeps it fast."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom click.testing import CliRunner\nfrom imuloco.cli import cli\n"
+            "res = CliRunner().invoke(cli, ['methods'])\nassert res.exit_code == 0\n"
+            "heavy = [m for m in ('numpy', 'torch', 'scipy', 'sklearn', 'imuloco.methods.base')"
+            " if m in sys.modules]\nassert not heavy, heavy\nprint(res.output)\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=False)
+    assert res.returncode == 0, res.stderr
+    for name in NAMES:
+        cls = method_class(name)
+        online = "online" if cls.supports_online else "offline"
+        assert f"[{online:>7}]  {cls.summary}" in res.stdout, name
+
+
+def test_a_method_whose_extra_is_missing_is_listed_with_the_install_hint(monkeypatch):
+    from importlib.metadata import PackageNotFoundError
+
+    from imuloco.methods import registry
+
+    real = registry.distribution
+
+    def without_torch(name):
+        if name == "torch":
+            raise PackageNotFoundError(name)
+        return real(name)
+
+    monkeypatch.setattr(registry, "distribution", without_torch)
+    info = registry.describe("learned")
+    assert info.missing == "torch" and info.extra == "deep" and info.supports_online
+    assert registry.describe("ridge").missing is None

@@ -178,14 +178,15 @@ def phases(motion_file: Path, as_json: bool, reference: str) -> None:
 
 @cli.command()
 def methods() -> None:
-    """List the reconstruction methods with one line each."""
-    from imuloco.methods import available_methods
+    """List the reconstruction methods with one line each (without importing them)."""
+    from imuloco.methods.registry import describe, method_names
 
-    found = available_methods()
-    width = max(len(n) for n in found)
-    for name, cls in found.items():
-        online = "online" if cls.supports_online else "offline"
-        click.echo(f"{name:<{width}}  [{online:>7}]  {cls.summary}")
+    found = [describe(name) for name in method_names()]
+    width = max(len(m.name) for m in found)
+    for m in found:
+        online = "online" if m.supports_online else "offline"
+        hint = f" (needs {m.missing}: pip install 'imuloco[{m.extra}]')" if m.missing else ""
+        click.echo(f"{m.name:<{width}}  [{online:>7}]  {m.summary}{hint}")
 
 
 def _csv(value: str | None) -> list[str]:

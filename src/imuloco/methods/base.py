@@ -61,10 +61,21 @@ class Stream(ABC):
         """sample : (6 S,) one frame of signals -> (local rotations (J, 4), root (3,))."""
 
 
+class _RegisteredName:
+    """A method class's name: its entry point's in the group ``imuloco.methods`` (stated once,
+    in ``pyproject.toml``; :func:`imuloco.methods.registry.registered_name`). A class
+    registered by hand states ``name`` itself, which takes precedence."""
+
+    def __get__(self, obj: object, cls: type) -> str:
+        from imuloco.methods.registry import registered_name
+
+        return registered_name(cls)
+
+
 class Method(ABC):
     """Base class of reconstruction methods (see the module docstring)."""
 
-    name: ClassVar[str]
+    name: ClassVar[str] = _RegisteredName()  # type: ignore[assignment]
     summary: ClassVar[str]  # one line for ``imuloco methods``
     supports_online: ClassVar[bool] = False
     # frames inside a gap of a recording reach reconstruct_signals as rows of NaN (methods

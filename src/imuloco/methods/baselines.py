@@ -22,7 +22,6 @@ from imuloco.methods.features import (
     standardize,
     windows,
 )
-from imuloco.methods.registry import register
 from imuloco.methods.training import Example, TrainingSet
 
 
@@ -38,12 +37,10 @@ class _ConstantStream(Stream):
         return self.integrator.step(self.vector)
 
 
-@register
 class MeanPose(Method):
     """The mean pose vector of the training data, whatever the sensors read (a standing
     figure that walks at the mean speed)."""
 
-    name = "mean"
     summary = "mean training pose, ignores the sensors (a floor for every metric)"
     supports_online = True
 
@@ -108,13 +105,11 @@ class _Windowed(Method):
         return _WindowedStream(self)
 
 
-@register
 class RidgePose(_Windowed):
     """Direct linear regression from a window of sensor samples to the full pose vector, the
     "Simple Linear Regression" of Eom et al. 2014 sec. 7 (Fig. 8, first row), with an L2
     penalty (scikit-learn ``Ridge``) on standardized inputs and outputs."""
 
-    name = "ridge"
     summary = "ridge regression from a causal window of sensor samples to the pose (2014 Fig. 8)"
 
     def __init__(self, window: int = 15, alpha: float = 1.0) -> None:
@@ -144,14 +139,12 @@ class RidgePose(_Windowed):
             setattr(self, k + "_", arrays[k])
 
 
-@register
 class KnnPose(_Windowed):
     """Windowed k-nearest-neighbour pose lookup: the training frames whose causal windows of
     standardized sensor samples are closest (Euclidean) to the input's give the pose, as the
     inverse-distance weighted mean of their pose vectors (scikit-learn ``NearestNeighbors``).
     Training rows are kept every ``stride`` frames to bound the model's size."""
 
-    name = "knn"
     summary = "k-nearest-neighbour lookup of poses by a causal window of sensor samples"
 
     def __init__(self, window: int = 15, k: int = 8, stride: int = 1) -> None:

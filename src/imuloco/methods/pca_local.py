@@ -31,14 +31,12 @@ from sklearn.neighbors import NearestNeighbors
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
 from imuloco.methods.base import Method
-from imuloco.methods.registry import register
 from imuloco.methods.training import TrainingSet
 from imuloco.ops.rotations import about_y, from_6d, qmul, qrot
 from imuloco.sensors.placement import anatomical_frame, get_placement
 from imuloco.sensors.simulate import GRAVITY, attached_trajectories
 
 
-@register
 class PCALocal(Method):
     """Local PCA pose prior with acceleration control (Tautges et al. 2008 sec. 5.2).
 
@@ -53,7 +51,6 @@ class PCALocal(Method):
     stride : keep every ``stride``-th training frame.
     """
 
-    name = "pca-local"
     summary = "local PCA pose prior + acceleration control, per frame (Chai & Hodgins 2005)"
 
     def __init__(self, k: int = 50, energy: float = 0.95, sigma_control: float = 0.01,

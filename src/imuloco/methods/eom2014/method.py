@@ -72,7 +72,6 @@ from imuloco.methods.postprocess import (
     laplacian_smooth_quaternions,
     pin_detected_contacts,
 )
-from imuloco.methods.registry import register
 from imuloco.methods.training import TrainingSet
 from imuloco.ops.filters import gaussian_smooth
 from imuloco.ops.rotations import (
@@ -124,11 +123,9 @@ class _Model:
         self.gp, self.phases, self.hmms, self.regs = gp, phases, hmms, regs
 
 
-@register
 class Eom2014(Method):
     """Eom, Choi, Noh 2014 (see the module docstring for the pipeline and every choice)."""
 
-    name = "eom2014"
     summary = "GPLVM + velocity GP, HMM phases, per-phase MLP (Eom et al. 2014)"
     supports_online = True
 

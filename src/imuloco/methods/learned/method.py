@@ -30,7 +30,6 @@ from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Reconstructor, TorchFK
 from imuloco.methods.postprocess import FootPinner, pin_feet
-from imuloco.methods.registry import register
 from imuloco.methods.training import Example, TrainingSet
 from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import from_6d, to_6d
@@ -56,7 +55,6 @@ class Prediction:
     sigma: np.ndarray
 
 
-@register
 class Learned(Method):
     """A causal GRU from sensor channels to pose vectors, contacts and confidence.
 
@@ -93,7 +91,6 @@ class Learned(Method):
     seed : seeds augmentation, initialization and batching.
     """
 
-    name = "learned"
     summary = "imuloco's causal GRU: pose, contacts and confidence; feet pinned (torch)"
     supports_online = True
     # files from before the look-ahead and the heavier acceleration term

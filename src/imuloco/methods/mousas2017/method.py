@@ -26,11 +26,9 @@ from imuloco.methods.mousas2017.registration import (
 )
 from imuloco.methods.mousas2017.stream import MousasStream
 from imuloco.methods.postprocess import pin_feet
-from imuloco.methods.registry import register
 from imuloco.methods.training import TrainingSet
 
 
-@register
 class Mousas2017(Method):
     """Hierarchical multivariate HMM with reactive interpolation (Mousas 2017).
 
@@ -78,7 +76,6 @@ class Mousas2017(Method):
         (eq. 9's sigma; 1: the y-marginal of the joint Gaussian of eq. 2).
     """
 
-    name = "mousas2017"
     summary = "hierarchical multivariate HMM + reactive interpolation (Mousas 2017), online"
     supports_online = True
 

@@ -40,7 +40,6 @@ from scipy.optimize import least_squares
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
 from imuloco.methods.base import Method
-from imuloco.methods.registry import register
 from imuloco.methods.tautges2008.align import eq17_distance, world_acceleration
 from imuloco.methods.tautges2008.tensor import (
     MotionModel,
@@ -58,7 +57,6 @@ from imuloco.sensors.simulate import GRAVITY, attached_trajectories
 MARGIN = 3  # extra synthesized frames each side of a window, so the spline's ends do not count
 
 
-@register
 class Tautges2008(Method):
     """Multilinear motion model reconstruction (Tautges et al. 2008, sec. 5.1).
 
@@ -76,7 +74,6 @@ class Tautges2008(Method):
     frame : ``"world"`` (eq. 17 on free accelerations) or ``"sensor"`` (see module docstring).
     """
 
-    name = "tautges2008"
     summary = "multilinear motion model fitted to windows of accelerations (Tautges 2008)"
 
     def __init__(self, frames: int = 32, repetitions: int = 3, style_rank: int | None = None,
