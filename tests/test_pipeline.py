@@ -149,7 +149,7 @@ def test_reconstruct_file_gives_a_walk_on_the_training_skeleton(log_file, fitted
     assert report["gait"]["cadence_spm"] > 0
     n = min(motion.num_frames, demo_clip.num_frames)
     assert mpjpe(demo_clip.slice(0, n), motion.slice(0, n)) < 12.0
-    json.dumps(report)  # JSON-ready
+    json.dumps(report.to_json())  # JSON-ready
 
 
 def test_calibration_makes_the_phone_orientation_irrelevant(fitted, demo_clip):

@@ -383,21 +383,21 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
                                       progress=True)
-    click.echo(f"model: {report['model']}", err=True)
+    click.echo(f"model: {report.model}", err=True)
     write_bvh(motion, output, overwrite=True)  # checked above
     written = [output]
     if video or html_path:
-        written += render_outputs([motion], [f"{motion.name} ({report['method']})"],
+        written += render_outputs([motion], [f"{motion.name} ({report.method})"],
                                   [video] if video else [], html_path, overwrite=True,
                                   progress=True, max_seconds=video_seconds)
     if report_path:
         with atomic_write(report_path, "w") as f:
-            f.write(json.dumps(report, indent=2) + "\n")
+            f.write(json.dumps(report.to_json(), indent=2) + "\n")
         written.append(report_path)
-    g = report["gait"]
+    g = report.gait
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
                f"cadence {_num(g['cadence_rhythm_spm'], 1)} steps/min from the legs' rhythm "
-               f"(raw signal: {_num(report['signal_cadence_spm'], 1)}), "
+               f"(raw signal: {_num(report.signal_cadence_spm, 1)}), "
                f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} detected strikes; "
                f"speed {_num(g['speed_mps'], 2)} m/s")
     click.echo("wrote " + ", ".join(str(p) for p in written))
@@ -548,16 +548,16 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
         if e.name != "websockets":
             raise
         raise MissingExtraError("live mode", "websockets", "live") from None
-    from imuloco.app.pipeline import choose_method
+    from imuloco.app.pipeline import choose_model
 
-    fitted, note = choose_method(method_name, model_path, placement, progress=True)
-    server = LiveServer(fitted, calibrate_seconds, note)
+    choice = choose_model(method_name, model_path, placement, progress=True)
+    server = LiveServer(choice.method, calibrate_seconds, choice.description)
     ssl = ssl_context(certfile, keyfile) if certfile else None
     scheme = "https" if ssl else "http"
     shown = "localhost" if host in ("127.0.0.1", "0.0.0.0", "::") else host
 
     def started(srv: LiveServer) -> None:
-        click.echo(f"model: {note}", err=True)
+        click.echo(f"model: {choice}", err=True)
         base = f"{scheme}://{shown}:{srv.port}"
         click.echo(f"viewer: {base}/live    phone: {base}/phone" +
                    ("" if host != "127.0.0.1" else "  (--host 0.0.0.0 for a phone on the "

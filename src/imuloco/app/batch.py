@@ -93,7 +93,7 @@ def reconstruct_one(recording: str | Path, out_dir: str | Path, name: str, model
                                           calibrate=calibrate, fitted=_load(model_path))
         out = Path(out_dir)
         write_bvh(motion, out / f"{name}.bvh", overwrite=overwrite)
-        (out / f"{name}.json").write_text(json.dumps(report, indent=2) + "\n")
+        (out / f"{name}.json").write_text(json.dumps(report.to_json(), indent=2) + "\n")
     except Exception as e:  # noqa: BLE001 - one bad recording must not stop the batch
         log.warning("%s: %s: %s", recording, type(e).__name__, e)
         row.update(status="error", error=f"{type(e).__name__}: {e}")

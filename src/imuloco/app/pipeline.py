@@ -21,13 +21,17 @@ import json
 import logging
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
+
+if TYPE_CHECKING:
+    from imuloco.methods.base import Method
 from imuloco.errors import UnknownNameError
 
 log = logging.getLogger(__name__)
@@ -50,10 +54,30 @@ def shipped_model(method: str, placement: str) -> Path | None:
     return path if path.is_file() else None
 
 
-def choose_method(method: str | None = None, model: str | Path | None = None,
-                  placement: str = "right_ankle", exclude: Sequence[str] = (),
-                  progress: bool = False, db=None):
-    """The fitted method that will reconstruct, and a sentence saying where it came from.
+@dataclass(frozen=True)
+class ModelChoice:
+    """The fitted method that will reconstruct and where it came from.
+
+    source : ``"file"`` (a model file the user gave), ``"shipped"`` (a pretrained model of the
+        package), ``"fitted"`` (fitted on the bundled sample on the fly) or ``"given"`` (an
+        already fitted method passed in).
+    description : the sentence reports print (``model`` in the JSON).
+    path : the model file, for ``"file"`` and ``"shipped"``.
+    """
+
+    method: Method
+    source: Literal["file", "shipped", "fitted", "given"]
+    description: str
+    path: Path | None = None
+
+    def __str__(self) -> str:
+        return self.description
+
+
+def choose_model(method: str | None = None, model: str | Path | None = None,
+                 placement: str = "right_ankle", exclude: Sequence[str] = (),
+                 progress: bool = False, db=None) -> ModelChoice:
+    """The fitted method that will reconstruct, with its source (see the module docstring).
 
     Parameters
     ----------
@@ -63,10 +87,6 @@ def choose_method(method: str | None = None, model: str | Path | None = None,
     exclude : clip names left out when a method is fitted on the bundled sample (the demo
         leaves its own clip out).
     db : the bundled sample when already loaded.
-
-    Returns
-    -------
-    (Method, str)
     """
     from imuloco.errors import InputError, ModelFileError
     from imuloco.methods import get_method, load_model, method_class
@@ -76,14 +96,15 @@ def choose_method(method: str | None = None, model: str | Path | None = None,
         if placement not in fitted.placements_:
             raise InputError(f"{model}: the model was trained for {fitted.placements_}, not "
                              f"{placement!r}")
-        return fitted, f"model file {model} (method {fitted.name!r})"
-    wanted = [method] if method is not None else [DEFAULT_METHOD]
-    for name in wanted:
-        path = shipped_model(name, placement)
-        if path is None:
-            continue
+        return ModelChoice(fitted, "file", f"model file {model} (method {fitted.name!r})",
+                           Path(model))
+    name = DEFAULT_METHOD if method is None else method
+    path = shipped_model(name, placement)
+    if path is not None:
         try:
-            return load_model(path), f"pretrained {name!r} model shipped with imuloco ({path.name})"
+            return ModelChoice(load_model(path), "shipped",
+                               f"pretrained {name!r} model shipped with imuloco ({path.name})",
+                               path)
         except (ModelFileError, ImportError) as e:
             log.warning("cannot load the shipped model %s: %s", path, e)
     if method is not None:
@@ -100,7 +121,65 @@ def choose_method(method: str | None = None, model: str | Path | None = None,
     keep = [i for i, lab in enumerate(db.labels) if lab["name"] not in set(exclude)]
     fitted = get_method(method).fit(db.subset(keep), placements=[placement], noise="phone",
                                     seed=0, progress=progress)
-    return fitted, f"{why} on the bundled sample ({len(keep)} clips) on the fly"
+    return ModelChoice(fitted, "fitted",
+                       f"{why} on the bundled sample ({len(keep)} clips) on the fly")
+
+
+def choose_method(method: str | None = None, model: str | Path | None = None,
+                  placement: str = "right_ankle", exclude: Sequence[str] = (),
+                  progress: bool = False, db=None) -> tuple[Method, str]:
+    """:func:`choose_model` as a pair (fitted method, sentence saying where it came from)."""
+    choice = choose_model(method, model, placement, exclude, progress, db)
+    return choice.method, choice.description
+
+
+@dataclass
+class ReconstructionReport:
+    """What :func:`reconstruct_file` found, as typed fields; :meth:`to_json` gives the JSON
+    report (its keys are a contract: ``imuloco reconstruct --report``, ``batch``'s NAME.json).
+
+    recording : the import (:class:`imuloco.sensors.reallog.LogReport` as JSON).
+    calibration : per placement, the rotation found (``None``: not calibrated).
+    feet_pinned_by : ``"method"``, ``"pipeline"`` or ``"none"``.
+    model : where the model came from (:class:`ModelChoice`).
+    placement : the placement read.
+    motion : frames, fps and duration of the reconstruction.
+    gait, plausibility : :func:`imuloco.evaluate.gait.gait_parameters` and
+        :func:`~imuloco.evaluate.gait.plausibility`, as JSON.
+    signal_cadence_spm : the cadence of the raw signal (Welch), steps per minute.
+    seconds : wall time of the whole reconstruction.
+    """
+
+    recording: dict[str, Any]
+    calibration: list[dict[str, Any]] | None
+    feet_pinned_by: str
+    model: ModelChoice
+    placement: str
+    motion: dict[str, Any]
+    gait: dict[str, Any]
+    signal_cadence_spm: float | None
+    plausibility: dict[str, Any]
+    seconds: float = 0.0
+
+    @property
+    def method(self) -> str:
+        """The registry name of the method that reconstructed."""
+        return self.model.method.name
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON report (keys in this order; ``calibration`` only when calibrated)."""
+        out: dict[str, Any] = {"recording": self.recording}
+        if self.calibration is not None:
+            out["calibration"] = self.calibration
+        out.update(feet_pinned_by=self.feet_pinned_by, method=self.method,
+                   model=self.model.description, placement=self.placement, motion=self.motion,
+                   gait=self.gait, signal_cadence_spm=self.signal_cadence_spm,
+                   plausibility=self.plausibility, seconds=self.seconds)
+        return out
+
+    def __getitem__(self, key: str) -> Any:
+        """``report[key]``: the JSON report's value (code written against the dict)."""
+        return self.to_json()[key]
 
 
 def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
@@ -147,7 +226,8 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
 def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=None,
                      method: str | None = None, placement: str = "right_ankle",
                      fmt: str = "auto", calibrate: bool = True, pin: bool | None = None,
-                     progress: bool = False, fitted=None) -> tuple[Motion, dict[str, Any]]:
+                     progress: bool = False, fitted: Method | ModelChoice | None = None
+                     ) -> tuple[Motion, ReconstructionReport]:
     """Import a phone's sensor log and reconstruct the wearer's motion.
 
     Parameters
@@ -155,17 +235,17 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     recording_path : a log file, a Sensor Logger folder or an (accelerometer, gyroscope) pair
         (see :func:`imuloco.sensors.reallog.read_log`; a RealWorld ``acc_*.csv`` finds its
         ``gyroscope_*.csv`` itself).
-    model, method, placement : see :func:`choose_method`.
+    model, method, placement : see :func:`choose_model`.
     fmt : log format or ``"auto"``.
     calibrate, pin : see :func:`reconstruct_recording`.
     progress : show progress bars (tqdm) on stderr.
-    fitted : an already fitted method (skips :func:`choose_method`).
+    fitted : an already fitted method or chosen model (skips :func:`choose_model`).
 
     Returns
     -------
-    The Motion (on the model's training skeleton, at its frame rate) and a JSON-ready report:
-    the import, the calibration, the method, gait parameters, plausibility checks and the
-    cadence of the raw signal.
+    The Motion (on the model's training skeleton, at its frame rate) and the
+    :class:`ReconstructionReport`: the import, the calibration, the model, gait parameters,
+    plausibility checks and the cadence of the raw signal (``report.to_json()`` for JSON).
     """
     from tqdm.auto import tqdm
 
@@ -181,9 +261,12 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar.update()
     bar.set_postfix_str("model")
     if fitted is None:
-        fitted, note = choose_method(method, model, placement, progress=progress)
+        choice = choose_model(method, model, placement, progress=progress)
+    elif isinstance(fitted, ModelChoice):
+        choice = fitted
     else:
-        note = f"given fitted method {fitted.name!r}"
+        choice = ModelChoice(fitted, "given", f"given fitted method {fitted.name!r}")
+    fitted = choice.method
     bar.update()
     bar.set_postfix_str(f"{fitted.name} on {rec.times[-1]:.0f} s")
     motion, info = reconstruct_recording(rec, fitted, calibrate, pin)
@@ -194,8 +277,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar.set_postfix_str("gait")
     phases = gait_phases(motion)
     k = rec.placements.index(fitted.placements_[0])
-    report = {
-        "recording": {
+    report = ReconstructionReport(
+        recording={
             "files": log_report.files, "format": log_report.format,
             "duration_s": round(log_report.duration, 3),
             "source_rate_hz": round(log_report.source_rate, 2),
@@ -204,17 +287,17 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
             "gyro_unit": log_report.gyro_unit,
             "gaps": [[round(g.start, 3), round(g.stop, 3)] for g in log_report.gaps],
         },
-        **info,
-        "method": fitted.name, "model": note, "placement": placement,
-        "motion": {"frames": motion.num_frames, "fps": motion.fps,
-                   "duration_s": round(motion.duration, 3)},
-        "gait": to_json(gait_parameters(motion, phases)),
-        "signal_cadence_spm": to_json({"v": signal_cadence(rec, k)})["v"],
-        "plausibility": to_json(plausibility(motion)),
-    }
+        calibration=info.get("calibration"), feet_pinned_by=info["feet_pinned_by"],
+        model=choice, placement=placement,
+        motion={"frames": motion.num_frames, "fps": motion.fps,
+                "duration_s": round(motion.duration, 3)},
+        gait=to_json(gait_parameters(motion, phases)),
+        signal_cadence_spm=to_json({"v": signal_cadence(rec, k)})["v"],
+        plausibility=to_json(plausibility(motion)),
+    )
     bar.update()
     bar.close()
-    report["seconds"] = round(time.perf_counter() - t0, 2)
+    report.seconds = round(time.perf_counter() - t0, 2)
     return motion, report
 
 
@@ -299,14 +382,15 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     bar.update()
 
     bar.set_postfix_str("model")
-    fitted, note = choose_method(method, model, "right_ankle", exclude=[clip], db=db)
+    choice = choose_model(method, model, "right_ankle", exclude=[clip], db=db)
     bar.update()
     bar.set_postfix_str("reconstructing")
-    motion, report = reconstruct_file(paths["recording.csv"], fitted=fitted)
-    if "on the fly" not in note and "pretrained" in note:
-        note += ("; it was trained on every clip of the data set, this one included, so these "
-                 "metrics are optimistic (see `imuloco bench` for held-out numbers)")
-    report["model"] = note
+    if choice.source == "shipped":
+        choice = replace(choice, description=choice.description + (
+            "; it was trained on every clip of the data set, this one included, so these "
+            "metrics are optimistic (see `imuloco bench` for held-out numbers)"))
+    motion, recon = reconstruct_file(paths["recording.csv"], fitted=choice)
+    report = recon.to_json()
     n = min(gt.num_frames, motion.num_frames)
     gt_cut, rec_cut = gt.slice(0, n), motion.slice(0, n)
     rec_cut.name = "reconstruction"
@@ -314,7 +398,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     bar.update()
 
     bar.set_postfix_str("rendering")
-    titles = ["ground truth", f"reconstruction ({fitted.name})"]
+    titles = ["ground truth", f"reconstruction ({recon.method})"]
     render_outputs([gt_cut, rec_cut], titles, [paths["demo.mp4"], paths["demo.gif"]],
                    paths["demo.html"], overwrite=overwrite)
     bar.update()
