@@ -117,6 +117,15 @@ log_options = _options(
 )
 calibrate_option = click.option("--no-calibrate", is_flag=True,
                                 help="Skip the phone-on-leg calibration.")
+# how motion files are read (info, phases, bench, train): read_bvh's options
+_reading_options = _options(
+    click.option("--up", type=click.Choice(["auto", "y", "z"]), default="auto",
+                 show_default=True, help="Vertical axis of the motion files; Z-up files are "
+                                         "turned Y up (auto: detected from the animated body)."),
+    click.option("--skip-frames", type=click.IntRange(min=0), default=0, show_default=True,
+                 help="Drop this many leading frames of each motion file (a prepended "
+                      "T-pose)."),
+)
 
 
 def _num(value: float | None, digits: int) -> str:
@@ -127,12 +136,13 @@ def _num(value: float | None, digits: int) -> str:
 @cli.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
-def info(file: Path, as_json: bool) -> None:
+@_reading_options
+def info(file: Path, as_json: bool, up: str, skip_frames: int) -> None:
     """Joints, frames, fps, duration and the body map found for a motion FILE."""
     from imuloco.core.bodymap import PARTS
     from imuloco.io.motionfile import read_motion
 
-    motion = read_motion(file)
+    motion = read_motion(file, up=up, skip_frames=skip_frames)
     sk = motion.skeleton
     report = {
         "file": str(file), "joints": sk.num_joints, "names": sk.names,
@@ -154,12 +164,14 @@ def info(file: Path, as_json: bool) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
 @click.option("--reference", type=click.Choice(["right", "left"]), default="right",
               show_default=True, help="Leg whose 8-phase cycle is labelled.")
-def phases(motion_file: Path, as_json: bool, reference: str) -> None:
+@_reading_options
+def phases(motion_file: Path, as_json: bool, reference: str, up: str, skip_frames: int) -> None:
     """Per-frame foot contacts and gait phases, and step events, of a MOTION file."""
     from imuloco.io.motionfile import read_motion
     from imuloco.phases import gait_phases
 
-    report = gait_phases(read_motion(motion_file), reference=reference).to_dict()
+    report = gait_phases(read_motion(motion_file, up=up, skip_frames=skip_frames),
+                         reference=reference).to_dict()
     if as_json:
         click.echo(json.dumps(report))
         return
@@ -208,8 +220,10 @@ def _csv(value: str | None) -> list[str]:
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
+@_reading_options
 def bench(method_names: str, split_name: str, noise: str, placement: str, data: Path | None,
-          limit: int | None, seed: int, out: Path, speed: bool, db_frames: str | None) -> None:
+          limit: int | None, seed: int, out: Path, speed: bool, db_frames: str | None,
+          up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
     names = _csv(method_names)
     if speed:
@@ -222,7 +236,7 @@ def bench(method_names: str, split_name: str, noise: str, placement: str, data: 
     from imuloco.evaluate.report import COLUMNS, table
 
     records = run_bench(names, split_name, noise, _csv(placement), data, out, limit, seed,
-                        progress=True)
+                        progress=True, up=up, skip_frames=skip_frames)
     click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
     click.echo(f"wrote {out / 'results.json'} and {out / 'results.md'}")
 
@@ -257,9 +271,10 @@ def evaluate(ground_truth: Path, reconstructed: Path, as_json: bool) -> None:
               help="A hyperparameter of the method (repeatable), e.g. --param epochs=4.")
 @click.option("-o", "--output", type=_file(), required=True, help="Model file to write (.npz).")
 @force_option
+@_reading_options
 def train(method_name: str, data: Path | None, limit: int | None, seed: int, placement: str,
           noise: str, split_name: str | None, params: tuple[str, ...], output: Path,
-          force: bool) -> None:
+          force: bool, up: str, skip_frames: int) -> None:
     """Fit a method on motion clips with simulated sensors and save the model.
 
     Writes OUTPUT, and for methods that keep a training history (``learned``) its losses per
@@ -274,7 +289,8 @@ def train(method_name: str, data: Path | None, limit: int | None, seed: int, pla
 
     check_output(output, force)
     method = method_class(method_name)().set_params(**parse_params(params, "--param"))
-    db = load_sample() if data is None else load_database(data, limit=limit)
+    db = (load_sample() if data is None
+          else load_database(data, limit=limit, up=up, skip_frames=skip_frames))
     if data is None and limit is not None:
         db = db.subset(spread(len(db), limit))
     if split_name is not None:
