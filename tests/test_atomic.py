@@ -27,3 +27,32 @@ def test_check_output_refuses_existing_and_inputs(tmp_path):
     assert check_output(target, force=True) == target
     with pytest.raises(ImulocoError, match="overwrite an input"):
         check_output(tmp_path / "." / "x.csv", force=True, inputs=[target])
+
+
+def test_an_interrupted_video_leaves_no_file(tmp_path):
+    import numpy as np
+
+    pytest.importorskip("imageio_ffmpeg")
+    from imuloco.viz.skeleton import write_video
+
+    def frames():
+        for _ in range(3):
+            yield np.zeros((16, 16, 3), np.uint8)
+        raise KeyboardInterrupt  # the user stops a long encoding
+
+    with pytest.raises(KeyboardInterrupt):
+        write_video(frames(), tmp_path / "v.mp4", 10.0)
+    assert list(tmp_path.iterdir()) == []
+    path = write_video(np.zeros((4, 16, 16, 3), np.uint8), tmp_path / "v.mp4", 10.0)
+    assert path.stat().st_size > 0 and list(tmp_path.iterdir()) == [path]
+
+
+def test_check_outputs_names_every_existing_target(tmp_path):
+    from imuloco.io.atomic import check_outputs
+
+    a, b, c = (tmp_path / n for n in ("a.bvh", "b.html", "c.json"))
+    a.write_text("x")
+    b.write_text("y")
+    with pytest.raises(OutputExistsError, match=r"a\.bvh, .*b\.html exist; pass --force"):
+        check_outputs([a, None, b, c])
+    assert check_outputs([a, None, b, c], force=True) == [a, b, c]

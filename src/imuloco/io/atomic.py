@@ -1,7 +1,8 @@
 """Writing outputs so that a reader never sees half a file and no input is overwritten.
 
-:func:`atomic_write` writes to a temporary file in the target's folder and renames it over the
-target only when the writing succeeded (``os.replace`` is atomic on one file system), so an
+:func:`atomic_write` (a file object) and :func:`atomic_path` (a file name, for writers that
+want one) write to a temporary file in the target's folder and rename it over the target only
+when the writing succeeded (``os.replace`` is atomic on one file system), so an
 interrupted run leaves the old file or none, never a truncated one. :func:`check_output`
 refuses a target that exists (unless ``force``) or that is one of the inputs.
 """
@@ -46,6 +47,23 @@ def check_outputs(paths: Iterable[str | Path | None], force: bool = False,
 
 
 @contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """A temporary path beside ``path`` with its suffix (for writers that take a file name
+    and pick the format from it: ffmpeg, matplotlib, imageio); renamed to ``path`` when the
+    block succeeds, removed when it raises (``path`` is then left as it was)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+@contextmanager
 def atomic_write(path: str | Path, mode: str = "wb") -> Iterator:
     """Open a temporary file beside ``path`` for writing; rename it to ``path`` on success.
 
@@ -53,15 +71,8 @@ def atomic_write(path: str | Path, mode: str = "wb") -> Iterator:
     removed and ``path`` is left as it was."""
     if mode not in ("wb", "w"):
         raise ValueError(f"atomic_write: mode must be 'wb' or 'w', not {mode!r}")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, mode, **({"encoding": "utf-8"} if mode == "w" else {})) as f:
-            yield f
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp, open(tmp, mode, **({"encoding": "utf-8"} if mode == "w"
+                                                      else {})) as f:
+        yield f
+        f.flush()
+        os.fsync(f.fileno())

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from imuloco.core.motion import Motion
-from imuloco.io.atomic import check_output
+from imuloco.io.atomic import atomic_write, check_output
 from imuloco.viz.skeleton import follow_azimuth, joint_sides
 
 TEMPLATE = Path(__file__).with_name("viewer.html")
@@ -115,5 +115,6 @@ def write_viewer(motions: Sequence[Motion], path: str | Path, titles: Sequence[s
     check_output(path, overwrite)
     page = viewer_html(motions, titles, title or motions[0].name or "imuloco")
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(page, encoding="utf-8")
+    with atomic_write(path, "w") as f:
+        f.write(page)
     return path

@@ -12,7 +12,7 @@ import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
-from imuloco.io.atomic import check_output
+from imuloco.io.atomic import atomic_path, check_output
 from imuloco.phases.gait import GAIT8, GaitPhases
 
 
@@ -31,8 +31,8 @@ def _figure(width: float, height: float):
 def _save(fig, path: str | Path, overwrite: bool) -> Path:
     path = Path(path)
     check_output(path, overwrite)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp)
     return path
 
 

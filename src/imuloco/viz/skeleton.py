@@ -15,7 +15,7 @@ import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
-from imuloco.io.atomic import check_output
+from imuloco.io.atomic import atomic_path, check_output
 from imuloco.ops.heading import heading_from_hips
 
 SIDE_COLORS = {"left": "#1f77b4", "right": "#d62728", "center": "#444444"}
@@ -244,14 +244,16 @@ def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path, fps
                                      "-loop", "0"]}
     else:
         raise ValueError(f"{path}: video format must be .mp4 or .gif, got {suffix!r}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    writer = imageio_ffmpeg.write_frames(str(path), (w, h), fps=fps, macro_block_size=1,
-                                         ffmpeg_log_level="error", **options)
-    writer.send(None)  # start the ffmpeg process
-    writer.send(np.ascontiguousarray(first))
-    for f in frames:
-        writer.send(np.ascontiguousarray(f, dtype=np.uint8))
-    writer.close()
+    with atomic_path(path) as tmp:  # an interrupted encoding leaves no truncated video
+        writer = imageio_ffmpeg.write_frames(str(tmp), (w, h), fps=fps, macro_block_size=1,
+                                             ffmpeg_log_level="error", **options)
+        writer.send(None)  # start the ffmpeg process
+        try:
+            writer.send(np.ascontiguousarray(first))
+            for f in frames:
+                writer.send(np.ascontiguousarray(f, dtype=np.uint8))
+        finally:
+            writer.close()
     return path
 
 
@@ -289,6 +291,6 @@ def frame_strip(motions: Sequence[Motion], times: Sequence[float], path: str | P
     blank = np.full_like(images[0], 255)
     images += [blank] * (-len(images) % columns)
     rows = [np.concatenate(images[i:i + columns], axis=1) for i in range(0, len(images), columns)]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    iio.imwrite(path, np.concatenate(rows, axis=0))
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, np.concatenate(rows, axis=0))
     return path
