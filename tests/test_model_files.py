@@ -187,20 +187,28 @@ def _add_member(src, dst, name, header_bytes):
         b.writestr(name, header_bytes)
 
 
-def test_unused_huge_member_is_refused_before_decompressing(models, tmp_path):
-    """1.1 GiB of zeros compress to ~1 MB: the declared size refuses them unread."""
+def test_unused_huge_member_is_refused_before_decompressing(models, tmp_path, monkeypatch):
+    """A member that unzips to more than the limit (here lowered to 1 MiB; 32 MiB of zeros
+    compress to 32 KB) is refused from its declared size: never opened."""
+    from imuloco.methods import modelfile
+
+    monkeypatch.setattr(modelfile, "MAX_ARRAY_BYTES", 1 << 20)
     path = models["ridge"].save(tmp_path / "r.npz")
     big = tmp_path / "big.npz"
     with zipfile.ZipFile(path) as a, zipfile.ZipFile(big, "w", zipfile.ZIP_DEFLATED) as b:
         for info in a.infolist():
             b.writestr(info, a.read(info))
-        with b.open("junk.npy", "w", force_zip64=True) as f:
-            chunk = bytes(1 << 24)
-            for _ in range(70):
-                f.write(chunk)
-    assert big.stat().st_size < 5_000_000
-    with pytest.raises(ModelFileError, match="junk.npy"):
+        b.writestr("junk.npy", bytes(32 << 20))
+    assert big.stat().st_size < 200_000
+    opened = []
+    real_open = zipfile.ZipFile.open
+    monkeypatch.setattr(zipfile.ZipFile, "open",
+                        lambda self, name, *a, **k: opened.append(str(getattr(name, "filename",
+                                                                                name)))
+                        or real_open(self, name, *a, **k))
+    with pytest.raises(ModelFileError, match="'junk.npy' unzips to 33,554,432 bytes"):
         load_model(big)
+    assert opened == []
 
 
 def test_unused_small_member_is_never_read(models, tmp_path):

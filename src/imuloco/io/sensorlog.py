@@ -380,7 +380,11 @@ class Export:
         if m.file_size > MAX_MEMBER_BYTES:
             raise FormatError(self.label(name), None, f"{m.file_size:,} bytes once unzipped, "
                                                       f"more than the {MAX_MEMBER_BYTES:,} allowed")
-        return self._zip.open(m)
+        try:
+            return self._zip.open(m)
+        except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError,
+                ValueError) as exc:  # damaged, encrypted or of an unknown compression
+            raise FormatError(self.label(name), None, f"unreadable zip member ({exc})") from None
 
     def header(self, name: str) -> str:
         """The first line that is neither blank nor a comment, lower case ('' when none)."""
@@ -458,8 +462,12 @@ def sensorlogger_platform(ex: Export) -> tuple[str, str]:
     cannot tell: negating the acceleration is a mirror image of a possible movement.
     """
     if ex.has("Metadata.csv"):
-        with ex.open("Metadata.csv") as f:
-            text = f.read(MAX_LINE_BYTES).decode("utf-8-sig", errors="replace")
+        try:
+            with ex.open("Metadata.csv") as f:
+                text = f.read(MAX_LINE_BYTES).decode("utf-8-sig", errors="replace")
+        except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+            raise FormatError(ex.label("Metadata.csv"), None, f"corrupted zip member ({exc})"
+                              ) from None
         rows = list(csv.DictReader(text.splitlines()))
         if rows:
             row = {k.strip().lower(): (v or "").strip().lower()

@@ -100,7 +100,10 @@ class _Arrays(Mapping):
                                          f"{shape} ({nbytes:,} bytes) in {info.file_size:,} "
                                          "bytes")
             with self._zip.open(info) as f:
-                self._cache[key] = np.lib.format.read_array(f, allow_pickle=False)
+                arr = np.lib.format.read_array(f, allow_pickle=False)
+            if arr.dtype.kind in "fc" and not np.isfinite(arr).all():
+                raise ModelFileError(f"{self.path}: array {key!r} holds NaN or infinite values")
+            self._cache[key] = arr
         return self._cache[key]
 
 
@@ -147,11 +150,24 @@ def _load(path: Path, arrays: _Arrays) -> Method:
         method.protocol_ = header.get("protocol", {})
         method.set_state(_Without(arrays, ("__header__", "__parents__", "__offsets__")),
                          header["values"])
-    except (KeyError, TypeError, ValueError, AttributeError, IndexError, RuntimeError) as e:
+        _self_check(path, method)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, RuntimeError,
+            np.linalg.LinAlgError) as e:
         # RuntimeError: torch refusing weights of another shape
         raise ModelFileError(f"{path}: {header['method']} model file is incomplete or corrupted "
                              f"({type(e).__name__}: {str(e)[:300]})") from None
     return method
+
+
+def _self_check(path: Path, method: Method) -> None:
+    """Reconstruct one second of a resting sensor: arrays of shapes that do not fit each other
+    (which no header check sees) fail here, at loading, rather than in the user's run."""
+    frames = max(2, round(method.fps_))
+    signals = np.zeros((frames, 6 * len(method.placements_)))
+    signals[:, 1::6] = 9.80665  # gravity along each sensor's y axis
+    motion = method.reconstruct_signals(signals)
+    if not (np.isfinite(motion.rotations).all() and np.isfinite(motion.root).all()):
+        raise ModelFileError(f"{path}: {method.name} model reconstructs NaN or infinite values")
 
 
 class _Without(Mapping):
