@@ -368,12 +368,15 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
 @click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
               help="Phone of a Sensor Logger export [default: from its Metadata.csv, else "
                    "guessed with a warning].")
+@click.option("--piece-seconds", type=click.FloatRange(10.0), default=None,
+              help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
+                   "(bounded memory for long recordings; not with --video/--html).")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
                 report_path: Path | None, no_calibrate: bool, platform: str | None,
-                force: bool) -> None:
+                piece_seconds: float | None, force: bool) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -389,6 +392,22 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         if out is not None:
             check_output(out, force=True, inputs=recording)  # never onto an input
     source = recording[0] if len(recording) == 1 else list(recording)
+    if piece_seconds is not None:
+        if video or html_path:
+            raise click.UsageError("--piece-seconds writes the BVH only: drop --video/--html")
+        from imuloco.app.chunked import reconstruct_to_bvh
+
+        report = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
+                                    not no_calibrate, platform=platform, overwrite=force,
+                                    piece_s=piece_seconds, progress=True)
+        if report_path:
+            with atomic_write(report_path, "w") as f:
+                f.write(json.dumps(report, indent=2) + "\n")
+        m = report["motion"]
+        click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
+                   f"{report['pieces']['count']} piece(s); wrote "
+                   + ", ".join(str(p) for p in (output, report_path) if p))
+        return
     try:
         motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                           placement=placement, fmt=fmt,
