@@ -55,10 +55,6 @@ def test_a_library_error_is_one_line_of_its_own_after_the_progress_bar(tmp_path,
     (["simulate", "{bvh}", "--placement", "left_ear", "-o", "{tmp}/s.csv"],
      "unknown sensor placement 'left_ear'"),
     (["train", "--method", "nosuch", "-o", "{tmp}/m.npz"], "unknown method 'nosuch'"),
-    (["train", "--method", "ridge", "--param", "windw=3", "-o", "{tmp}/m.npz"],
-     "no hyperparameter 'windw'"),
-    (["train", "--method", "ridge", "--param", "window", "-o", "{tmp}/m.npz"],
-     "--param: expected key=value"),
     (["bench", "--method", "ridge[window", "--out", "{tmp}/b"], "expected NAME[key=value"),
     (["reconstruct", "{log}", "--method", "nosuch", "-o", "{tmp}/r.bvh"],
      "unknown method 'nosuch'"),
@@ -71,6 +67,15 @@ def test_user_errors_print_a_plain_message(tmp_path, walk, log_file, args, messa
     (line,) = _error_lines(res.output)
     assert line.startswith("Error: ") and message in line
     assert "Error: '" not in line  # no KeyError quotes around the message
+
+
+@pytest.mark.parametrize(("param", "message"), [
+    ("windw=3", "no hyperparameter 'windw'"), ("window", "--param: expected key=value")])
+def test_bad_hyperparameters_are_usage_errors(tmp_path, param, message):
+    res = CliRunner().invoke(cli, ["train", "--method", "ridge", "--param", param, "-o",
+                                   str(tmp_path / "m.npz")])
+    assert res.exit_code == 2 and message in res.output and "--param" in res.output
+    assert not (tmp_path / "m.npz").exists()
 
 
 def test_outputs_are_never_replaced_without_force_nor_an_input(tmp_path, log_file, model_file):

@@ -115,6 +115,10 @@ log_options = _options(
     click.option("--format", "fmt", default="auto", show_default=True, type=_LogFormat(),
                  help="Sensor log format."),
 )
+platform_option = click.option(
+    "--platform", type=click.Choice(["ios", "android"]), default=None,
+    help="Phone of a Sensor Logger export [default: from its Metadata.csv, else guessed with "
+         "a warning].")
 calibrate_option = click.option("--no-calibrate", is_flag=True,
                                 help="Skip the phone-on-leg calibration.")
 # how motion files are read (info, phases, bench, train): read_bvh's options
@@ -206,7 +210,7 @@ def _csv(value: str | None) -> list[str]:
 
 
 @cli.command()
-@click.option("--method", "method_names", required=True,
+@click.option("--method", "method_names", default=None,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
                    "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm].")
 @click.option("--split", "split_name", type=click.Choice(SPLITS), default="random-clips",
@@ -220,11 +224,29 @@ def _csv(value: str | None) -> list[str]:
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
+@click.option("--fuzz", type=click.IntRange(1), default=None, metavar="N",
+              help="Instead: read N generated malformed inputs per reader (imuloco.evaluate."
+                   "fuzz) and write fuzz.md and fuzz.json.")
+@click.option("--readers", default=None,
+              help="With --fuzz: readers, comma separated [default: all].")
 @_reading_options
-def bench(method_names: str, split_name: str, noise: str, placement: str, data: Path | None,
-          limit: int | None, seed: int, out: Path, speed: bool, db_frames: str | None,
-          up: str, skip_frames: int) -> None:
+def bench(method_names: str | None, split_name: str, noise: str, placement: str,
+          data: Path | None, limit: int | None, seed: int, out: Path, speed: bool,
+          db_frames: str | None, fuzz: int | None, readers: str | None, up: str,
+          skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
+    if fuzz is not None:
+        from imuloco.evaluate.fuzz import READERS, write_fuzz
+
+        chosen = tuple(_csv(readers)) or READERS
+        unknown = sorted(set(chosen) - set(READERS))
+        if unknown:
+            raise click.BadParameter(f"unknown reader(s) {unknown}; expected {list(READERS)}",
+                                     param_hint="--readers")
+        click.echo(write_fuzz(fuzz, out, chosen, seed=seed, progress=True))
+        return
+    if not method_names:
+        raise click.UsageError("Missing option '--method' (or pass --fuzz N).")
     names = _csv(method_names)
     if speed:
         from imuloco.evaluate.speed import speed_benchmark
@@ -281,6 +303,7 @@ def train(method_name: str, data: Path | None, limit: int | None, seed: int, pla
     epoch beside it as OUTPUT.history.json and, with matplotlib, OUTPUT.curves.png.
     """
 
+    from imuloco.errors import UnknownNameError
     from imuloco.evaluate.protocols import split
     from imuloco.io.atomic import check_output
     from imuloco.io.database import load_database, load_sample, spread
@@ -288,7 +311,11 @@ def train(method_name: str, data: Path | None, limit: int | None, seed: int, pla
     from imuloco.methods.registry import parse_params
 
     check_output(output, force)
-    method = method_class(method_name)().set_params(**parse_params(params, "--param"))
+    method = method_class(method_name)()
+    try:
+        method.set_params(**parse_params(params, "--param"))
+    except UnknownNameError as e:
+        raise click.BadParameter(str(e), param_hint="--param") from None
     db = (load_sample() if data is None
           else load_database(data, limit=limit, up=up, skip_frames=skip_frames))
     if data is None and limit is not None:
@@ -296,7 +323,13 @@ def train(method_name: str, data: Path | None, limit: int | None, seed: int, pla
     if split_name is not None:
         db = split(db, split_name)[0]
     placements = _csv(placement)
-    method.fit(db, placements, noise, seed, progress=True)
+    try:
+        method.fit(db, placements, noise, seed, progress=True)
+    except (ValueError, TypeError) as e:
+        if not params:
+            raise
+        raise click.BadParameter(f"{e} (rejected by {method_name})", param_hint="--param"
+                                 ) from None
     method.protocol_.update(data="bundled sample" if data is None else Path(data).name,
                             split=split_name or "all")
     seconds = method.protocol_["train_seconds"]
@@ -339,7 +372,8 @@ def export_onnx_command(model_path: Path | None, output: Path, force: bool) -> N
 @click.argument("motion_file", type=_existing_file())
 @placement_option
 @noise_option
-@click.option("--rate", default=100.0, show_default=True, type=float, help="Sampling rate, Hz.")
+@click.option("--rate", default=100.0, show_default=True, type=click.FloatRange(1.0, 10_000.0),
+              help="Sampling rate, Hz.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the noise draws.")
 @click.option("-o", "--output", required=True, type=_file(),
               help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s).")
@@ -379,11 +413,16 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @click.option("--report", "report_path", type=_file(), default=None,
               help="Also write the report (gait, checks) as JSON.")
 @calibrate_option
+@platform_option
+@click.option("--piece-seconds", type=click.FloatRange(10.0), default=None,
+              help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
+                   "(bounded memory for long recordings; not with --video/--html).")
 @force_option
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
-                report_path: Path | None, no_calibrate: bool, force: bool) -> None:
+                report_path: Path | None, no_calibrate: bool, platform: str | None,
+                piece_seconds: float | None, force: bool) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -396,9 +435,25 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     check_outputs([output, video, html_path, report_path], force,
                   inputs=[*recording, *([model_path] if model_path else [])])
     source = recording[0] if len(recording) == 1 else list(recording)
+    if piece_seconds is not None:
+        if video or html_path:
+            raise click.UsageError("--piece-seconds writes the BVH only: drop --video/--html")
+        from imuloco.app.chunked import reconstruct_to_bvh
+
+        pieces = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
+                                    not no_calibrate, platform=platform, overwrite=True,
+                                    piece_s=piece_seconds, progress=True)
+        if report_path:
+            with atomic_write(report_path, "w") as f:
+                f.write(json.dumps(pieces, indent=2) + "\n")
+        m = pieces["motion"]
+        click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
+                   f"{pieces['pieces']['count']} piece(s); wrote "
+                   + ", ".join(str(p) for p in (output, report_path) if p))
+        return
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
-                                      progress=True)
+                                      progress=True, platform=platform)
     click.echo(f"model: {report.model}", err=True)
     write_bvh(motion, output, overwrite=True)  # checked above
     written = [output]
@@ -503,10 +558,11 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
 @model_options
 @log_options
 @calibrate_option
+@platform_option
 @force_option
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path, jobs: int,
           model_path: Path | None, method_name: str | None, placement: str, fmt: str,
-          no_calibrate: bool, force: bool) -> None:
+          no_calibrate: bool, platform: str | None, force: bool) -> None:
     """Reconstruct many RECORDINGS (one walker each) in parallel: a BVH and a gait report
     per recording, and a summary.csv / summary.json of cadence, speed and step length."""
     from imuloco.app.batch import find_recordings, run_batch
@@ -515,7 +571,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     if not paths:
         raise click.UsageError("no recordings: give files or --glob PATTERN")
     summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
-                        calibrate=not no_calibrate, overwrite=force, progress=True)
+                        calibrate=not no_calibrate, overwrite=force, progress=True,
+                        platform=platform)
     click.echo(f"model: {summary['model']}", err=True)
     click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
     for r in summary["recordings"]:

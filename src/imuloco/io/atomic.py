@@ -4,7 +4,8 @@
 want one) write to a temporary file in the target's folder and rename it over the target only
 when the writing succeeded (``os.replace`` is atomic on one file system), so an
 interrupted run leaves the old file or none, never a truncated one. :func:`check_output`
-refuses a target that exists (unless ``force``) or that is one of the inputs.
+refuses a target that exists (unless ``force``), that is one of the inputs, or whose folder
+cannot be written.
 """
 
 from __future__ import annotations
@@ -29,6 +30,11 @@ def check_output(path: str | Path, force: bool = False,
                                "output path")
     if path.exists() and not force:
         raise OutputExistsError(f"{path} exists; pass --force to replace it")
+    if path.parent.is_dir():  # fail now, not after the work: /proc, a read-only mount, ...
+        try:
+            tempfile.TemporaryFile(dir=path.parent).close()
+        except OSError as e:
+            raise ImulocoError(f"{path}: cannot write there ({e.strerror or e})") from None
     return path
 
 
@@ -52,8 +58,11 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     and pick the format from it: ffmpeg, matplotlib, imageio); renamed to ``path`` when the
     block succeeds, removed when it raises (``path`` is then left as it was)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    except OSError as e:  # a read-only or virtual file system (/proc), no permission, ...
+        raise ImulocoError(f"{path}: cannot write there ({e.strerror or e})") from None
     os.close(fd)
     try:
         yield Path(tmp)
