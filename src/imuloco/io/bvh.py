@@ -38,7 +38,7 @@ from imuloco.core.bodymap import resolve_body_map
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
-from imuloco.io.atomic import atomic_write
+from imuloco.io.atomic import atomic_write, check_output
 from imuloco.io.upaxis import Z_TO_Y, check_skip, check_up, resolve_up, to_y_up
 from imuloco.ops.rotations import IDENTITY, from_euler, qmul, qrot, to_euler
 
@@ -446,8 +446,7 @@ def write_bvh_pieces(pieces: Iterable[Motion], frames: int, path: str | Path, un
     order = order.upper()
     if sorted(order) != ["X", "Y", "Z"]:
         raise ValueError(f"order must be a permutation of 'XYZ' such as 'ZXY', got {order!r}")
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
+    check_output(path, overwrite)
     k = 1.0 / UNITS[unit]
     dec = _decimals(UNITS[unit])
     written = 0
