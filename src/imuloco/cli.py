@@ -426,9 +426,12 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
 @click.option("--glob", "patterns", multiple=True, metavar="PATTERN",
               help="Recordings matching a glob pattern, e.g. 'logs/*.csv' (repeatable).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
-              required=True, help="Folder for NAME.bvh, NAME.json and summary.csv/.json.")
-@click.option("-j", "--jobs", type=int, default=1, show_default=True,
-              help="Worker processes (-1: one per CPU; needs joblib, the [dist] extra).")
+              required=True, help="Folder for NAME.bvh, NAME.json, summary.csv/.json, "
+              "walkers.parquet and strides.parquet.")
+@click.option("-j", "--jobs", type=int, default=None,
+              help="Dask worker processes of the local cluster [default: one per CPU].")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="Run on an existing Dask cluster, e.g. tcp://host:8786 (see the README).")
 @click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
                                                        path_type=Path), default=None,
               help="Model file from `imuloco train` [default: the shipped pretrained model].")
@@ -440,12 +443,15 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
               type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
               help="Sensor log format.")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
-@click.option("--force", is_flag=True, help="Replace existing output files.")
-def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path, jobs: int,
-          model_path: Path | None, method_name: str | None, placement: str, fmt: str,
-          no_calibrate: bool, force: bool) -> None:
-    """Reconstruct many RECORDINGS (one walker each) in parallel: a BVH and a gait report
-    per recording, and a summary.csv / summary.json of cadence, speed and step length."""
+@click.option("--force", is_flag=True,
+              help="Redo recordings whose outputs are complete (a re-run skips them).")
+def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path,
+          jobs: int | None, scheduler: str | None, model_path: Path | None,
+          method_name: str | None, placement: str, fmt: str, no_calibrate: bool,
+          force: bool) -> None:
+    """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
+    recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
+    finished recordings)."""
     from imuloco.app.batch import find_recordings, run_batch
 
     paths = find_recordings(recordings, patterns)
@@ -453,8 +459,9 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
         raise click.UsageError("no recordings: give files or --glob PATTERN")
     try:
         summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
-                            calibrate=not no_calibrate, overwrite=force, progress=True)
-    except (FileExistsError, KeyError, ValueError) as e:
+                            calibrate=not no_calibrate, force=force, progress=True,
+                            scheduler=scheduler)
+    except (KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {summary['model']}", err=True)
     click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
@@ -465,10 +472,11 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
         click.echo(f"{r['name'][:28]:<28} {fmt_v(r['cadence_spm'], 1):>8} "
                    f"{fmt_v(r['speed_mps'], 2):>6} {fmt_v(r['step_length_m'], 2):>6}  "
                    f"{r['status'] if r['status'] == 'ok' else r['error']}")
-    rate = len(paths) / max(summary["seconds"], 1e-9) * 60
-    click.echo(f"{summary['ok']} of {len(paths)} reconstructed in {summary['seconds']:.1f} s "
-               f"({rate:.1f} recordings/min, {summary['frames'] / summary['seconds']:.0f} "
-               f"frames/s, {jobs} job(s)); wrote {out_dir}/summary.csv and summary.json")
+    rate = summary["done"] / max(summary["seconds"], 1e-9) * 60
+    click.echo(f"{summary['done']} done, {summary['skipped']} skipped, {summary['failed']} "
+               f"failed of {len(paths)} in {summary['seconds']:.1f} s ({rate:.1f} "
+               f"recordings/min on {summary['jobs']} worker(s)); wrote {out_dir}/summary.csv, "
+               "walkers.parquet and strides.parquet")
     if summary["failed"]:
         raise click.ClickException(f"{summary['failed']} recording(s) failed; see "
                                    f"{out_dir / 'summary.csv'}")

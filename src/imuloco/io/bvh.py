@@ -28,6 +28,7 @@ from imuloco.core.bodymap import resolve_body_map
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
+from imuloco.io.atomic import atomic_write
 from imuloco.ops.rotations import IDENTITY, from_euler, qmul, qrot, to_euler
 
 # Metres per file unit. "cmu": the CMU motion capture unit, (1 / 0.45) inch.
@@ -353,7 +354,8 @@ def write_bvh(motion: Motion, path: str | Path, unit: str = "cm", order: str = "
     The root gets 6 channels (position, then rotation), every other joint 3 rotation channels,
     in the intrinsic Euler ``order`` (a permutation of ``XYZ``); lengths are in ``unit``
     (``m, cm, mm, in, cmu``), angles in degrees with 6 decimals, lengths with enough decimals
-    for 1e-8 m. Refuses to replace an existing file unless ``overwrite``. Returns the path.
+    for 1e-8 m, written atomically. Refuses to replace an existing file unless ``overwrite``.
+    Returns the path.
     """
     path = Path(path)
     if unit not in UNITS:
@@ -398,6 +400,6 @@ def write_bvh(motion: Motion, path: str | Path, unit: str = "cm", order: str = "
     out += ["MOTION", f"Frames: {motion.num_frames}", f"Frame Time: {1.0 / motion.fps:.10g}"]
     for root, angles in zip(motion.root * k, eul.reshape(motion.num_frames, -1)):
         out.append(vec(root) + " " + " ".join(f"{a:.6f}" for a in angles))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(out) + "\n")
+    with atomic_write(path, "w") as f:  # a reader never sees half a file
+        f.write("\n".join(out) + "\n")
     return path
