@@ -231,3 +231,22 @@ def test_cli_batch_on_a_scheduler_reports_failures(logs, fitted, client, tmp_pat
                                    client.scheduler.address])
     assert res.exit_code == 1 and "0 done, 0 skipped, 1 failed" in res.output
     assert "1 recording(s) failed" in res.output
+
+
+def test_benchmark_walkers_are_continuous_and_seeded(sample_db):
+    from imuloco.evaluate.batchbench import WALKING, walker_motion
+    from imuloco.ops.heading import heading_from_hips, wrap_angle
+
+    clips = [c for c, lab in zip(sample_db.clips, sample_db.labels)
+             if lab["content"] in WALKING]
+    m = walker_motion(clips, 60.0, seed=3)
+    assert m.num_frames == 1800 and m.fps == 30.0
+    # chained clips start where and facing where the last one ended: no jump at a seam
+    step = np.linalg.norm(np.diff(m.root[:, [0, 2]], axis=0), axis=1)
+    assert step.max() < 0.1  # m per frame: 3 m/s
+    hips = m.part_positions(["left_hip", "right_hip"])
+    turn = np.abs(wrap_angle(np.diff(heading_from_hips(hips[:, 0], hips[:, 1]))))
+    assert np.degrees(turn.max()) < 20
+    again, other = walker_motion(clips, 60.0, seed=3), walker_motion(clips, 60.0, seed=4)
+    np.testing.assert_array_equal(again.rotations, m.rotations)
+    assert not np.array_equal(other.root, m.root)

@@ -86,9 +86,10 @@ def _csv(value: str | None) -> list[str]:
 
 
 @cli.command()
-@click.option("--method", "method_names", required=True,
+@click.option("--method", "method_names", default=None,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
-                   "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm].")
+                   "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm] [required "
+                   "but with --batch, which defaults to the shipped model].")
 @click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
               default="random-clips", show_default=True)
 @click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
@@ -105,9 +106,24 @@ def _csv(value: str | None) -> list[str]:
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
-def bench(method_names: str, split_name: str, noise: str, placement: str, data: Path | None,
-          out: Path, limit: int | None, seed: int, speed: bool, db_frames: str | None) -> None:
+@click.option("--batch", "batch_walkers", type=int, default=None, metavar="N",
+              help="Run the batch benchmark (imuloco.evaluate.batchbench) on N simulated "
+                   "walkers of 60 s instead.")
+def bench(method_names: str | None, split_name: str, noise: str, placement: str,
+          data: Path | None, out: Path, limit: int | None, seed: int, speed: bool,
+          db_frames: str | None, batch_walkers: int | None) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
+    if batch_walkers is not None:
+        from imuloco.evaluate.batchbench import batch_benchmark, markdown
+
+        if batch_walkers < 1:
+            raise click.BadParameter("must be at least 1", param_hint="--batch")
+        click.echo(markdown(batch_benchmark(batch_walkers, out, method=method_names,
+                                            placement=placement)))
+        click.echo(f"wrote {out / 'batch_bench.json'} and {out / 'batch_bench.md'}")
+        return
+    if not method_names:
+        raise click.UsageError("Missing option '--method'.")
     names = _csv(method_names)
     if speed:
         from imuloco.evaluate.speed import speed_benchmark

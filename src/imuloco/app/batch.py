@@ -269,7 +269,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     -------
     The summary (also written to ``summary.json``): ``model``, ``method``, ``model_sha256``,
     ``jobs`` (workers), ``scheduler``, ``model_seconds`` (choosing the model), ``seconds``
-    (reconstructing), ``done``, ``skipped`` (complete from an earlier run), ``ok`` (done +
+    (reconstructing, from the cluster ready to the last result), ``done``, ``skipped`` (complete from an earlier run), ``ok`` (done +
     skipped), ``failed``, ``frames`` (reconstructed), ``strides`` and ``recordings`` (rows in
     input order).
     """
@@ -307,10 +307,10 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
             rows[n], strides[n] = walker_rows(n, rep)
     skipped = len(rows)
     todo = [(n, r) for n, r in zip(names, recs) if n not in rows]
-    t0 = time.perf_counter()
     with dask_client(scheduler, jobs) as client:
         from distributed import as_completed
 
+        t0 = time.perf_counter()
         workers = len(client.scheduler_info(n_workers=-1)["workers"])
         futures, jobs_of = [], {}
         if todo:
