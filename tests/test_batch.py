@@ -250,3 +250,35 @@ def test_benchmark_walkers_are_continuous_and_seeded(sample_db):
     again, other = walker_motion(clips, 60.0, seed=3), walker_motion(clips, 60.0, seed=4)
     np.testing.assert_array_equal(again.rotations, m.rotations)
     assert not np.array_equal(other.root, m.root)
+
+
+def test_a_worker_lost_mid_task_is_retried_elsewhere(logs, fitted, tmp_path, monkeypatch):
+    """The first reconstruction closes the worker running it: Dask reschedules the task on
+    the other worker and the recording completes."""
+    import time
+
+    from distributed.core import Status
+
+    from imuloco.app import pipeline
+
+    paths, _ = logs
+    real, calls = pipeline.reconstruct_file, []
+
+    def lose_worker(*args, **kwargs):
+        calls.append(distributed.get_worker().address)
+        if len(calls) == 1:
+            worker = distributed.get_worker()
+            worker.loop.add_callback(worker.close, executor_wait=False)
+            deadline = time.monotonic() + 60
+            while worker.status != Status.closed and time.monotonic() < deadline:
+                time.sleep(0.05)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "reconstruct_file", lose_worker)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  **LOCAL_CLUSTER) as cluster, \
+            distributed.Client(cluster) as c:
+        summary = run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=c)
+    assert len(calls) == 2 and calls[0] != calls[1]
+    assert summary["done"] == 1 and summary["failed"] == 0
+    assert read_bvh(tmp_path / f"{summary['recordings'][0]['name']}.bvh").num_frames > 0

@@ -20,6 +20,8 @@ Protocol details fixed here:
   last result (the cluster's start-up and the tables are counted apart, ``startup_s``), so it
   is what a long run on that many workers sustains. The machine may be shared: the record
   keeps the 1-minute load average before and after each run, and ``os.cpu_count()``.
+- ``worker_cpu_s_per_recording`` is the CPU time (user + system) the worker processes spent
+  during the run over the walkers: what a recording costs a core of its own, whatever the load.
 - Peak memory is each worker process's ``ru_maxrss`` (Linux: kB) at the end of the run.
 """
 
@@ -100,6 +102,11 @@ def _peak_rss_kb() -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
 
+def _cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
 def _load() -> float:
     return round(os.getloadavg()[0], 2)
 
@@ -117,12 +124,15 @@ def _run(logs: list[Path], out: Path, fitted, scheduler=None, jobs: int = 1
     with dask_client(scheduler, jobs) as client:
         client.wait_for_workers(jobs, timeout=STARTUP_TIMEOUT_S)
         startup = time.perf_counter() - t0
+        cpu0 = client.run(_cpu_s)
         summary = run_batch(logs, out, fitted=fitted, scheduler=client)
+        cpu = sum(v - cpu0[k] for k, v in client.run(_cpu_s).items())
         peak = client.run(_peak_rss_kb)
     n = len(logs)
     return {"workers": summary["jobs"], "recordings": n, "ok": summary["ok"],
             "failed": summary["failed"], "seconds": summary["seconds"],
             "recordings_per_min": round(n / summary["seconds"] * 60, 2),
+            "worker_cpu_s_per_recording": round(cpu / n, 2),
             "startup_s": round(startup, 2),
             "peak_rss_mb_per_worker": sorted(round(v / 1024, 1) for v in peak.values()),
             "load_avg_1min": [load_before, _load()]}
@@ -221,15 +231,15 @@ def markdown(record: dict[str, Any]) -> str:
     """The benchmark's table."""
     head = (f"{record['walkers']} walkers of {record['seconds_each']:.0f} s, "
             f"{record['method']} at {record['placement']}, {record['cpu_count']} CPUs")
-    columns = ("| cluster | workers | recordings/min | speed-up | peak MB per worker "
-               "| start-up s | load avg before/after |")
-    lines = [head, "", columns, "|---|---:|---:|---:|---|---:|---|"]
+    columns = ("| cluster | workers | recordings/min | speed-up | worker CPU s per recording "
+               "| peak MB per worker | start-up s | load avg before/after |")
+    lines = [head, "", columns, "|---|---:|---:|---:|---:|---|---:|---|"]
     runs = [("local", r) for r in record["local"]]
     if "scheduler" in record:
         runs.append(("dask scheduler + dask worker", record["scheduler"]))
     for kind, r in runs:
         lines.append(f"| {kind} | {r['workers']} | {r['recordings_per_min']:.2f} | "
-                     f"{r.get('speedup', '–')} | "
+                     f"{r.get('speedup', '–')} | {r['worker_cpu_s_per_recording']:.1f} | "
                      f"{', '.join(f'{v:.0f}' for v in r['peak_rss_mb_per_worker'])} | "
                      f"{r['startup_s']:.1f} | {' / '.join(map(str, r['load_avg_1min']))} |")
     if "scheduler" in record:
