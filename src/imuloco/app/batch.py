@@ -115,7 +115,8 @@ def worker_model(sha256: str, data: bytes):
 
 def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
-                    height_m: float | None = None) -> dict[str, Any]:
+                    platform: str | None = None, height_m: float | None = None
+                    ) -> dict[str, Any]:
     """Reconstruct one recording (a path read here), write ``NAME.bvh`` then ``NAME.json``.
 
     Returns ``{"row": ..., "strides": [...]}`` (see :func:`walker_rows`); errors are caught and
@@ -128,7 +129,8 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
     try:
         fitted = worker_model(model_sha256, model)
         motion, report = reconstruct_file(recording, placement=placement, fmt=fmt,
-                                          calibrate=calibrate, fitted=fitted)
+                                          calibrate=calibrate, fitted=fitted,
+                                          platform=platform)
         report["strides"] = stride_rows(motion)
         report["seconds"] = round(time.perf_counter() - t0, 3)
         report["batch"] = {"recording": recording, "model_sha256": model_sha256,
@@ -247,7 +249,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
               model: str | Path | None = None, method: str | None = None,
               placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
               force: bool = False, progress: bool = False, fitted=None, scheduler=None,
-              height_m: float | None = None, retries: int = 2) -> dict[str, Any]:
+              platform: str | None = None, height_m: float | None = None, retries: int = 2
+              ) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
     Parameters
@@ -256,7 +259,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     out_dir : folder for the outputs (created).
     jobs : workers of the local cluster (``None`` or ``-1``: one per CPU).
     model, method, placement : the model, as :func:`imuloco.app.pipeline.choose_method` picks it.
-    fmt, calibrate : see :func:`imuloco.app.pipeline.reconstruct_file`.
+    fmt, calibrate, platform : see :func:`imuloco.app.pipeline.reconstruct_file`.
     force : redo recordings whose outputs are complete, replace another job's outputs.
     progress : a progress bar (tqdm) on stderr.
     fitted : an already fitted method (skips the choice).
@@ -319,7 +322,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
             for n, r in todo:
                 fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
                                     placement=placement, fmt=fmt, calibrate=calibrate,
-                                    height_m=height_m, key=f"imuloco-batch-{job}-{n}",
+                                    platform=platform, height_m=height_m, key=f"imuloco-batch-{job}-{n}",
                                     retries=retries, pure=False)
                 futures.append(fut)
                 jobs_of[fut.key] = (n, r)
