@@ -56,3 +56,22 @@ def test_check_outputs_names_every_existing_target(tmp_path):
     with pytest.raises(OutputExistsError, match=r"a\.bvh, .*b\.html exist; pass --force"):
         check_outputs([a, None, b, c])
     assert check_outputs([a, None, b, c], force=True) == [a, b, c]
+
+
+def test_atomic_write_gives_the_permissions_open_would(tmp_path):
+    with open(tmp_path / "plain.txt", "w") as f:
+        f.write("x")
+    with atomic_write(tmp_path / "atomic.txt", "w") as f:
+        f.write("x")
+    modes = [(tmp_path / n).stat().st_mode & 0o777 for n in ("plain.txt", "atomic.txt")]
+    assert modes[0] == modes[1]
+
+
+def test_atomic_path_gives_the_permissions_open_would(tmp_path):
+    from imuloco.io.atomic import atomic_path
+
+    (tmp_path / "plain.png").write_bytes(b"x")
+    with atomic_path(tmp_path / "atomic.png") as tmp:
+        tmp.write_bytes(b"x")
+    modes = [(tmp_path / n).stat().st_mode & 0o777 for n in ("plain.png", "atomic.png")]
+    assert modes[0] == modes[1]
