@@ -279,7 +279,6 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     from tqdm.auto import tqdm
 
     from imuloco.app.pipeline import choose_method
-    from imuloco.io.atomic import check_outputs
 
     paths = [Path(p) for p in recordings]
     if not paths:
