@@ -141,6 +141,10 @@ def _read_table(path: Path, allow_empty: bool = False, data: BinaryIO | None = N
         header, values, rows, start = _parse(path, allow_empty, data)
     except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
         raise FormatError(path, None, f"corrupted zip member ({exc})") from None
+    except OSError as exc:
+        if data is None:  # the file itself: not found, no permission, ...
+            raise
+        raise FormatError(path, None, f"corrupted zip member ({exc})") from None
     if not rows:
         raise FormatError(path, start, "no data rows after the header")
     table = np.frombuffer(values, dtype=np.float64).reshape(len(rows), len(header))
@@ -383,7 +387,7 @@ class Export:
         try:
             return self._zip.open(m)
         except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError,
-                ValueError) as exc:  # damaged, encrypted or of an unknown compression
+                ValueError, OSError) as exc:  # damaged, encrypted or of an unknown compression
             raise FormatError(self.label(name), None, f"unreadable zip member ({exc})") from None
 
     def header(self, name: str) -> str:
@@ -465,7 +469,7 @@ def sensorlogger_platform(ex: Export) -> tuple[str, str]:
         try:
             with ex.open("Metadata.csv") as f:
                 text = f.read(MAX_LINE_BYTES).decode("utf-8-sig", errors="replace")
-        except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+        except (zipfile.BadZipFile, zlib.error, EOFError, OSError) as exc:
             raise FormatError(ex.label("Metadata.csv"), None, f"corrupted zip member ({exc})"
                               ) from None
         rows = list(csv.DictReader(text.splitlines()))
