@@ -25,6 +25,8 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from imuloco.io.atomic import atomic_write
+
 log = logging.getLogger(__name__)
 
 # summary columns after name and status, taken from the report's gait parameters
@@ -94,7 +96,8 @@ def reconstruct_one(recording: str | Path, out_dir: str | Path, name: str, model
                                           platform=platform)
         out = Path(out_dir)
         write_bvh(motion, out / f"{name}.bvh", overwrite=overwrite)
-        (out / f"{name}.json").write_text(json.dumps(report, indent=2) + "\n")
+        with atomic_write(out / f"{name}.json", "w") as f:
+            f.write(json.dumps(report, indent=2) + "\n")
     except Exception as e:  # noqa: BLE001 - one bad recording must not stop the batch
         log.warning("%s: %s: %s", recording, type(e).__name__, e)
         row.update(status="error", error=f"{type(e).__name__}: {e}")
@@ -189,9 +192,10 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
                "model_seconds": round(model_seconds, 2), "seconds": round(seconds, 2), "ok": sum(r["status"] == "ok" for r in ordered),
                "failed": sum(r["status"] != "ok" for r in ordered),
                "frames": sum(r["frames"] or 0 for r in ordered), "recordings": ordered}
-    with open(out / "summary.csv", "w", newline="") as f:
+    with atomic_write(out / "summary.csv", "w") as f:
         writer = csv.DictWriter(f, fieldnames=COLUMNS)
         writer.writeheader()
         writer.writerows(ordered)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    with atomic_write(out / "summary.json", "w") as f:
+        f.write(json.dumps(summary, indent=2) + "\n")
     return summary

@@ -49,6 +49,7 @@ from typing import BinaryIO, Self
 import numpy as np
 
 from imuloco.errors import FormatError, UnknownNameError
+from imuloco.io.atomic import atomic_write
 
 log = logging.getLogger(__name__)
 
@@ -239,7 +240,8 @@ def write_generic_csv(rec, path: str | Path, overwrite: bool = False) -> Path:
     """Write a :class:`~imuloco.core.recording.Recording` as generic CSV (m/s^2, rad/s).
 
     One sensor gives the plain ``time_s,acc_x,...,gyro_z`` header; several sensors prefix the
-    placement (``right_ankle.acc_x``). Refuses to replace a file unless ``overwrite``.
+    placement (``right_ankle.acc_x``). Refuses to replace a file unless ``overwrite``; writes
+    atomically.
     """
     path = Path(path)
     if path.exists() and not overwrite:
@@ -249,8 +251,9 @@ def write_generic_csv(rec, path: str | Path, overwrite: bool = False) -> Path:
     else:
         cols = [f"{p}.{c}" for p in rec.placements for c in GENERIC_COLUMNS]
     data = np.concatenate([rec.times[:, None], rec.channels()], axis=1)
-    np.savetxt(path, data, delimiter=",", header=",".join(["time_s"] + cols), comments="",
-               fmt=["%.6f"] + ["%.9g"] * (data.shape[1] - 1))
+    with atomic_write(path) as f:
+        np.savetxt(f, data, delimiter=",", header=",".join(["time_s"] + cols), comments="",
+                   fmt=["%.6f"] + ["%.9g"] * (data.shape[1] - 1))
     return path
 
 
