@@ -451,3 +451,13 @@ def test_any_bytes_as_a_table_fail_cleanly_or_read_finite(tmp_path, content):
             continue
         if reader is not detect_format:
             assert all(np.isfinite(s.values).all() and np.isfinite(s.times).all() for s in out)
+
+
+def test_zip_of_an_unknown_version_is_a_format_error(walk_rec, tmp_path):
+    _sensor_logger(tmp_path / "sl", walk_rec, total=True, ios=False)
+    blob = bytearray(_zip(tmp_path / "sl", tmp_path / "export.zip").read_bytes())
+    at = blob.find(b"PK\x01\x02")
+    blob[at + 6] = 166  # "version needed to extract": 16.6, which zipfile refuses
+    (tmp_path / "export.zip").write_bytes(bytes(blob))
+    with pytest.raises(FormatError, match="export.zip"):
+        read_log(tmp_path / "export.zip")

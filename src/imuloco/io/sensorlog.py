@@ -350,7 +350,7 @@ class Export:
         try:
             self._zip = zipfile.ZipFile(self.path)
             infos = self._zip.infolist()
-        except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
+        except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as exc:
             raise FormatError(self.path, None, f"not a readable zip archive ({exc})") from None
         if len(infos) > MAX_MEMBERS:
             raise FormatError(self.path, None, f"zip with {len(infos)} members; an app export "
