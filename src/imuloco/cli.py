@@ -499,15 +499,18 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
               help="TLS certificate (PEM): serve HTTPS, which phones need for motion sensors.")
 @click.option("--key", "keyfile", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Private key of --cert.")
+@click.option("--allow-origin", "allow_origins", multiple=True, metavar="ORIGIN",
+              help="Also accept browsers on this origin (https://host:port); repeatable.")
 def live(host: str, port: int, model_path: Path | None, method_name: str | None,
          placement: str, calibrate_seconds: float, replay: Path | None, fmt: str, speed: float,
-         loop: bool, certfile: str | None, keyfile: str | None) -> None:
+         loop: bool, certfile: str | None, keyfile: str | None,
+         allow_origins: tuple[str, ...]) -> None:
     """Watch a walker live: a phone on the leg streams its sensors (open /phone on it), a
     browser shows the reconstruction as it walks (open /live). Ctrl-C stops."""
     import asyncio
 
     try:
-        from imuloco.app.live.server import LiveServer, run, ssl_context
+        from imuloco.app.live.server import LiveServer, configure_logging, run, ssl_context
     except ImportError as e:
         raise click.ClickException(f"live mode needs websockets: pip install imuloco[live] "
                                    f"({e})") from None
@@ -515,23 +518,23 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
 
     try:
         fitted, note = choose_method(method_name, model_path, placement, progress=True)
-        server = LiveServer(fitted, calibrate_seconds, note)
+        server = LiveServer(fitted, calibrate_seconds, note, allow_origins=allow_origins)
     except (KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     ssl = ssl_context(certfile, keyfile) if certfile else None
-    scheme = "https" if ssl else "http"
     shown = "localhost" if host in ("127.0.0.1", "0.0.0.0", "::") else host
 
     def started(srv: LiveServer) -> None:
         click.echo(f"model: {note}", err=True)
-        base = f"{scheme}://{shown}:{srv.port}"
-        click.echo(f"viewer: {base}/live    phone: {base}/phone" +
+        urls = srv.urls(shown)
+        click.echo(f"viewer: {urls['live']}\nphone:  {urls['phone']}" +
                    ("" if host != "127.0.0.1" else "  (--host 0.0.0.0 for a phone on the "
                                                    "network)"))
         if not ssl and host != "127.0.0.1":
             click.echo("phones only give motion sensors to https pages: pass --cert and --key",
                        err=True)
 
+    configure_logging()
     replay_args = None if replay is None else {"path": replay, "placement": placement,
                                                "fmt": fmt, "speed": speed, "loop": loop}
     try:
