@@ -10,22 +10,47 @@ from pathlib import Path
 
 import click
 
+from imuloco.errors import ImulocoError
 
-@click.group()
+
+class Commands(click.Group):
+    """The command group: an :class:`~imuloco.errors.ImulocoError` raised by any command ends
+    it with ``Error: <message>`` and exit status 1, instead of a traceback."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except ImulocoError as e:
+            raise click.ClickException(str(e)) from None
+
+
+@click.group(cls=Commands)
 @click.version_option(package_name="imuloco")
 def cli() -> None:
     """Full-body locomotion reconstruction from one body-worn inertial sensor."""
 
 
+def _reading_options(f):
+    """``--up`` and ``--skip-frames``: how motion files are read (``read_bvh``'s options)."""
+    f = click.option("--skip-frames", type=click.IntRange(min=0), default=0, show_default=True,
+                     help="Drop this many leading frames of each motion file (a prepended "
+                          "T-pose).")(f)
+    return click.option("--up", type=click.Choice(["auto", "y", "z"]), default="auto",
+                        show_default=True,
+                        help="Vertical axis of the motion files; Z-up files are turned Y up "
+                             "(auto: detected from the animated body).")(f)
+
+
 @cli.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
-def info(file: Path, as_json: bool) -> None:
+@_reading_options
+def info(file: Path, as_json: bool, up: str, skip_frames: int) -> None:
     """Joints, frames, fps, duration and the body map found for a motion FILE."""
     from imuloco.core.bodymap import PARTS
     from imuloco.io.motionfile import read_motion
 
-    motion = read_motion(file)
+    motion = read_motion(file, up=up, skip_frames=skip_frames)
     sk = motion.skeleton
     report = {
         "file": str(file), "joints": sk.num_joints, "names": sk.names,
@@ -47,12 +72,14 @@ def info(file: Path, as_json: bool) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
 @click.option("--reference", type=click.Choice(["right", "left"]), default="right",
               show_default=True, help="Leg whose 8-phase cycle is labelled.")
-def phases(motion_file: Path, as_json: bool, reference: str) -> None:
+@_reading_options
+def phases(motion_file: Path, as_json: bool, reference: str, up: str, skip_frames: int) -> None:
     """Per-frame foot contacts and gait phases, and step events, of a MOTION file."""
     from imuloco.io.motionfile import read_motion
     from imuloco.phases import gait_phases
 
-    report = gait_phases(read_motion(motion_file), reference=reference).to_dict()
+    report = gait_phases(read_motion(motion_file, up=up, skip_frames=skip_frames),
+                         reference=reference).to_dict()
     if as_json:
         click.echo(json.dumps(report))
         return
@@ -86,9 +113,10 @@ def _csv(value: str | None) -> list[str]:
 
 
 @cli.command()
-@click.option("--method", "method_names", required=True,
+@click.option("--method", "method_names", default=None,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
-                   "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm].")
+                   "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm] [required "
+                   "but with --batch, which defaults to the shipped model].")
 @click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
               default="random-clips", show_default=True)
 @click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
@@ -105,9 +133,39 @@ def _csv(value: str | None) -> list[str]:
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
-def bench(method_names: str, split_name: str, noise: str, placement: str, data: Path | None,
-          out: Path, limit: int | None, seed: int, speed: bool, db_frames: str | None) -> None:
+@click.option("--fuzz", type=click.IntRange(1), default=None, metavar="N",
+              help="Instead: read N generated malformed inputs per reader (imuloco.evaluate."
+                   "fuzz) and write fuzz.md and fuzz.json.")
+@click.option("--readers", default=None,
+              help="With --fuzz: readers, comma separated [default: all].")
+@click.option("--batch", "batch_walkers", type=click.IntRange(1), default=None, metavar="N",
+              help="Instead: the batch benchmark (imuloco.evaluate.batchbench) on N simulated "
+                   "walkers of 60 s; writes batch_bench.md and batch_bench.json.")
+@_reading_options
+def bench(method_names: str | None, split_name: str, noise: str, placement: str,
+          data: Path | None, out: Path, limit: int | None, seed: int, speed: bool,
+          db_frames: str | None, fuzz: int | None, readers: str | None,
+          batch_walkers: int | None, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
+    if fuzz is not None:
+        from imuloco.evaluate.fuzz import READERS, write_fuzz
+
+        chosen = tuple(_csv(readers)) or READERS
+        unknown = sorted(set(chosen) - set(READERS))
+        if unknown:
+            raise click.BadParameter(f"unknown reader(s) {unknown}; expected {list(READERS)}",
+                                     param_hint="--readers")
+        click.echo(write_fuzz(fuzz, out, chosen, seed=seed, progress=True))
+        return
+    if batch_walkers is not None:
+        from imuloco.evaluate.batchbench import batch_benchmark, markdown
+
+        click.echo(markdown(batch_benchmark(batch_walkers, out, method=method_names,
+                                            placement=placement)))
+        click.echo(f"wrote {out / 'batch_bench.json'} and {out / 'batch_bench.md'}")
+        return
+    if not method_names:
+        raise click.UsageError("Missing option '--method' (or pass --fuzz N or --batch N).")
     names = _csv(method_names)
     if speed:
         from imuloco.evaluate.speed import speed_benchmark
@@ -120,7 +178,7 @@ def bench(method_names: str, split_name: str, noise: str, placement: str, data: 
 
     try:
         records = run_bench(names, split_name, noise, _csv(placement), data, out, limit, seed,
-                            progress=True)
+                            progress=True, up=up, skip_frames=skip_frames)
     except KeyError as e:
         raise click.UsageError(str(e.args[0])) from None
     click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
@@ -180,9 +238,10 @@ def _param(items: tuple[str, ...]) -> dict:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Model file to write (.npz).")
 @click.option("--force", is_flag=True, help="Overwrite the output file.")
+@_reading_options
 def train(method_name: str, data: Path | None, placement: str, noise: str,
           split_name: str | None, params: tuple[str, ...], limit: int | None, seed: int,
-          output: Path, force: bool) -> None:
+          output: Path, force: bool, up: str, skip_frames: int) -> None:
     """Fit a method on motion clips with simulated sensors and save the model.
 
     Writes OUTPUT, and for methods that keep a training history (``learned``) its losses per
@@ -201,13 +260,20 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
         raise click.UsageError(str(e.args[0])) from None
     except TypeError as e:
         raise click.UsageError(f"--param: {e}") from None
-    db = load_sample() if data is None else load_database(data, limit=limit)
+    db = (load_sample() if data is None
+          else load_database(data, limit=limit, up=up, skip_frames=skip_frames))
     if data is None and limit is not None:
         db = db.subset(spread(len(db), limit))
     if split_name is not None:
         db = split(db, split_name)[0]
     placements = _csv(placement)
-    method.fit(db, placements, noise, seed, progress=True)
+    try:
+        method.fit(db, placements, noise, seed, progress=True)
+    except (ValueError, TypeError) as e:
+        if not params:
+            raise
+        raise click.BadParameter(f"{e} (rejected by {method_name})", param_hint="--param"
+                                 ) from None
     method.protocol_.update(data="bundled sample" if data is None else Path(data).name,
                             split=split_name or "all")
     seconds = method.protocol_["train_seconds"]
@@ -248,7 +314,8 @@ def export_onnx_command(model_path: Path, output: Path, force: bool) -> None:
               help="Sensor placement(s), comma separated (e.g. right_ankle,pelvis).")
 @click.option("--noise", default="phone", show_default=True,
               help="Noise preset: clean, phone or imu.")
-@click.option("--rate", default=100.0, show_default=True, type=float, help="Sampling rate, Hz.")
+@click.option("--rate", default=100.0, show_default=True, type=click.FloatRange(1.0, 10_000.0),
+              help="Sampling rate, Hz.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the noise draws.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s).")
@@ -309,11 +376,18 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Also write the report (gait, checks) as JSON.")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
+@click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
+              help="Phone of a Sensor Logger export [default: from its Metadata.csv, else "
+                   "guessed with a warning].")
+@click.option("--piece-seconds", type=click.FloatRange(10.0), default=None,
+              help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
+                   "(bounded memory for long recordings; not with --video/--html).")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
-                report_path: Path | None, no_calibrate: bool, force: bool) -> None:
+                report_path: Path | None, no_calibrate: bool, platform: str | None,
+                piece_seconds: float | None, force: bool) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -321,14 +395,35 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     """
     from imuloco.app.pipeline import reconstruct_file, render_outputs
     from imuloco.errors import FormatError
+    from imuloco.io.atomic import atomic_write, check_output
     from imuloco.io.bvh import write_bvh
 
     _refuse_existing([output, video, html_path, report_path], force)
+    for out in (output, video, html_path, report_path):
+        if out is not None:
+            check_output(out, force=True, inputs=recording)  # never onto an input
     source = recording[0] if len(recording) == 1 else list(recording)
+    if piece_seconds is not None:
+        if video or html_path:
+            raise click.UsageError("--piece-seconds writes the BVH only: drop --video/--html")
+        from imuloco.app.chunked import reconstruct_to_bvh
+
+        report = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
+                                    not no_calibrate, platform=platform, overwrite=force,
+                                    piece_s=piece_seconds, progress=True)
+        if report_path:
+            with atomic_write(report_path, "w") as f:
+                f.write(json.dumps(report, indent=2) + "\n")
+        m = report["motion"]
+        click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
+                   f"{report['pieces']['count']} piece(s); wrote "
+                   + ", ".join(str(p) for p in (output, report_path) if p))
+        return
     try:
         motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                           placement=placement, fmt=fmt,
-                                          calibrate=not no_calibrate, progress=True)
+                                          calibrate=not no_calibrate, progress=True,
+                                          platform=platform)
     except (FormatError, KeyError, ValueError) as e:
         raise click.ClickException(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {report['model']}", err=True)
@@ -339,7 +434,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                                   [video] if video else [], html_path, overwrite=force,
                                   progress=True, max_seconds=video_seconds)
     if report_path:
-        report_path.write_text(json.dumps(report, indent=2) + "\n")
+        with atomic_write(report_path, "w") as f:
+            f.write(json.dumps(report, indent=2) + "\n")
         written.append(report_path)
     g = report["gait"]
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
@@ -426,9 +522,12 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
 @click.option("--glob", "patterns", multiple=True, metavar="PATTERN",
               help="Recordings matching a glob pattern, e.g. 'logs/*.csv' (repeatable).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
-              required=True, help="Folder for NAME.bvh, NAME.json and summary.csv/.json.")
-@click.option("-j", "--jobs", type=int, default=1, show_default=True,
-              help="Worker processes (-1: one per CPU; needs joblib, the [dist] extra).")
+              required=True, help="Folder for NAME.bvh, NAME.json, summary.csv/.json, "
+              "walkers.parquet and strides.parquet.")
+@click.option("-j", "--jobs", type=int, default=None,
+              help="Dask worker processes of the local cluster [default: one per CPU].")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="Run on an existing Dask cluster, e.g. tcp://host:8786 (see the README).")
 @click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
                                                        path_type=Path), default=None,
               help="Model file from `imuloco train` [default: the shipped pretrained model].")
@@ -440,12 +539,18 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
               type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
               help="Sensor log format.")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
-@click.option("--force", is_flag=True, help="Replace existing output files.")
-def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path, jobs: int,
-          model_path: Path | None, method_name: str | None, placement: str, fmt: str,
-          no_calibrate: bool, force: bool) -> None:
-    """Reconstruct many RECORDINGS (one walker each) in parallel: a BVH and a gait report
-    per recording, and a summary.csv / summary.json of cadence, speed and step length."""
+@click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
+              help="Phone of Sensor Logger exports [default: from their Metadata.csv, else "
+                   "guessed with a warning].")
+@click.option("--force", is_flag=True,
+              help="Redo recordings whose outputs are complete (a re-run skips them).")
+def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path,
+          jobs: int | None, scheduler: str | None, model_path: Path | None,
+          method_name: str | None, placement: str, fmt: str, no_calibrate: bool,
+          platform: str | None, force: bool) -> None:
+    """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
+    recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
+    finished recordings)."""
     from imuloco.app.batch import find_recordings, run_batch
 
     paths = find_recordings(recordings, patterns)
@@ -453,8 +558,9 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
         raise click.UsageError("no recordings: give files or --glob PATTERN")
     try:
         summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
-                            calibrate=not no_calibrate, overwrite=force, progress=True)
-    except (FileExistsError, KeyError, ValueError) as e:
+                            calibrate=not no_calibrate, force=force, progress=True,
+                            scheduler=scheduler, platform=platform)
+    except (KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {summary['model']}", err=True)
     click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
@@ -465,10 +571,11 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
         click.echo(f"{r['name'][:28]:<28} {fmt_v(r['cadence_spm'], 1):>8} "
                    f"{fmt_v(r['speed_mps'], 2):>6} {fmt_v(r['step_length_m'], 2):>6}  "
                    f"{r['status'] if r['status'] == 'ok' else r['error']}")
-    rate = len(paths) / max(summary["seconds"], 1e-9) * 60
-    click.echo(f"{summary['ok']} of {len(paths)} reconstructed in {summary['seconds']:.1f} s "
-               f"({rate:.1f} recordings/min, {summary['frames'] / summary['seconds']:.0f} "
-               f"frames/s, {jobs} job(s)); wrote {out_dir}/summary.csv and summary.json")
+    rate = summary["done"] / max(summary["seconds"], 1e-9) * 60
+    click.echo(f"{summary['done']} done, {summary['skipped']} skipped, {summary['failed']} "
+               f"failed of {len(paths)} in {summary['seconds']:.1f} s ({rate:.1f} "
+               f"recordings/min on {summary['jobs']} worker(s)); wrote {out_dir}/summary.csv, "
+               "walkers.parquet and strides.parquet")
     if summary["failed"]:
         raise click.ClickException(f"{summary['failed']} recording(s) failed; see "
                                    f"{out_dir / 'summary.csv'}")

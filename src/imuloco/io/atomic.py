@@ -3,7 +3,8 @@
 :func:`atomic_write` writes to a temporary file in the target's folder and renames it over the
 target only when the writing succeeded (``os.replace`` is atomic on one file system), so an
 interrupted run leaves the old file or none, never a truncated one. :func:`check_output`
-refuses a target that exists (unless ``force``) or that is one of the inputs.
+refuses a target that exists (unless ``force``), that is one of the inputs, or whose folder
+cannot be written.
 """
 
 from __future__ import annotations
@@ -17,6 +18,17 @@ from pathlib import Path
 from imuloco.errors import ImulocoError, OutputExistsError
 
 
+def _read_umask() -> int:
+    mask = os.umask(0o022)  # reading the mask sets it: done once, at import
+    os.umask(mask)
+    return mask
+
+
+# mkstemp makes a file only its owner can read; a written output gets the permissions open()
+# would give it (0o666 less the umask), so that others can read a shared study's outputs
+_MODE = 0o666 & ~_read_umask()
+
+
 def check_output(path: str | Path, force: bool = False,
                  inputs: Iterable[str | Path] = ()) -> Path:
     """``path`` as a Path when it may be written: not an input, and new unless ``force``."""
@@ -28,6 +40,11 @@ def check_output(path: str | Path, force: bool = False,
                                "output path")
     if path.exists() and not force:
         raise OutputExistsError(f"{path} exists; pass --force to replace it")
+    if path.parent.is_dir():  # fail now, not after the work: /proc, a read-only mount, ...
+        try:
+            tempfile.TemporaryFile(dir=path.parent).close()
+        except OSError as e:
+            raise ImulocoError(f"{path}: cannot write there ({e.strerror or e})") from None
     return path
 
 
@@ -40,12 +57,16 @@ def atomic_write(path: str | Path, mode: str = "wb") -> Iterator:
     if mode not in ("wb", "w"):
         raise ValueError(f"atomic_write: mode must be 'wb' or 'w', not {mode!r}")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as e:  # a read-only or virtual file system (/proc), no permission, ...
+        raise ImulocoError(f"{path}: cannot write there ({e.strerror or e})") from None
     try:
         with os.fdopen(fd, mode, **({"encoding": "utf-8"} if mode == "w" else {})) as f:
             yield f
             f.flush()
+            os.fchmod(f.fileno(), _MODE)
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
