@@ -373,9 +373,11 @@ def test_token_is_required_off_loopback_and_checked_when_given(fitted):
             page = f"http://127.0.0.1:{server.port}/live"
             with pytest.raises(urllib.error.HTTPError) as e:
                 await asyncio.to_thread(urllib.request.urlopen, page, timeout=10)
+            e.value.close()
             assert e.value.code == 403
             got = await asyncio.to_thread(urllib.request.urlopen, f"{page}?token={token}",
                                           timeout=10)
+            got.close()
             assert got.status == 200
         async with _serve(fitted) as (server, base):  # loopback: no token is fine, a wrong no
             assert not server.require_token
@@ -408,7 +410,9 @@ def test_other_origins_and_hosts_are_refused(fitted):
             req = urllib.request.Request(f"{own}/live", headers={"Host": "evil.example:80"})
             with pytest.raises(urllib.error.HTTPError) as e:
                 await asyncio.to_thread(urllib.request.urlopen, req, timeout=10)
-            assert e.value.code == 403 and b"loopback" in e.value.read()
+            body = e.value.read()
+            e.value.close()
+            assert e.value.code == 403 and b"loopback" in body
 
     asyncio.run(main())
 

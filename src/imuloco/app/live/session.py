@@ -256,9 +256,12 @@ class LiveSession:
 
         Returns the frames it completes (none while calibrating, a burst when it ends). After
         a dropout (more than ``max_gap_s`` without samples) the model restarts on fresh state
-        while the walker carries on: frame numbers keep counting on the same grid, and its
-        heading and position continue from before the pause at the rates of the second before
-        it (held still after a pause over :data:`DEAD_RECKON_S`). A dropout while calibrating
+        while the walker carries on: frame numbers keep counting on the same grid, it keeps its
+        heading, and moves on at the mean velocity of the second before the pause (held still
+        after a pause over :data:`DEAD_RECKON_S`). Of the ways tried on the sample's walks (held
+        still; velocity; velocity and turn rate, from end points or fitted lines) this one
+        started nearest the run without the pause (0.29 m and 13 degrees apart on average over
+        ten 1 s dropouts, 0.3 s after them). A dropout while calibrating
         restarts the calibration.
         """
         acc = np.asarray(acc, dtype=np.float64).reshape(self.num_sensors, 3)
@@ -354,19 +357,15 @@ class LiveSession:
     def _continue_walker(self, t: float, rot: np.ndarray, root: np.ndarray) -> None:
         """Set the turn and shift that put the restarted model's first frame (local rotations
         rot (J, 4), root (3,) at time t) where the walker would be had it kept its heading and
-        velocity of the second before the dropout."""
+        the velocity of the second before the dropout (see :meth:`push`)."""
         t0 = self._join
         self._join = None
         times = np.array([r[0] for r in self._recent])
         keep = times > t0 - 1.0
         times, roots = times[keep], np.stack([r[1] for r in self._recent])[keep]
-        yaws = np.unwrap([r[2] for r in self._recent])[keep]
-        if len(times) > 2 and t - t0 <= DEAD_RECKON_S:  # lines through the last second
-            (vx, x0), (vz, z0), (w, y0) = (np.polyfit(times - t0, v, 1) for v in
-                                           (roots[:, 0], roots[:, 2], yaws))
-            target, yaw = np.array([x0 + vx * (t - t0), 0.0, z0 + vz * (t - t0)]), y0 + w * (t - t0)
-        else:  # held where it stopped
-            target, yaw = roots[-1], yaws[-1]
+        target, yaw = roots[-1], self._recent[-1][2]
+        if len(times) > 1 and t - t0 <= DEAD_RECKON_S:  # on at the last second's velocity
+            target = target + (roots[-1] - roots[0]) / (times[-1] - times[0]) * (t - t0)
         self._turn = about_y(np.asarray(yaw - _yaw(rot[0])))
         self._shift = target - qrot(self._turn, root)
         self._shift[1] = 0.0  # the model's own root height
