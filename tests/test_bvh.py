@@ -689,3 +689,13 @@ def test_limited_database_spreads_over_the_folder(sample_db):
     db = load_database(SAMPLE_DIR, limit=4, progress=False)
     assert len(db) == 4
     assert len({lab["content"] for lab in db.labels}) >= 3  # not only the first type by name
+
+
+def test_joint_positions_match_fk(sample_db):
+    from imuloco.ops.kinematics import joint_positions
+    m = sample_db.clips[0]
+    sk = m.skeleton
+    picks = [sk.part(p) for p in ("head", "left_ankle", "right_wrist")] + [0]
+    np.testing.assert_allclose(
+        joint_positions(m.rotations, m.root, sk.offsets, sk.parents, picks),
+        m.positions()[:, picks], atol=1e-12)
