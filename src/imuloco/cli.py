@@ -100,7 +100,7 @@ def _csv(value: str | None) -> list[str]:
 
 
 @cli.command()
-@click.option("--method", "method_names", required=True,
+@click.option("--method", "method_names", default=None,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
                    "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm].")
 @click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
@@ -119,11 +119,27 @@ def _csv(value: str | None) -> list[str]:
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
+@click.option("--load", "load_dirs", multiple=True, metavar="DIR",
+              type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="Time loading these motion folders instead (repeat or comma-separate): "
+                   "numpy parse, reader, cold and warm cache; writes load.json and load.md.")
+@click.option("--against", default=None, metavar="REV",
+              help="With --load: also time the BVH reader of this git commit.")
 @_reading_options
-def bench(method_names: str, split_name: str, noise: str, placement: str, data: Path | None,
-          out: Path, limit: int | None, seed: int, speed: bool, db_frames: str | None,
-          up: str, skip_frames: int) -> None:
+def bench(method_names: str | None, split_name: str, noise: str, placement: str,
+          data: Path | None, out: Path, limit: int | None, seed: int, speed: bool,
+          db_frames: str | None, load_dirs: tuple[Path, ...], against: str | None, up: str,
+          skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
+    if load_dirs:
+        from imuloco.evaluate.loadspeed import load_benchmark, table
+
+        folders = [Path(p) for d in load_dirs for p in _csv(str(d))]
+        click.echo(table(load_benchmark(folders, out, against), against))
+        click.echo(f"wrote {out / 'load.json'} and {out / 'load.md'}")
+        return
+    if not method_names:
+        raise click.UsageError("Missing option '--method' (or give --load DIR).")
     names = _csv(method_names)
     if speed:
         from imuloco.evaluate.speed import speed_benchmark

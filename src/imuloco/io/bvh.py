@@ -489,7 +489,7 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
     offsets = local_pos[0, first:].copy()
     offsets[0] = 0.0
     sk_parents = np.where(parents[first:] >= 0, parents[first:] - first, -1)
-    parts = _body_map(tuple(names[first:]))
+    parts = cached_body_map(tuple(names[first:]))
     if scale is None:
         scale = _guess_scale(names[first:], sk_parents, offsets, parts)
     end_sites = {k - first: j.end_site * scale for k, j in enumerate(joints)
@@ -507,8 +507,9 @@ def _moving(pos: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=64)
-def _body_map(names: tuple[str, ...]) -> dict[str, str]:
-    """The body map of joint ``names`` (memoised: a folder's clips share one rig)."""
+def cached_body_map(names: tuple[str, ...]) -> dict[str, str]:
+    """The body map of joint ``names`` (memoised: a folder's clips share one rig); callers
+    copy it before handing it on."""
     return resolve_body_map(list(names), strict=False)
 
 
