@@ -632,6 +632,113 @@ def test_parser_fails_only_with_format_error(tmp_path_factory, text: str):
     assert np.all(np.isfinite(m.positions())) and m.fps > 0
 
 
+@st.composite
+def byte_mutations(draw, text: str) -> bytes:
+    """Up to 6 random byte edits (flip, delete, insert, repeat, cut) of a valid file: inputs
+    stay under ~2 kB."""
+    b = bytearray(text.encode())
+    for _ in range(draw(st.integers(1, 6))):
+        i = draw(st.integers(0, len(b)))
+        j = min(len(b), i + draw(st.integers(0, 24)))
+        kind = draw(st.sampled_from(["flip", "delete", "insert", "repeat", "cut"]))
+        if kind == "flip" and i < len(b):
+            b[i] = draw(st.integers(0, 255))
+        elif kind == "delete":
+            del b[i:j]
+        elif kind == "insert":
+            b[i:i] = draw(st.binary(max_size=12))
+        elif kind == "repeat":
+            b[i:i] = b[i:j] * draw(st.integers(1, 20))
+        else:
+            del b[i:]
+    return bytes(b)
+
+
+def read_or_format_error(path: Path) -> Motion | None:
+    """The reader's contract: a valid Motion, or a FormatError naming this file and a line of
+    it (or none); nothing else."""
+    try:
+        m = read_bvh(path)
+    except FormatError as e:
+        assert e.path == str(path) and e.message
+        lines = path.read_bytes().count(b"\n") + 2
+        assert e.line is None or 1 <= e.line <= lines, (e.line, lines)
+        return None
+    assert m.num_frames >= 1 and 0.1 <= m.fps <= 10_000
+    assert np.all(np.isfinite(m.positions()))
+    return m
+
+
+@settings(SETTINGS, max_examples=300)
+@given(data=byte_mutations(TWO_JOINT))
+def test_byte_mutations_fail_only_with_format_error(tmp_path_factory, data: bytes):
+    path = tmp_path_factory.getbasetemp() / "bytes.bvh"
+    path.write_bytes(data)
+    read_or_format_error(path)
+
+
+NUMBERS = st.one_of(st.floats().map(repr), st.integers().map(str), st.text(max_size=12),
+                    st.sampled_from(["1e-6", "1000", "0", "-1", "9" * 5000, "1_0", "0x10",
+                                     "\u0663", "nan", "1e308", "5e-324"]))
+
+
+@settings(SETTINGS, max_examples=200)
+@given(frames=NUMBERS, frame_time=NUMBERS, value=NUMBERS, cut=st.integers(0, len(TWO_JOINT)))
+def test_malformed_headers_numbers_and_truncation(tmp_path_factory, frames: str,
+                                                  frame_time: str, value: str, cut: int):
+    d = tmp_path_factory.getbasetemp()
+    texts = [TWO_JOINT.replace("Frames: 4", f"Frames: {frames}"),
+             TWO_JOINT.replace("Frame Time: 0.0333333", f"Frame Time: {frame_time}"),
+             TWO_JOINT.replace("10 20 30 90", f"10 {value} 30 90"),
+             TWO_JOINT.replace("OFFSET 0 100 0", f"OFFSET 0 {value} 0"),
+             TWO_JOINT[:cut]]
+    for i, text in enumerate(texts):
+        path = d / f"field{i}.bvh"
+        path.write_text(text, encoding="utf-8", errors="surrogatepass")
+        m = read_or_format_error(path)
+        if i == 4 and m is not None:  # only the whole file, or it without its last newline
+            assert cut >= len(TWO_JOINT) - 1
+
+
+@settings(SETTINGS, max_examples=60)
+@given(values=st.lists(st.floats(-1e9, 1e9), min_size=18, max_size=18),
+       fmt=st.sampled_from(["{:.6f}", "{!r}", "{:.3e}", "{:g}", "{:+.2f}"]),
+       sep=st.sampled_from([" ", "\t", "  ", " \t "]), crlf=st.booleans())
+def test_fast_and_line_by_line_readings_agree(values, fmt: str, sep: str, crlf: bool):
+    """The one-pass MOTION reading gives the reference line-by-line reading's numbers."""
+    from imuloco.io import bvh as reader
+    head, _ = TWO_JOINT.split("MOTION")
+    rows = [sep.join(fmt.format(v) for v in values[:9]), sep.join(fmt.format(v)
+                                                                 for v in values[9:])]
+    text = head + "MOTION\nFrames: 2\nFrame Time: 0.01\n" + "\n".join(rows) + "\n"
+    text = text.replace("\n", "\r\n") if crlf else text
+    path = Path("fast.bvh")
+    joints, fps, fast = reader.parse_bvh(path, text)
+    lines = text.splitlines()
+    slow_fps, slow = reader._parse_motion(path, lines, lines.index("MOTION"), joints)
+    assert fps == slow_fps == 100.0
+    np.testing.assert_array_equal(fast, slow)
+
+
+def test_limits(tmp_path: Path):
+    """Frame rates, counts, joint numbers and depth have plausible ranges; 20,000 joints are
+    refused at once (the name check is linear)."""
+    chain = "".join(f"JOINT j{i}\n{{\nOFFSET 0 1 0\nCHANNELS 3 Xrotation Yrotation "
+                    "Zrotation\n" for i in range(20_000))
+    deep = ("HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Yrotation Zrotation\n"
+            + chain + "}\n" * 20_001 + "MOTION\nFrames: 1\nFrame Time: 0.03\n0\n")
+    wide = deep.replace(chain, chain.replace("JOINT", "}\nJOINT")[2:]).replace(
+        "}\n" * 20_001, "}\n}\n")
+    for name, text, words in [("deep", deep, "nested more than 256"),
+                              ("wide", wide, "more than 2000 joints"),
+                              ("digits", TWO_JOINT.replace("Frames: 4", "Frames: " + "9" * 5000),
+                               "frame count from 1 to"),
+                              ("channels", TWO_JOINT.replace("CHANNELS 3", "CHANNELS 7"),
+                               "channel count from 0 to 6")]:
+        with pytest.raises(FormatError, match=words):
+            read_bvh(write(tmp_path, f"{name}.bvh", text))
+
+
 # ---------------------------------------------------------------------------------------------
 # Real data.
 

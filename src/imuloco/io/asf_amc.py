@@ -39,6 +39,8 @@ from imuloco.ops.rotations import IDENTITY, from_euler, qinv, qmul
 
 INCH = 0.0254
 CMU_FPS = 120.0
+LENGTH_UNITS = (1e-3, 1e3)  # plausible ':units length L' (file values per inch)
+MAX_BONE = 10.0  # metres: longer bones are corrupt data
 _ROOT_CHANNELS = ("TX", "TY", "TZ", "RX", "RY", "RZ")
 _BONE_DOF = ("rx", "ry", "rz")
 
@@ -133,8 +135,10 @@ def _parse_asf(path: Path) -> _Asf:
         if section == "units":
             if key == "length":
                 asf.length = _num(path, line, toks[1] if len(toks) > 1 else "", "length unit")
-                if asf.length <= 0:
-                    raise FormatError(path, line, "expected a positive length unit")
+                if not LENGTH_UNITS[0] <= asf.length <= LENGTH_UNITS[1]:
+                    raise FormatError(path, line, f"expected a length unit from "
+                                      f"{LENGTH_UNITS[0]:g} to {LENGTH_UNITS[1]:g} (CMU: 0.45), "
+                                      f"found {toks[1]!r}")
             elif key == "angle":
                 unit = toks[1].lower() if len(toks) > 1 else ""
                 if unit not in ("deg", "rad"):
@@ -277,6 +281,10 @@ def _skeleton(asf: _Asf, scale: float) -> Skeleton:
     for b in asf.order:
         bone = asf.bones[b]
         vec = bone.direction * bone.length * scale  # the bone, from its start to its end
+        if not bone.length * scale <= MAX_BONE:
+            raise FormatError(asf.path, bone.line, f"bone {b!r} is {bone.length * scale:.3g} m "
+                              f"long; expected at most {MAX_BONE:g} m (check its length and "
+                              "the length unit)")
         for c in bone.children:
             offsets[index[c]] = vec
         if not bone.children:
@@ -307,6 +315,9 @@ def _parse_amc(path: Path, channels: dict[str, list[str]], degrees: bool
                 degrees = key.upper() == ":DEGREES"
             continue
         if len(toks) == 1 and key.isascii() and key.isdigit():
+            if len(key.lstrip("0")) > 9:
+                raise FormatError(path, line, f"expected a frame number below 1e9, found "
+                                  f"{key[:40]!r}")
             number = int(key)
             if frames and number != frames_start + len(frames):
                 raise FormatError(path, line, f"expected frame {frames_start + len(frames)}, "
@@ -419,4 +430,8 @@ def read_asf_amc(asf_path: str | Path, amc_path: str | Path, fps: float = CMU_FP
             c = _fixed_axes(bone.axis, bone.axis_order, asf.degrees)
             m = _fixed_axes(values[b], "".join(d[1] for d in bone.dof), degrees)
             rotations[:, j] = _conjugated(c, m)
-    return to_y_up(Motion(skeleton, rotations, root * scale, fps, amc_path.stem), up, amc_path)
+    try:
+        motion = Motion(skeleton, rotations, root * scale, fps, amc_path.stem)
+    except ValueError as e:  # values overflowing once scaled; each was checked finite
+        raise FormatError(amc_path, None, f"{e}; expected plausible values") from None
+    return to_y_up(motion, up, amc_path)

@@ -494,8 +494,12 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
         scale = _guess_scale(names[first:], sk_parents, offsets, parts)
     end_sites = {k - first: j.end_site * scale for k, j in enumerate(joints)
                  if j.end_site is not None and k >= first}
-    skeleton = Skeleton(names[first:], sk_parents, offsets * scale, end_sites, dict(parts))
-    motion = Motion(skeleton, local_rot[:, first:], local_pos[:, first] * scale, fps, path.stem)
+    try:
+        skeleton = Skeleton(names[first:], sk_parents, offsets * scale, end_sites, dict(parts))
+        motion = Motion(skeleton, local_rot[:, first:], local_pos[:, first] * scale, fps,
+                        path.stem)
+    except ValueError as e:  # each value was checked finite and below 1e9: not expected
+        raise FormatError(path, None, f"{e}; expected plausible values") from None
     return motion, scale
 
 
