@@ -502,8 +502,8 @@ MALFORMED = {
     "missing frame count": (_edit(17, None), 17, "Frames"),
     "zero frame time": (_edit(18, "Frame Time: 0"), 18, "Frame Time"),
     "nan frame time": (_edit(18, "Frame Time: nan"), 18, "Frame Time"),
-    "frame time of 1000 s": (_edit(18, "Frame Time: 1000"), 18, "0.1 to 10000 fps"),
-    "frame rate of 1e6": (_edit(18, "Frame Time: 1e-6"), 18, "0.1 to 10000 fps"),
+    "frame time of 1000 s": (_edit(18, "Frame Time: 1000"), 18, "1 to 1000 fps"),
+    "frame rate of 1e6": (_edit(18, "Frame Time: 1e-6"), 18, "1 to 1000 fps"),
     "no MOTION": (lambda t: t.replace("MOTION", "MOTON"), 16, "MOTION"),
     "missing brace": (_edit(15, None), 14, "ends early"),
     "extra brace": (_edit(15, "}\n}"), 16, "expected MOTION after the ROOT joint, found '}'"),
@@ -664,7 +664,7 @@ def read_or_format_error(path: Path) -> Motion | None:
         lines = path.read_bytes().count(b"\n") + 2
         assert e.line is None or 1 <= e.line <= lines, (e.line, lines)
         return None
-    assert m.num_frames >= 1 and 0.1 <= m.fps <= 10_000
+    assert m.num_frames >= 1 and 1 <= m.fps <= 1000
     assert np.all(np.isfinite(m.positions()))
     return m
 

@@ -31,6 +31,7 @@ import io
 import math
 import re
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,6 +41,7 @@ from imuloco.core.bodymap import resolve_body_map
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
+from imuloco.io.atomic import atomic_write
 from imuloco.io.upaxis import Z_TO_Y, check_skip, check_up, resolve_up, spread_frames, to_y_up
 from imuloco.ops.rotations import IDENTITY, from_euler, qmul, qrot, to_euler
 
@@ -47,7 +49,7 @@ from imuloco.ops.rotations import IDENTITY, from_euler, qmul, qrot, to_euler
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
 CHANNELS = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 _CANON = {c.lower(): c for c in CHANNELS}  # "XROTATION" and "XRotation" are seen in the wild
-MIN_FPS, MAX_FPS = 0.1, 10_000.0  # plausible frame rates; others are corrupt headers
+MIN_FPS, MAX_FPS = 1.0, 1000.0  # plausible frame rates; others are corrupt headers
 MAX_FRAMES = 10_000_000  # 23 hours at 120 fps
 MAX_JOINTS, MAX_DEPTH = 2_000, 256  # rigs with face and finger bones have a few hundred
 # The fast reading takes "\n" and "\r\n" only; str.splitlines also breaks at these.
@@ -250,7 +252,7 @@ def parse_bvh(path: Path, text: str) -> tuple[list[_Joint], float, np.ndarray]:
     ``\r\n``) goes to the line-by-line reading, which names the line and field at fault.
     """
     m = None if _odd_breaks(text) else _MOTION.search(text)
-    hierarchy = None if m is None else _hierarchy(path, text[:m.start()])
+    hierarchy = None if m is None else _memo_hierarchy(path, text[:m.start()])
     if hierarchy is not None:
         joints, motion_line = hierarchy
         parsed = _parse_motion_fast(path, text, m.end(), motion_line, joints)
@@ -269,7 +271,7 @@ def parse_bvh(path: Path, text: str) -> tuple[list[_Joint], float, np.ndarray]:
 _HIERARCHIES: dict[str, tuple[list[_Joint], int]] = {}
 
 
-def _hierarchy(path: Path, head: str) -> tuple[list[_Joint], int] | None:
+def _memo_hierarchy(path: Path, head: str) -> tuple[list[_Joint], int] | None:
     """The joints of the text ``head`` before a MOTION line, and that line's number; None when
     ``head`` itself has a MOTION line. Memoised by text (a folder's clips share one rig): the
     joints are shared, read only."""
@@ -551,20 +553,45 @@ def write_bvh(motion: Motion, path: str | Path, unit: str = "cm", order: str = "
     (``m, cm, mm, in, cmu``), angles in degrees with 6 decimals, lengths with enough decimals
     for 1e-8 m. Refuses to replace an existing file unless ``overwrite``. Returns the path.
     """
+    return write_bvh_pieces([motion], motion.num_frames, path, unit, order, overwrite)
+
+
+def write_bvh_pieces(pieces: Iterable[Motion], frames: int, path: str | Path, unit: str = "cm",
+                     order: str = "ZXY", overwrite: bool = False) -> Path:
+    """Write consecutive Motions (one skeleton and frame rate, ``frames`` frames in all) as one
+    BVH file, a piece at a time: a long reconstruction never needs to be in memory whole. See
+    :func:`write_bvh` for the options; the file appears (atomically) only when complete."""
     path = Path(path)
     if unit not in UNITS:
         raise ValueError(f"unit must be one of {sorted(UNITS)}, got {unit!r}")
     order = order.upper()
     if sorted(order) != ["X", "Y", "Z"]:
         raise ValueError(f"order must be a permutation of 'XYZ' such as 'ZXY', got {order!r}")
-    sk = motion.skeleton
-    for name in sk.names:
-        if not name.strip() or name != name.strip() or any(c in name for c in "{}\r\n\t"):
-            raise ValueError(f"joint name {name!r} cannot be written to BVH")
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
     k = 1.0 / UNITS[unit]
     dec = _decimals(UNITS[unit])
+    written = 0
+    with atomic_write(path, "w") as f:
+        for motion in pieces:
+            if written == 0:
+                f.write("\n".join(_hierarchy(motion.skeleton, k, dec, order)) + "\n")
+                f.write(f"MOTION\nFrames: {frames}\nFrame Time: {1.0 / motion.fps:.10g}\n")
+            eul = to_euler(motion.rotations, order).reshape(motion.num_frames, -1)
+            f.writelines(" ".join(f"{x:.{dec}f}" for x in root) + " "
+                         + " ".join(f"{a:.6f}" for a in angles) + "\n"
+                         for root, angles in zip(motion.root * k, eul))
+            written += motion.num_frames
+        if written != frames:
+            raise ValueError(f"{path}: the pieces hold {written} frames, not {frames}")
+    return path
+
+
+def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
+    """The HIERARCHY section's lines of ``sk`` (lengths times ``k``, ``dec`` decimals)."""
+    for name in sk.names:
+        if not name.strip() or name != name.strip() or any(c in name for c in "{}\r\n\t"):
+            raise ValueError(f"joint name {name!r} cannot be written to BVH")
     rot_channels = " ".join(f"{a}rotation" for a in order)
     out: list[str] = ["HIERARCHY"]
 
@@ -590,10 +617,4 @@ def write_bvh(motion: Motion, path: str | Path, unit: str = "cm", order: str = "
         out.append(f"{pad}}}")
 
     emit(0, 0)
-    eul = to_euler(motion.rotations, order)  # (T, J, 3)
-    out += ["MOTION", f"Frames: {motion.num_frames}", f"Frame Time: {1.0 / motion.fps:.10g}"]
-    for root, angles in zip(motion.root * k, eul.reshape(motion.num_frames, -1)):
-        out.append(vec(root) + " " + " ".join(f"{a:.6f}" for a in angles))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(out) + "\n")
-    return path
+    return out

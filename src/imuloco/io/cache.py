@@ -24,6 +24,7 @@ import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
+from imuloco.errors import ImulocoError
 from imuloco.io.atomic import atomic_write
 from imuloco.io.bvh import cached_body_map
 
@@ -123,5 +124,5 @@ def _store(entry: Path, motion: Motion) -> None:
             np.savez(f, names=np.array(sk.names, dtype=str),
                      ints=np.concatenate([sk.parents, np.array(ends, dtype=np.int64)]),
                      floats=np.concatenate(floats))
-    except OSError:
+    except (OSError, ImulocoError):  # atomic_write's "cannot write there"
         pass  # a cache that cannot be written only costs time
