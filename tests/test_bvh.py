@@ -806,3 +806,98 @@ def test_joint_positions_match_fk(sample_db):
     np.testing.assert_allclose(
         joint_positions(m.rotations, m.root, sk.offsets, sk.parents, picks),
         m.positions()[:, picks], atol=1e-12)
+
+
+# ---------------------------------------------------------------------------------------------
+# The writer, checked by an independent reader (bvhio) and, where it is installed, Blender.
+
+@pytest.mark.parametrize("unit, per_metre", [("cm", 100.0), ("m", 1.0)])
+def test_written_units_and_end_sites_in_bvhio(sample_db, tmp_path: Path, unit: str,
+                                              per_metre: float):
+    """bvhio reads our file to our world positions in the chosen unit; every leaf has a
+    non-zero End Site though the rig's are of zero length (head top ~21 cm, hands, toes)."""
+    bvhio = pytest.importorskip("bvhio")
+    m = sample_db.clips[0].slice(0, 30)
+    assert all(np.linalg.norm(v) == 0 for v in m.skeleton.end_sites.values())
+    path = write_bvh(m, tmp_path / f"w_{unit}.bvh", unit=unit)
+    root = bvhio.readAsHierarchy(str(path))
+    pos = m.positions()
+    for f in (0, 29):
+        root.loadPose(f)
+        got = {j.Name: np.array(j.PositionWorld) / per_metre for j, *_ in root.layout()}
+        for k, name in enumerate(m.skeleton.names):
+            np.testing.assert_allclose(got[name], pos[f, k], atol=1e-5)
+    ends = {j.Name: np.linalg.norm(j.EndSite) / per_metre
+            for j, *_ in bvhio.readAsBvh(str(path)).Root.layout() if not j.Children}
+    assert set(ends) == {"Head", "Hand_L", "Hand_R", "Toes_L", "Toes_R"}
+    assert 0.15 < ends["Head"] < 0.3 and 0.1 < ends["Hand_L"] < 0.25, ends
+    assert 0.02 < ends["Toes_R"] < 0.1, ends
+    back = read_bvh(path, unit=unit)
+    np.testing.assert_allclose(back.positions(), pos, atol=1e-6, rtol=0)
+
+
+def test_end_site_of_a_rig_without_body_map():
+    from imuloco.core.skeleton import Skeleton
+    from imuloco.io.bvh import end_site
+    sk = Skeleton(["a", "b"], np.array([-1, 0]), [[0, 0, 0], [0, 0, 0.3]], {1: np.zeros(3)})
+    np.testing.assert_allclose(end_site(sk, 1), [0, 0, 0.15])  # half its bone
+    sk = Skeleton(["a", "b"], np.array([-1, 0]), [[0, 0, 0], [0, 0, 0.3]], {1: [1.0, 0, 0]})
+    np.testing.assert_allclose(end_site(sk, 1), [1, 0, 0])  # the rig's own is kept
+
+
+BLENDER_SCRIPT = r"""
+import builtins, json, sys
+import bpy
+_open = builtins.open
+def _open_without_U(file, mode="r", *args, **kwargs):
+    # Debian's Blender 3.4 BVH importer opens with mode 'rU', which Python 3.11 refuses;
+    # patched here, in the test only.
+    return _open(file, mode.replace("U", "") if isinstance(mode, str) else mode, *args, **kwargs)
+builtins.open = _open_without_U
+path, scale, frame = sys.argv[-3], float(sys.argv[-2]), int(sys.argv[-1])
+bpy.ops.import_anim.bvh(filepath=path, global_scale=scale, update_scene_fps=True,
+                        update_scene_duration=True)
+arm = next(o for o in bpy.context.scene.objects if o.type == "ARMATURE")
+scene = bpy.context.scene
+scene.frame_set(scene.frame_start + frame)
+bones = {b.name: [list(arm.matrix_world @ b.head), list(arm.matrix_world @ b.tail)]
+         for b in arm.pose.bones}
+print("RESULT " + json.dumps({"fps": scene.render.fps / scene.render.fps_base,
+                              "frame_end": scene.frame_end, "bones": bones}))
+"""
+
+
+@pytest.mark.parametrize("unit, scale", [("cm", 0.01), ("m", 1.0)])
+def test_blender_imports_the_written_bvh(sample_db, tmp_path: Path, unit: str, scale: float):
+    """Blender (Debian's, run in the background) imports the file as the README says: scale
+    0.01 for centimetres, 1 for metres, the scene at the file's frame rate; joints where we
+    put them (Blender is Z up: our (x, y, z) is its (x, -z, y)) and a head bone of non-zero
+    length (its tail is the End Site)."""
+    import json
+    import shutil
+    import subprocess
+    blender = shutil.which("blender")
+    if blender is None:
+        pytest.skip("Blender is not installed (Debian: apt-get install blender)")
+    probe = subprocess.run([blender, "--background", "--factory-startup", "--python-expr",
+                            "print('BLENDER-OK')"], check=False, capture_output=True, text=True,
+                           timeout=300)
+    if "BLENDER-OK" not in probe.stdout:
+        pytest.skip(f"Blender cannot run here: {(probe.stderr or probe.stdout)[-300:]}")
+    m = sample_db.clips[0].slice(0, 30)
+    path = write_bvh(m, tmp_path / f"b_{unit}.bvh", unit=unit)
+    script = tmp_path / "check.py"
+    script.write_text(BLENDER_SCRIPT)
+    run = subprocess.run([blender, "--background", "--factory-startup", "--python",
+                          str(script), "--", str(path), str(scale), "12"],
+                         check=False, capture_output=True, text=True, timeout=300)
+    line = next((ln for ln in run.stdout.splitlines() if ln.startswith("RESULT ")), None)
+    assert line is not None, (run.stdout + run.stderr)[-2000:]
+    res = json.loads(line[len("RESULT "):])
+    assert res["fps"] == pytest.approx(m.fps) and res["frame_end"] >= 30
+    pos = m.positions()[12]
+    for k, name in enumerate(m.skeleton.names):
+        x, y, z = pos[k]
+        np.testing.assert_allclose(res["bones"][name][0], [x, -z, y], atol=1e-4)
+    head, tail = np.array(res["bones"]["Head"])
+    assert 0.15 < np.linalg.norm(tail - head) < 0.3

@@ -41,6 +41,14 @@ def _reading_options(f):
                              "(auto: detected from the animated body).")(f)
 
 
+def _units_option(f):
+    """``--units m|cm``: the length unit of written BVH files."""
+    return click.option("--units", "units", type=click.Choice(["cm", "m"]), default="cm",
+                        show_default=True,
+                        help="Length unit of the written BVH (Blender: import a cm file with "
+                             "scale 0.01, an m file with scale 1).")(f)
+
+
 @cli.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
@@ -385,11 +393,12 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html).")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
+@_units_option
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
                 report_path: Path | None, no_calibrate: bool, platform: str | None,
-                piece_seconds: float | None, force: bool) -> None:
+                piece_seconds: float | None, force: bool, units: str) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -412,7 +421,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 
         report = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
                                     not no_calibrate, platform=platform, overwrite=force,
-                                    piece_s=piece_seconds, progress=True)
+                                    piece_s=piece_seconds, progress=True, unit=units)
         if report_path:
             with atomic_write(report_path, "w") as f:
                 f.write(json.dumps(report, indent=2) + "\n")
@@ -429,7 +438,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     except (FormatError, KeyError, ValueError) as e:
         raise click.ClickException(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {report['model']}", err=True)
-    write_bvh(motion, output, overwrite=force)
+    write_bvh(motion, output, unit=units, overwrite=force)
     written = [output]
     if video or html_path:
         written += render_outputs([motion], [f"{motion.name} ({report['method']})"],
@@ -456,14 +465,16 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                                                        path_type=Path), default=None,
               help="Model file from `imuloco train`.")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
-def demo(out_dir: Path, method_name: str | None, model_path: Path | None, force: bool) -> None:
+@_units_option
+def demo(out_dir: Path, method_name: str | None, model_path: Path | None, force: bool,
+         units: str) -> None:
     """Simulate a phone on the right ankle of a bundled walk, reconstruct it and write the
     BVH, a side-by-side video (MP4, GIF), the HTML viewer, plots and a report."""
     from imuloco.app.pipeline import demo as run_demo
 
     try:
         report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
-                          progress=True)
+                          progress=True, unit=units)
     except FileExistsError as e:
         raise click.UsageError(str(e)) from None
     m = report["metrics"]
@@ -542,9 +553,10 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
               help="Phone of Sensor Logger exports [default: from their Metadata.csv, else "
                    "guessed with a warning].")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
+@_units_option
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path, jobs: int,
           model_path: Path | None, method_name: str | None, placement: str, fmt: str,
-          no_calibrate: bool, platform: str | None, force: bool) -> None:
+          no_calibrate: bool, platform: str | None, force: bool, units: str) -> None:
     """Reconstruct many RECORDINGS (one walker each) in parallel: a BVH and a gait report
     per recording, and a summary.csv / summary.json of cadence, speed and step length."""
     from imuloco.app.batch import find_recordings, run_batch
@@ -555,7 +567,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     try:
         summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
                             calibrate=not no_calibrate, overwrite=force, progress=True,
-                            platform=platform)
+                            platform=platform, unit=units)
     except (FileExistsError, KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {summary['model']}", err=True)

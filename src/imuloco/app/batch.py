@@ -78,8 +78,10 @@ def _load(model_path: str):
 
 def reconstruct_one(recording: str | Path, out_dir: str | Path, name: str, model_path: str,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
-                    overwrite: bool = False, platform: str | None = None) -> dict[str, Any]:
-    """Reconstruct one recording, write ``NAME.bvh`` and ``NAME.json`` into ``out_dir``.
+                    overwrite: bool = False, platform: str | None = None,
+                    unit: str = "cm") -> dict[str, Any]:
+    """Reconstruct one recording, write ``NAME.bvh`` (lengths in ``unit``) and ``NAME.json``
+    into ``out_dir``.
 
     Returns its summary row (see :data:`COLUMNS`); errors are caught and reported in the row.
     """
@@ -93,7 +95,7 @@ def reconstruct_one(recording: str | Path, out_dir: str | Path, name: str, model
                                           calibrate=calibrate, fitted=_load(model_path),
                                           platform=platform)
         out = Path(out_dir)
-        write_bvh(motion, out / f"{name}.bvh", overwrite=overwrite)
+        write_bvh(motion, out / f"{name}.bvh", unit=unit, overwrite=overwrite)
         (out / f"{name}.json").write_text(json.dumps(report, indent=2) + "\n")
     except Exception as e:  # noqa: BLE001 - one bad recording must not stop the batch
         log.warning("%s: %s: %s", recording, type(e).__name__, e)
@@ -127,7 +129,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
               model: str | Path | None = None, method: str | None = None,
               placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
               overwrite: bool = False, progress: bool = False, fitted=None,
-              platform: str | None = None) -> dict[str, Any]:
+              platform: str | None = None, unit: str = "cm") -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` (see the module docstring).
 
     Parameters
@@ -140,6 +142,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
     overwrite : replace existing outputs (otherwise refuse before starting).
     progress : a progress bar (tqdm) on stderr.
     fitted : an already fitted method (skips the choice).
+    unit : length unit of the BVH files (``cm`` or ``m``; see :func:`imuloco.io.bvh.write_bvh`).
 
     Returns
     -------
@@ -175,7 +178,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
         model_path = str(fitted.save(Path(tmp) / "model.npz"))
         tasks = [{"recording": str(p), "out_dir": str(out), "name": n,
                   "model_path": model_path, "placement": placement, "fmt": fmt,
-                  "calibrate": calibrate, "overwrite": overwrite, "platform": platform}
+                  "calibrate": calibrate, "overwrite": overwrite, "platform": platform,
+                  "unit": unit}
                  for p, n in zip(paths, names)]
         bar = tqdm(total=len(tasks), desc="batch", unit="rec", disable=not progress)
         for row in _results(tasks, jobs):

@@ -550,8 +550,10 @@ def write_bvh(motion: Motion, path: str | Path, unit: str = "cm", order: str = "
 
     The root gets 6 channels (position, then rotation), every other joint 3 rotation channels,
     in the intrinsic Euler ``order`` (a permutation of ``XYZ``); lengths are in ``unit``
-    (``m, cm, mm, in, cmu``), angles in degrees with 6 decimals, lengths with enough decimals
-    for 1e-8 m. Refuses to replace an existing file unless ``overwrite``. Returns the path.
+    (``m, cm, mm, in, cmu``; Blender's importer takes the file's numbers as metres, so import
+    a centimetre file with scale 0.01), angles in degrees with 6 decimals, lengths with enough
+    decimals for 1e-8 m. Leaf joints get a non-zero End Site (:func:`end_site`). Refuses to
+    replace an existing file unless ``overwrite``. Returns the path.
     """
     return write_bvh_pieces([motion], motion.num_frames, path, unit, order, overwrite)
 
@@ -587,6 +589,34 @@ def write_bvh_pieces(pieces: Iterable[Motion], frames: int, path: str | Path, un
     return path
 
 
+# End Site lengths where a rig has none, as fractions of stature (Winter, Biomechanics and
+# Motor Control of Human Movement, 4th ed., Fig. 4.1: head top above the skull base about
+# 0.13 H, hand 0.108 H, toe tip beyond the ball of the foot about 0.04 H); the stature from
+# the hip-to-ankle length, about 0.49 H there.
+_END_SITE_STATURE = {"head": 0.13, "left_wrist": 0.108, "right_wrist": 0.108,
+                     "left_toe": 0.04, "right_toe": 0.04}
+
+
+def end_site(sk: Skeleton, j: int) -> np.ndarray:
+    """The End Site offset (3,) in metres written for leaf joint ``j``: the rig's own, or where
+    it has none (or one of zero length, which Blender drops with a warning) one along the
+    joint's bone: of the body part's length (head top, hand, toes; see above) when the body map
+    and the leg allow, else half the bone's length, at least 1 cm."""
+    site = np.asarray(sk.end_sites.get(j, np.zeros(3)), dtype=np.float64)
+    if np.linalg.norm(site) > 1e-6:
+        return site
+    bone = float(np.linalg.norm(sk.offsets[j]))
+    direction = sk.offsets[j] / bone if bone > 1e-9 else np.array([0.0, 1.0, 0.0])
+    length = max(0.5 * bone, 0.01)
+    part = next((p for p, name in (sk.body_map or {}).items() if name == sk.names[j]), None)
+    if part in _END_SITE_STATURE:
+        try:
+            length = _END_SITE_STATURE[part] * sk.leg_length() / 0.49
+        except KeyError:  # no leg in the body map: keep the bone-based length
+            pass
+    return direction * length
+
+
 def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
     """The HIERARCHY section's lines of ``sk`` (lengths times ``k``, ``dec`` decimals)."""
     for name in sk.names:
@@ -611,9 +641,8 @@ def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
         for c in kids:
             emit(c, depth + 1)
         if not kids or j in sk.end_sites:
-            site = np.asarray(sk.end_sites.get(j, np.zeros(3))) * k
-            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET {vec(site)}",
-                        f"{pad}\t}}"])
+            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{",
+                        f"{pad}\t\tOFFSET {vec(end_site(sk, j) * k)}", f"{pad}\t}}"])
         out.append(f"{pad}}}")
 
     emit(0, 0)
