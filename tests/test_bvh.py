@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from mutations import byte_mutations
 
 from imuloco.core.motion import Motion
 from imuloco.errors import FormatError
@@ -630,28 +631,6 @@ def test_parser_fails_only_with_format_error(tmp_path_factory, text: str):
         assert e.path == str(path) and e.message
         return
     assert np.all(np.isfinite(m.positions())) and m.fps > 0
-
-
-@st.composite
-def byte_mutations(draw, text: str) -> bytes:
-    """Up to 6 random byte edits (flip, delete, insert, repeat, cut) of a valid file: inputs
-    stay under ~2 kB."""
-    b = bytearray(text.encode())
-    for _ in range(draw(st.integers(1, 6))):
-        i = draw(st.integers(0, len(b)))
-        j = min(len(b), i + draw(st.integers(0, 24)))
-        kind = draw(st.sampled_from(["flip", "delete", "insert", "repeat", "cut"]))
-        if kind == "flip" and i < len(b):
-            b[i] = draw(st.integers(0, 255))
-        elif kind == "delete":
-            del b[i:j]
-        elif kind == "insert":
-            b[i:i] = draw(st.binary(max_size=12))
-        elif kind == "repeat":
-            b[i:i] = b[i:j] * draw(st.integers(1, 20))
-        else:
-            del b[i:]
-    return bytes(b)
 
 
 def read_or_format_error(path: Path) -> Motion | None:
