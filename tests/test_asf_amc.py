@@ -367,3 +367,25 @@ def test_implausible_values(tmp_path: Path, which, old, new, words):
     with pytest.raises(FormatError, match=words) as e:
         read_asf_amc(a, b)
     assert e.value.path == str(a if which == "asf" else b) and e.value.line is not None
+
+
+def _many_bones(n: int, chain: bool) -> str:
+    bones = "".join(f"  begin\n    id {i}\n    name b{i}\n    direction 0 1 0\n    length 1\n"
+                    f"    axis 0 0 0 XYZ\n    dof rx\n  end\n" for i in range(n))
+    links = "".join(f"    {'root' if i == 0 or not chain else f'b{i - 1}'} b{i}\n"
+                    for i in range(n))
+    return (":units\n  length 0.45\n:root\n  order TX TY TZ RX RY RZ\n  axis XYZ\n"
+            f"  position 0 0 0\n  orientation 0 0 0\n:bonedata\n{bones}:hierarchy\n  begin\n"
+            f"{links}  end\n")
+
+
+@pytest.mark.parametrize("n, chain, words", [(300, True, "nested more than 256 deep"),
+                                             (2100, False, "more than 1999 bones")])
+def test_bone_limits(tmp_path: Path, n: int, chain: bool, words: str):
+    """A body has far fewer bones, far less deeply nested: such files are refused at once (the
+    fuzzing of issue 18 found 20,000 chained bones taking over a minute)."""
+    a = write(tmp_path, "many.asf", _many_bones(n, chain))
+    b = write(tmp_path, "many.amc", ":DEGREES\n1\nroot 0 0 0 0 0 0\n")
+    with pytest.raises(FormatError, match=words) as e:
+        read_asf_amc(a, b)
+    assert e.value.path == str(a)

@@ -34,6 +34,7 @@ import numpy as np
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
+from imuloco.io.bvh import MAX_DEPTH, MAX_JOINTS
 from imuloco.io.upaxis import check_skip, check_up, to_y_up
 from imuloco.ops.rotations import IDENTITY, from_euler, qinv, qmul
 
@@ -233,6 +234,9 @@ def _close_bone(asf: _Asf, bone: _Bone, line: int) -> None:
         raise FormatError(path, line, "bone block ends without a 'name'")
     if bone.name in asf.bones or bone.name == "root":
         raise FormatError(path, bone.line, f"bone name {bone.name!r} is used twice")
+    if len(asf.bones) + 1 >= MAX_JOINTS:
+        raise FormatError(path, bone.line, f"more than {MAX_JOINTS - 1} bones; expected a "
+                          "body's skeleton")
     for what in ("direction", "length"):
         if getattr(bone, what) is None:
             raise FormatError(path, line, f"bone {bone.name!r} has no {what!r}")
@@ -261,12 +265,16 @@ def _link(asf: _Asf, line: int, parent: str, children: list[str]) -> None:
 
 
 def _order_bones(asf: _Asf) -> None:
-    stack = list(reversed(asf.root_children))
+    stack = [(b, 1) for b in reversed(asf.root_children)]
     while stack:  # depth first, children in the order the hierarchy lists them
-        b = stack.pop()
+        b, depth = stack.pop()
+        if depth > MAX_DEPTH:
+            raise FormatError(asf.path, asf.bones[b].line, f"bones nested more than "
+                              f"{MAX_DEPTH} deep; expected a body's skeleton")
         asf.order.append(b)
-        stack.extend(reversed(asf.bones[b].children))
-    missing = [b for b in asf.bones.values() if b.name not in asf.order]
+        stack.extend((c, depth + 1) for c in reversed(asf.bones[b].children))
+    ordered = set(asf.order)
+    missing = [b for b in asf.bones.values() if b.name not in ordered]
     if missing:
         raise FormatError(asf.path, missing[0].line, f"bones {[b.name for b in missing]} are "
                           "not connected to the root in the :hierarchy")
