@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -75,19 +76,18 @@ class _Asf:
     order: list[str] = field(default_factory=list)  # bones, parents before children
 
 
-def _lines(path: Path) -> list[tuple[int, list[str]]]:
-    """(1-based line number, tokens) of each line that has tokens once comments are removed."""
+def _lines(path: Path) -> Iterator[tuple[int, list[str]]]:
+    """(1-based line number, tokens) of each line that has tokens once comments are removed,
+    lazily: a parser that stops at a limit does not split the rest of a huge file."""
     raw = path.read_bytes()
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         text = raw.decode("latin-1")
-    out = []
     for i, ln in enumerate(text.splitlines()):
         toks = ln.split("#", 1)[0].split()
         if toks:
-            out.append((i + 1, toks))
-    return out
+            yield i + 1, toks
 
 
 def _num(path: Path, line: int, tok: str, what: str, allow_inf: bool = False) -> float:
