@@ -182,15 +182,27 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str) -> dict 
     return report if same else False
 
 
-def write_tables(out: Path, rows: list[dict], strides: list[dict],
-                 inputs: Sequence[Path] = ()) -> list[Path]:
-    """Write ``summary.csv``, ``walkers.parquet`` and ``strides.parquet`` atomically."""
+def _schema(fields: Sequence[str]):
+    import pyarrow as pa
+
+    return pa.schema([(f, pa.string() if f in _STRINGS else
+                          pa.int64() if f in _INTEGERS else pa.float64()) for f in fields])
+
+
+def stride_table(strides: list[dict]):
+    """Stride rows as a pyarrow Table: columnar, so a study's millions of strides fit in memory
+    (about 100 bytes a stride, against about 1 kB as dicts)."""
+    import pyarrow as pa
+
+    return pa.Table.from_pylist(strides, schema=_schema(("walker", *STRIDE_FIELDS)))
+
+
+def write_tables(out: Path, rows: list[dict], strides: list, inputs: Sequence[Path] = ()
+                 ) -> list[Path]:
+    """Write ``summary.csv``, ``walkers.parquet`` and ``strides.parquet`` (from the walkers'
+    :func:`stride_table`, in order) atomically."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-
-    def schema(fields: Sequence[str]) -> pa.Schema:
-        return pa.schema([(f, pa.string() if f in _STRINGS else
-                              pa.int64() if f in _INTEGERS else pa.float64()) for f in fields])
 
     def whole(v: Any) -> Any:
         return None if v is None else int(v)
@@ -202,10 +214,11 @@ def write_tables(out: Path, rows: list[dict], strides: list[dict],
         writer.writeheader()
         writer.writerows(rows)
     walkers = [{**r, **{k: whole(r.get(k)) for k in _INTEGERS}} for r in rows]
-    for path, fields, table in ((paths[1], WALKER_FIELDS, walkers),
-                                (paths[2], ("walker", *STRIDE_FIELDS), strides)):
+    tables = (pa.Table.from_pylist(walkers, schema=_schema(WALKER_FIELDS)),
+              pa.concat_tables([stride_table([]), *strides]))
+    for path, table in zip(paths[1:], tables):
         with atomic_write(path, "wb") as f:
-            pq.write_table(pa.Table.from_pylist(table, schema=schema(fields)), f)
+            pq.write_table(table, f)
     return paths
 
 
@@ -304,10 +317,11 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                                 " hold(s) another recording's or model's outputs; pass --force "
                                 "(force=True) to replace them or choose another --out")
     rows: dict[str, dict] = {}
-    strides: dict[str, list[dict]] = {}
+    strides: dict[str, Any] = {}  # pyarrow Tables
     for n, rep in reports.items():
         if rep and not force:
-            rows[n], strides[n] = walker_rows(n, rep)
+            rows[n], table = walker_rows(n, rep)
+            strides[n] = stride_table(table)
     skipped = len(rows)
     todo = [(n, r) for n, r in zip(names, recs) if n not in rows]
     with dask_client(scheduler, jobs) as client:
@@ -332,9 +346,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
             n, r = jobs_of[fut.key]
             if fut.status == "finished":
                 res = fut.result()
-                rows[n], strides[n] = res["row"], res["strides"]
+                rows[n], strides[n] = res["row"], stride_table(res["strides"])
             else:  # lost more often than Dask allows, or raised more than ``retries`` times
-                rows[n], strides[n] = error_row(n, r, fut.exception(), 0.0), []
+                rows[n], strides[n] = error_row(n, r, fut.exception(), 0.0), stride_table([])
             fut.release()
             bar.set_postfix_str(f"{n}: {rows[n]['status']}")
             bar.update()
@@ -343,7 +357,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     ordered = [{k: rows[n].get(k) for k in WALKER_FIELDS} | {"method": fitted.name,
                                                                "model": note}
                for n in names]
-    all_strides = [s for n in names for s in strides[n]]
+    all_strides = [strides[n] for n in names]
     write_tables(out, ordered, all_strides, inputs=paths)
     failed = sum(r["status"] != "ok" for r in ordered)
     summary = {"model": note, "method": fitted.name, "model_sha256": sha, "jobs": workers,
@@ -351,7 +365,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                "model_seconds": round(model_seconds, 2), "seconds": round(seconds, 2),
                "done": len(names) - skipped - failed, "skipped": skipped,
                "ok": len(names) - failed, "failed": failed,
-               "frames": sum(r["frames"] or 0 for r in ordered), "strides": len(all_strides),
+               "frames": sum(r["frames"] or 0 for r in ordered), "strides": sum(t.num_rows for t in all_strides),
                "recordings": [{k: r[k] for k in COLUMNS} for r in ordered]}
     with atomic_write(check_output(out / "summary.json", force=True, inputs=paths), "w") as f:
         f.write(json.dumps(summary, indent=2) + "\n")
