@@ -285,9 +285,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     -------
     The summary (also written to ``summary.json``): ``model``, ``method``, ``model_sha256``,
     ``jobs`` (workers), ``scheduler``, ``model_seconds`` (choosing the model), ``seconds``
-    (reconstructing, from the cluster ready to the last result), ``done``, ``skipped`` (complete from an earlier run), ``ok`` (done +
-    skipped), ``failed``, ``frames`` (reconstructed), ``strides`` and ``recordings`` (rows in
-    input order).
+    (reconstructing, from the cluster ready to the last result), ``done``, ``skipped``
+    (complete from an earlier run), ``ok`` (done + skipped), ``failed``, ``frames``
+    (reconstructed), ``strides`` and ``recordings`` (rows in input order).
     """
     from tqdm.auto import tqdm
 
@@ -336,8 +336,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
             for n, r in todo:
                 fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
                                     placement=placement, fmt=fmt, calibrate=calibrate,
-                                    platform=platform, height_m=height_m, key=f"imuloco-batch-{job}-{n}",
-                                    retries=retries, pure=False)
+                                    platform=platform, height_m=height_m,
+                                    key=f"imuloco-batch-{job}-{n}", retries=retries,
+                                    pure=False)
                 futures.append(fut)
                 jobs_of[fut.key] = (n, r)
         bar = tqdm(total=len(names), initial=skipped, desc="batch", unit="rec",
@@ -365,7 +366,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                "model_seconds": round(model_seconds, 2), "seconds": round(seconds, 2),
                "done": len(names) - skipped - failed, "skipped": skipped,
                "ok": len(names) - failed, "failed": failed,
-               "frames": sum(r["frames"] or 0 for r in ordered), "strides": sum(t.num_rows for t in all_strides),
+               "frames": sum(r["frames"] or 0 for r in ordered),
+               "strides": sum(t.num_rows for t in all_strides),
                "recordings": [{k: r[k] for k in COLUMNS} for r in ordered]}
     with atomic_write(check_output(out / "summary.json", force=True, inputs=paths), "w") as f:
         f.write(json.dumps(summary, indent=2) + "\n")
