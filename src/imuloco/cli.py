@@ -86,7 +86,7 @@ def _csv(value: str | None) -> list[str]:
 
 
 @cli.command()
-@click.option("--method", "method_names", required=True,
+@click.option("--method", "method_names", default=None,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
                    "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm].")
 @click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
@@ -105,9 +105,24 @@ def _csv(value: str | None) -> list[str]:
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
-def bench(method_names: str, split_name: str, noise: str, placement: str, data: Path | None,
-          out: Path, limit: int | None, seed: int, speed: bool, db_frames: str | None) -> None:
+@click.option("--real", "real_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=None, help="Run the real-data gait protocol on this folder (real IMUs "
+                                 "with references, see imuloco.evaluate.real) instead.")
+@click.option("--baseline", is_flag=True,
+              help="With --real: also measure a right-ankle reconstruction's gait.")
+def bench(method_names: str | None, split_name: str, noise: str, placement: str,
+          data: Path | None, out: Path, limit: int | None, seed: int, speed: bool,
+          db_frames: str | None, real_dir: Path | None, baseline: bool) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
+    if real_dir is not None:
+        from imuloco.evaluate.real import run_real, summarize, table
+
+        rows = run_real(real_dir, out, limit, baseline, progress=True)
+        click.echo(table(summarize(rows)))
+        click.echo(f"wrote {out / 'real.json'}, real.csv and README.md")
+        return
+    if not method_names:
+        raise click.UsageError("give --method NAME (or --real DIR)")
     names = _csv(method_names)
     if speed:
         from imuloco.evaluate.speed import speed_benchmark
