@@ -46,15 +46,16 @@ from imuloco.methods.training import TEST_SEED_OFFSET, Example, synthesize
 LATENCY_FRAMES = 300
 
 
-def load_data(data: str | Path | None, limit: int | None = None, progress: bool = False
-              ) -> MotionDatabase:
-    """The clips of folder ``data``, or the bundled sample when ``data`` is None."""
+def load_data(data: str | Path | None, limit: int | None = None, progress: bool = False,
+              up: str = "auto", skip_frames: int = 0) -> MotionDatabase:
+    """The clips of folder ``data``, or the bundled sample when ``data`` is None (``up`` and
+    ``skip_frames`` as for :func:`imuloco.io.bvh.read_bvh`)."""
     from imuloco.io.database import load_database, load_sample, spread
 
     if data is None:
         db = load_sample(progress=progress)
         return db.subset(spread(len(db), limit))
-    return load_database(data, limit=limit, progress=progress)
+    return load_database(data, limit=limit, progress=progress, up=up, skip_frames=skip_frames)
 
 
 def _aggregate(clips: list[dict[str, Any]]) -> dict[str, Any]:
@@ -164,6 +165,8 @@ def run_bench(
     limit: int | None = None,
     seed: int = 0,
     progress: bool = False,
+    up: str = "auto",
+    skip_frames: int = 0,
 ) -> list[dict[str, Any]]:
     """Run the benchmark protocol and return its records (one per method x motion type).
 
@@ -180,6 +183,7 @@ def run_bench(
         writes nothing.
     limit : read at most this many clips (before the split), for quick runs.
     seed : training seed; test recordings use ``seed + TEST_SEED_OFFSET``.
+    up, skip_frames : how motion files are read (see :func:`imuloco.io.bvh.read_bvh`).
     """
     from imuloco.methods import method_class
 
@@ -187,7 +191,7 @@ def run_bench(
     for name, _ in specs.values():  # fail before any work on an unknown or uninstalled method
         method_class(name)
     placements = list(placements)
-    db = load_data(data, limit, progress)
+    db = load_data(data, limit, progress, up, skip_frames)
     train, test_db = split(db, split_name)
     test = synthesize(test_db, placements, noise, seed + TEST_SEED_OFFSET, progress=progress)
     header = {"split": split_name, "noise": noise, "placements": placements,

@@ -57,6 +57,8 @@ def load_database(
     style: list[str] | None = None,
     limit: int | None = None,
     progress: bool = True,
+    up: str = "auto",
+    skip_frames: int = 0,
 ) -> MotionDatabase:
     """Read every ``*.bvh`` in ``folder`` (sorted by name) with its labels.
 
@@ -65,6 +67,8 @@ def load_database(
     content, style : keep only clips with these labels (e.g. ``["walk", "run"]``).
     limit : read at most this many clips (after filtering, evenly spaced over the sorted
         names: see :func:`spread`), for quick runs.
+    up, skip_frames : as for :func:`imuloco.io.bvh.read_bvh` (the vertical axis, ``"auto"``
+        by default; leading frames to drop, such as a prepended T-pose).
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -82,7 +86,7 @@ def load_database(
             continue
         chosen.append((f, lab))
     chosen = [chosen[i] for i in spread(len(chosen), limit)]
-    clips = [read_bvh(f) for f, _ in tqdm(chosen, desc="loading clips", disable=not progress,
+    clips = [read_bvh(f, up=up, skip_frames=skip_frames) for f, _ in tqdm(chosen, desc="loading clips", disable=not progress,
                                           unit="clip")]
     return MotionDatabase(clips, [lab for _, lab in chosen])
 
