@@ -10,8 +10,21 @@ from pathlib import Path
 
 import click
 
+from imuloco.errors import ImulocoError
 
-@click.group()
+
+class Commands(click.Group):
+    """The command group: an :class:`~imuloco.errors.ImulocoError` raised by any command ends
+    it with ``Error: <message>`` and exit status 1, instead of a traceback."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except ImulocoError as e:
+            raise click.ClickException(str(e)) from None
+
+
+@click.group(cls=Commands)
 @click.version_option(package_name="imuloco")
 def cli() -> None:
     """Full-body locomotion reconstruction from one body-worn inertial sensor."""
@@ -119,17 +132,32 @@ def _csv(value: str | None) -> list[str]:
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
+@click.option("--fuzz", type=click.IntRange(1), default=None, metavar="N",
+              help="Instead: read N generated malformed inputs per reader (imuloco.evaluate."
+                   "fuzz) and write fuzz.md and fuzz.json.")
+@click.option("--readers", default=None,
+              help="With --fuzz: readers, comma separated [default: all].")
 @click.option("--real", "real_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
-              default=None, help="Run the real-data gait protocol on this folder (real IMUs "
-                                 "with references, see imuloco.evaluate.real) instead.")
+              default=None, help="Instead: the real-data gait protocol on this folder (real "
+                                 "IMUs with references, imuloco.evaluate.real).")
 @click.option("--baseline", is_flag=True,
               help="With --real: also measure a right-ankle reconstruction's gait.")
 @_reading_options
 def bench(method_names: str | None, split_name: str, noise: str, placement: str,
           data: Path | None, out: Path, limit: int | None, seed: int, speed: bool,
-          db_frames: str | None, real_dir: Path | None, baseline: bool, up: str,
-          skip_frames: int) -> None:
+          db_frames: str | None, fuzz: int | None, readers: str | None,
+          real_dir: Path | None, baseline: bool, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
+    if fuzz is not None:
+        from imuloco.evaluate.fuzz import READERS, write_fuzz
+
+        chosen = tuple(_csv(readers)) or READERS
+        unknown = sorted(set(chosen) - set(READERS))
+        if unknown:
+            raise click.BadParameter(f"unknown reader(s) {unknown}; expected {list(READERS)}",
+                                     param_hint="--readers")
+        click.echo(write_fuzz(fuzz, out, chosen, seed=seed, progress=True))
+        return
     if real_dir is not None:
         from imuloco.evaluate.real import run_real, summarize, table
 
@@ -138,7 +166,7 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
         click.echo(f"wrote {out / 'real.json'}, real.csv and README.md")
         return
     if not method_names:
-        raise click.UsageError("give --method NAME (or --real DIR)")
+        raise click.UsageError("Missing option '--method' (or pass --fuzz N or --real DIR).")
     names = _csv(method_names)
     if speed:
         from imuloco.evaluate.speed import speed_benchmark
@@ -240,7 +268,13 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
     if split_name is not None:
         db = split(db, split_name)[0]
     placements = _csv(placement)
-    method.fit(db, placements, noise, seed, progress=True)
+    try:
+        method.fit(db, placements, noise, seed, progress=True)
+    except (ValueError, TypeError) as e:
+        if not params:
+            raise
+        raise click.BadParameter(f"{e} (rejected by {method_name})", param_hint="--param"
+                                 ) from None
     method.protocol_.update(data="bundled sample" if data is None else Path(data).name,
                             split=split_name or "all")
     seconds = method.protocol_["train_seconds"]
@@ -281,7 +315,8 @@ def export_onnx_command(model_path: Path, output: Path, force: bool) -> None:
               help="Sensor placement(s), comma separated (e.g. right_ankle,pelvis).")
 @click.option("--noise", default="phone", show_default=True,
               help="Noise preset: clean, phone or imu.")
-@click.option("--rate", default=100.0, show_default=True, type=float, help="Sampling rate, Hz.")
+@click.option("--rate", default=100.0, show_default=True, type=click.FloatRange(1.0, 10_000.0),
+              help="Sampling rate, Hz.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the noise draws.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s).")
@@ -342,11 +377,18 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Also write the report (gait, checks) as JSON.")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
+@click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
+              help="Phone of a Sensor Logger export [default: from its Metadata.csv, else "
+                   "guessed with a warning].")
+@click.option("--piece-seconds", type=click.FloatRange(10.0), default=None,
+              help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
+                   "(bounded memory for long recordings; not with --video/--html).")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
-                report_path: Path | None, no_calibrate: bool, force: bool) -> None:
+                report_path: Path | None, no_calibrate: bool, platform: str | None,
+                piece_seconds: float | None, force: bool) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -354,14 +396,35 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     """
     from imuloco.app.pipeline import reconstruct_file, render_outputs
     from imuloco.errors import FormatError
+    from imuloco.io.atomic import atomic_write, check_output
     from imuloco.io.bvh import write_bvh
 
     _refuse_existing([output, video, html_path, report_path], force)
+    for out in (output, video, html_path, report_path):
+        if out is not None:
+            check_output(out, force=True, inputs=recording)  # never onto an input
     source = recording[0] if len(recording) == 1 else list(recording)
+    if piece_seconds is not None:
+        if video or html_path:
+            raise click.UsageError("--piece-seconds writes the BVH only: drop --video/--html")
+        from imuloco.app.chunked import reconstruct_to_bvh
+
+        report = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
+                                    not no_calibrate, platform=platform, overwrite=force,
+                                    piece_s=piece_seconds, progress=True)
+        if report_path:
+            with atomic_write(report_path, "w") as f:
+                f.write(json.dumps(report, indent=2) + "\n")
+        m = report["motion"]
+        click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
+                   f"{report['pieces']['count']} piece(s); wrote "
+                   + ", ".join(str(p) for p in (output, report_path) if p))
+        return
     try:
         motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                           placement=placement, fmt=fmt,
-                                          calibrate=not no_calibrate, progress=True)
+                                          calibrate=not no_calibrate, progress=True,
+                                          platform=platform)
     except (FormatError, KeyError, ValueError) as e:
         raise click.ClickException(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {report['model']}", err=True)
@@ -372,7 +435,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                                   [video] if video else [], html_path, overwrite=force,
                                   progress=True, max_seconds=video_seconds)
     if report_path:
-        report_path.write_text(json.dumps(report, indent=2) + "\n")
+        with atomic_write(report_path, "w") as f:
+            f.write(json.dumps(report, indent=2) + "\n")
         written.append(report_path)
     g = report["gait"]
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
@@ -473,10 +537,13 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
               type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
               help="Sensor log format.")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
+@click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
+              help="Phone of Sensor Logger exports [default: from their Metadata.csv, else "
+                   "guessed with a warning].")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path, jobs: int,
           model_path: Path | None, method_name: str | None, placement: str, fmt: str,
-          no_calibrate: bool, force: bool) -> None:
+          no_calibrate: bool, platform: str | None, force: bool) -> None:
     """Reconstruct many RECORDINGS (one walker each) in parallel: a BVH and a gait report
     per recording, and a summary.csv / summary.json of cadence, speed and step length."""
     from imuloco.app.batch import find_recordings, run_batch
@@ -486,7 +553,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
         raise click.UsageError("no recordings: give files or --glob PATTERN")
     try:
         summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
-                            calibrate=not no_calibrate, overwrite=force, progress=True)
+                            calibrate=not no_calibrate, overwrite=force, progress=True,
+                            platform=platform)
     except (FileExistsError, KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {summary['model']}", err=True)
