@@ -172,3 +172,76 @@ def test_real_protocol_on_one_trial_each(real_dir, tmp_path):
     assert shoe["steps_err_pct"] == 0
     assert shoe["stride_mae_m"] < 0.10 and shoe["path_final_pct"] < 1.0
     assert abs(ours[("ipol-gait", "lower_back")]["cadence_err_pct"]) < 3
+
+
+# ---- heights, consistency and the report's gait --------------------------------------------
+def test_running_lengths_agree_with_speed_and_cadence(sample_db):
+    """speed = step length x cadence / 60 on running clips too (the flight is covered)."""
+    for clip in sample_db.where(content="run").clips:
+        g = gait_parameters(clip)
+        assert g["speed_mps"] == pytest.approx(g["step_length_m"] * g["cadence_spm"] / 60)
+        assert g["stride_length_m"] == pytest.approx(2 * g["step_length_m"])
+        # the heel-to-heel separation at a strike misses the flight
+        assert g["ankle_step_length_m"] < g["step_length_m"]
+
+
+def test_to_height_scales_every_length_and_speed(demo_clip):
+    from imuloco.evaluate.gait import gait_strides, stature, to_height
+
+    h = stature(demo_clip.skeleton)
+    assert 1.4 < h < 2.0  # an adult's stature from the leg
+    tall = to_height(demo_clip, 2.0)
+    k = 2.0 / h
+    assert stature(tall.skeleton) == pytest.approx(2.0)
+    a, b = gait_parameters(demo_clip), gait_parameters(tall)
+    for key in ("stride_length_m", "step_length_m", "speed_mps", "ankle_stride_length_m"):
+        assert b[key] == pytest.approx(k * a[key], rel=1e-6)
+    assert b["cadence_spm"] == pytest.approx(a["cadence_spm"])
+    la = [r["length_m"] for r in gait_strides(demo_clip)]
+    lb = [r["length_m"] for r in gait_strides(tall)]
+    np.testing.assert_allclose(lb, k * np.asarray(la), rtol=1e-6)
+    with pytest.raises(ValueError, match="metres"):
+        to_height(demo_clip, 175.0)  # centimetres
+
+
+def test_reconstruct_file_height_and_foot_gait(tmp_path, demo_rec, demo_clip, sample_db):
+    """A foot sensor: the report's gait comes from the sensor's signal (ZUPT strides), the
+    motion from a baseline fitted on the fly for right_foot (no shipped model), scaled to
+    --height."""
+    from imuloco.app.pipeline import choose_method, reconstruct_file
+    from imuloco.evaluate.gait import stature
+    from imuloco.io.sensorlog import write_generic_csv
+
+    rec = demo_rec.select(["right_foot"])
+    path = write_generic_csv(rec, tmp_path / "foot.csv")
+    fitted, note = choose_method(placement="right_foot", db=sample_db)
+    assert "on the fly" in note and fitted.placements_ == ["right_foot"]
+    motion, report = reconstruct_file(path, fitted=fitted, placement="right_foot",
+                                      height=1.9)
+    assert stature(motion.skeleton) == pytest.approx(1.9)
+    assert report["height_m"] == 1.9
+    assert "right_foot sensor" in report["gait_source"] and report["gait_note"] is None
+    truth = gait_parameters(demo_clip)
+    assert report["gait"]["stride_length_m"] == pytest.approx(truth["stride_length_m"],
+                                                              rel=0.05)
+    assert len(report["strides"]) >= 3 and report["strides"][0]["foot"] == "right"
+    json.dumps(report)
+
+
+def test_a_model_refuses_a_placement_it_does_not_know(tmp_path, ridge_without_demo_clip):
+    from imuloco.app.pipeline import choose_method
+
+    model = ridge_without_demo_clip.save(tmp_path / "ankle.npz")
+    with pytest.raises(ValueError, match="'right_foot'"):
+        choose_method(model=model, placement="right_foot")
+
+
+def test_gait_report_states_when_nothing_was_measured(demo_clip, demo_rec):
+    from imuloco.evaluate.sensorgait import gait_report
+
+    still = demo_clip.slice(0, 1)
+    still = type(still)(still.skeleton, np.repeat(still.rotations, 60, axis=0),
+                        np.repeat(still.root, 60, axis=0), still.fps)
+    out = gait_report(still, demo_rec, "right_ankle")
+    assert out["gait_note"].startswith("no gait could be measured")
+    assert out["gait"]["cadence_spm"] is None and out["gait"]["steps"] is None

@@ -30,6 +30,12 @@ def cli() -> None:
     """Full-body locomotion reconstruction from one body-worn inertial sensor."""
 
 
+_height_option = click.option(
+    "--height", type=click.FloatRange(0.5, 2.6), default=None, metavar="METRES",
+    help="The wearer's body height: the skeleton and every length and speed in their "
+         "proportions [default: the training skeleton's].")
+
+
 def _reading_options(f):
     """``--up`` and ``--skip-frames``: how motion files are read (``read_bvh``'s options)."""
     f = click.option("--skip-frames", type=click.IntRange(min=0), default=0, show_default=True,
@@ -383,12 +389,13 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
 @click.option("--piece-seconds", type=click.FloatRange(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html).")
+@_height_option
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
                 report_path: Path | None, no_calibrate: bool, platform: str | None,
-                piece_seconds: float | None, force: bool) -> None:
+                piece_seconds: float | None, height: float | None, force: bool) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -405,6 +412,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
             check_output(out, force=True, inputs=recording)  # never onto an input
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
+        if height is not None:
+            raise click.UsageError("--piece-seconds does not scale to --height yet: drop one")
         if video or html_path:
             raise click.UsageError("--piece-seconds writes the BVH only: drop --video/--html")
         from imuloco.app.chunked import reconstruct_to_bvh
@@ -424,7 +433,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                           placement=placement, fmt=fmt,
                                           calibrate=not no_calibrate, progress=True,
-                                          platform=platform)
+                                          platform=platform, height=height)
     except (FormatError, KeyError, ValueError) as e:
         raise click.ClickException(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {report['model']}", err=True)
@@ -540,10 +549,11 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
 @click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
               help="Phone of Sensor Logger exports [default: from their Metadata.csv, else "
                    "guessed with a warning].")
+@_height_option
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path, jobs: int,
           model_path: Path | None, method_name: str | None, placement: str, fmt: str,
-          no_calibrate: bool, platform: str | None, force: bool) -> None:
+          no_calibrate: bool, platform: str | None, height: float | None, force: bool) -> None:
     """Reconstruct many RECORDINGS (one walker each) in parallel: a BVH and a gait report
     per recording, and a summary.csv / summary.json of cadence, speed and step length."""
     from imuloco.app.batch import find_recordings, run_batch
@@ -554,7 +564,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     try:
         summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
                             calibrate=not no_calibrate, overwrite=force, progress=True,
-                            platform=platform)
+                            platform=platform, height=height)
     except (FileExistsError, KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {summary['model']}", err=True)
@@ -600,9 +610,10 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
               help="TLS certificate (PEM): serve HTTPS, which phones need for motion sensors.")
 @click.option("--key", "keyfile", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Private key of --cert.")
+@_height_option
 def live(host: str, port: int, model_path: Path | None, method_name: str | None,
          placement: str, calibrate_seconds: float, replay: Path | None, fmt: str, speed: float,
-         loop: bool, certfile: str | None, keyfile: str | None) -> None:
+         loop: bool, certfile: str | None, keyfile: str | None, height: float | None) -> None:
     """Watch a walker live: a phone on the leg streams its sensors (open /phone on it), a
     browser shows the reconstruction as it walks (open /live). Ctrl-C stops."""
     import asyncio
@@ -616,7 +627,7 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
 
     try:
         fitted, note = choose_method(method_name, model_path, placement, progress=True)
-        server = LiveServer(fitted, calibrate_seconds, note)
+        server = LiveServer(fitted, calibrate_seconds, note, height_m=height)
     except (KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     ssl = ssl_context(certfile, keyfile) if certfile else None

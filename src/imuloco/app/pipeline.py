@@ -151,8 +151,8 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
 def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=None,
                      method: str | None = None, placement: str = "right_ankle",
                      fmt: str = "auto", calibrate: bool = True, pin: bool | None = None,
-                     progress: bool = False, fitted=None, platform: str | None = None
-                     ) -> tuple[Motion, dict[str, Any]]:
+                     progress: bool = False, fitted=None, platform: str | None = None,
+                     height: float | None = None) -> tuple[Motion, dict[str, Any]]:
     """Import a phone's sensor log and reconstruct the wearer's motion.
 
     Parameters
@@ -167,17 +167,22 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     fitted : an already fitted method (skips :func:`choose_method`).
     platform : Sensor Logger exports: ``"ios"`` or ``"android"`` (default: from the export's
         metadata, else guessed with a warning).
+    height : the wearer's body height in metres: the skeleton, and so every length and speed,
+        is scaled to it (:func:`imuloco.evaluate.gait.to_height`); None keeps the training
+        skeleton.
 
     Returns
     -------
-    The Motion (on the model's training skeleton, at its frame rate) and a JSON-ready report:
-    the import, the calibration, the method, gait parameters, plausibility checks and the
-    cadence of the raw signal.
+    The Motion (on the model's training skeleton, or scaled to ``height``, at its frame rate)
+    and a JSON-ready report: the import, the calibration, the method, gait parameters from the
+    best estimator for the placement (:func:`imuloco.evaluate.sensorgait.gait_report`: the
+    sensor's signal for a foot or the lower back, else the motion) with per-stride rows,
+    plausibility checks and the cadence of the raw signal.
     """
     from tqdm.auto import tqdm
 
-    from imuloco.evaluate.gait import gait_parameters, plausibility, signal_cadence, to_json
-    from imuloco.phases import gait_phases
+    from imuloco.evaluate.gait import plausibility, signal_cadence, to_height, to_json
+    from imuloco.evaluate.sensorgait import gait_report
     from imuloco.sensors.reallog import read_log
 
     steps = ["import", "model", "reconstruct", "gait"]
@@ -194,12 +199,13 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar.update()
     bar.set_postfix_str(f"{fitted.name} on {rec.times[-1]:.0f} s")
     motion, info = reconstruct_recording(rec, fitted, calibrate, pin)
+    if height is not None:
+        motion = to_height(motion, height)
     name = Path(recording_path if isinstance(recording_path, (str, Path))
                 else recording_path[0]).stem
     motion.name = name
     bar.update()
     bar.set_postfix_str("gait")
-    phases = gait_phases(motion)
     k = rec.placements.index(fitted.placements_[0])
     report = {
         "recording": {
@@ -215,7 +221,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         "method": fitted.name, "model": note, "placement": placement,
         "motion": {"frames": motion.num_frames, "fps": motion.fps,
                    "duration_s": round(motion.duration, 3)},
-        "gait": to_json(gait_parameters(motion, phases)),
+        "height_m": height,
+        **gait_report(motion, rec, placement, height),
         "signal_cadence_spm": to_json({"v": signal_cadence(rec, k)})["v"],
         "plausibility": to_json(plausibility(motion)),
     }

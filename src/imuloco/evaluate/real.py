@@ -25,7 +25,6 @@ physical bound or the tolerance below.
 
 from __future__ import annotations
 
-import itertools
 import json
 import logging
 import math
@@ -35,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from imuloco.evaluate.sensorgait import SensorGait, sensor_gait
+from imuloco.evaluate.sensorgait import SensorGait, not_measured, sensor_gait
 from imuloco.io.realimu import RealTrial, find_datasets, read_trials
 
 log = logging.getLogger(__name__)
@@ -233,6 +232,7 @@ def reconstruction_gait(trial: RealTrial, placement: str, fitted) -> SensorGait:
     from the motion's strikes (:func:`imuloco.evaluate.gait.gait_parameters`)."""
     from imuloco.app.pipeline import reconstruct_recording
     from imuloco.core.recording import Recording
+    from imuloco.evaluate.gait import gait_strides
     from imuloco.phases import gait_phases
 
     rec = trial.recording.select([placement])
@@ -241,13 +241,7 @@ def reconstruction_gait(trial: RealTrial, placement: str, fitted) -> SensorGait:
     ph = gait_phases(motion)
     strikes = np.sort(np.concatenate([ph.steps["left"], ph.steps["right"]])) / motion.fps
     ankle = motion.part_positions(["right_ankle"])[:, 0]
-    right = ph.steps["right"]
-    rows = []
-    for a, b in itertools.pairwise(right):
-        length = float(np.linalg.norm(ankle[b, [0, 2]] - ankle[a, [0, 2]]))
-        rows.append({"foot": "right", "start_s": a / motion.fps, "end_s": b / motion.fps,
-                     "length_m": length, "speed_mps": length / ((b - a) / motion.fps),
-                     "stance_pct": math.nan, "swing_pct": math.nan})
+    rows = [r for r in gait_strides(motion, ph) if r["foot"] == "right"]
     t = np.arange(motion.num_frames) / motion.fps + rec.times[0]
     return SensorGait(placement, f"reconstruction ({fitted.name}) strikes", strides=rows,
                       initial_contacts=strikes + rec.times[0], steps_per_contact=1, times=t,
@@ -275,8 +269,12 @@ def run_real(folder: str | Path, out: str | Path | None = None, limit: int | Non
         trials = list(read_trials(path, layout, limit))
         for trial in tqdm(trials, desc=layout, unit="trial", disable=not progress):
             for placement in trial.recording.placements:
-                gait = sensor_gait(trial.recording, placement, height_m=trial.reference.height_m,
-                                   sensor_height_m=trial.reference.sensor_height_m)
+                try:
+                    gait = sensor_gait(trial.recording, placement,
+                                       height_m=trial.reference.height_m,
+                                       sensor_height_m=trial.reference.sensor_height_m)
+                except ValueError as e:  # e.g. a lower back without the walker's height
+                    gait = not_measured(placement, "", str(e))
                 rows.append(evaluate_gait(gait, trial, "imuloco"))
                 if baseline and placement.endswith("_foot"):
                     try:

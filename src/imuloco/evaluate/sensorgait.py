@@ -345,3 +345,49 @@ def sensor_gait(rec, placement: str, height_m: float | None = None,
         return lower_back_gait(rec.times, rec.acc[:, k], rec.gyro[:, k], sensor_height_m)
     raise KeyError(f"no sensor-level gait method for placement {placement!r}; have "
                    f"{[*FOOT_PLACEMENTS, LOWER_BACK]}")
+
+
+GAIT_KEYS = ("steps", "cadence_spm", "step_length_m", "stride_length_m", "speed_mps",
+             "stance_pct", "swing_pct")
+
+
+def gait_report(motion, rec, placement: str, height_m: float | None = None) -> dict:
+    """The gait a study reads for a recording, from the best estimator for its placement:
+    the sensor's own signal for a foot or the lower back (:func:`sensor_gait`), the
+    reconstructed motion otherwise (:func:`imuloco.evaluate.gait.gait_parameters`).
+
+    Returns
+    -------
+    dict: ``gait`` (JSON-ready parameters; NaN/None where nothing could be measured),
+    ``gait_source`` (what measured them), ``gait_note`` (why nothing was measured, or None)
+    and ``strides`` (one row per stride: foot, start_s, end_s, length_m, speed_mps,
+    stance_pct, swing_pct).
+    """
+    from imuloco.evaluate.gait import gait_parameters, gait_strides, stature, to_json
+    from imuloco.phases import gait_phases
+
+    phases = gait_phases(motion)
+    gait = gait_parameters(motion, phases)
+    strides = gait_strides(motion, phases)
+    source, note = "the reconstructed motion", None
+    if placement in (*FOOT_PLACEMENTS, LOWER_BACK):
+        if height_m is None:
+            height_m = stature(motion.skeleton)
+            if placement == LOWER_BACK:
+                note = (f"no --height given: the skeleton's stature {height_m:.2f} m sets "
+                        "the pendulum length")
+        sg = sensor_gait(rec, placement, height_m=height_m)
+        summary = sg.summary()
+        gait.update({k: summary[k] for k in GAIT_KEYS})
+        gait["double_support_pct"] = math.nan
+        strides, source = sg.strides, f"the {placement} sensor's signal: {sg.method}"
+        if not sg.measured:
+            note = f"no gait could be measured: {sg.reason}"
+    elif len(strides) < MIN_STRIDES:
+        note = ("no gait could be measured: fewer than 2 strides (strike to strike of one "
+                "foot) in the reconstruction")
+    if note and note.startswith("no gait"):
+        gait = {k: (v if k == "duration_s" else math.nan) for k, v in gait.items()}
+    return {"gait": to_json(gait), "gait_source": source, "gait_note": note,
+            "strides": [{k: (v if isinstance(v, str) else to_json({"v": v})["v"])
+                         for k, v in r.items()} for r in strides]}

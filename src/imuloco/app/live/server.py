@@ -96,8 +96,10 @@ class LiveServer:
     note : where the model came from, shown to viewers.
     """
 
-    def __init__(self, method, calibrate_s: float = 5.0, note: str = "") -> None:
-        probe = LiveSession(method, calibrate_s)  # fails early on an offline method
+    def __init__(self, method, calibrate_s: float = 5.0, note: str = "",
+                 height_m: float | None = None) -> None:
+        probe = LiveSession(method, calibrate_s, height_m=height_m)  # fails early if offline
+        self.height_m = height_m
         self.method = method
         self.calibrate_s = calibrate_s
         self.note = note
@@ -186,7 +188,8 @@ class LiveServer:
 
     def start_session(self, calibration=None) -> None:
         """A fresh session (frames from 0); ``calibration`` reuses a phone's mounting."""
-        self.session = LiveSession(self.method, self.calibrate_s, calibration=calibration)
+        self.session = LiveSession(self.method, self.calibrate_s, calibration=calibration,
+                                   height_m=self.height_m)
         self._last_status_t = -np.inf
         self.publish({"type": "reset"})
         self.set_status(self.session.describe())

@@ -156,10 +156,13 @@ class LiveSession:
         anatomical frame).
     sigma_s, radius_s : resampling kernel (see the module docstring).
     calibration : a calibration found earlier for the same phone (skips calibrating).
+    height_m : the wearer's body height: poses on the skeleton scaled to it (None: the
+        training skeleton's).
     """
 
     def __init__(self, method, calibrate_s: float = 5.0, sigma_s: float | None = None,
-                 radius_s: float | None = None, calibration: Calibration | None = None) -> None:
+                 radius_s: float | None = None, calibration: Calibration | None = None,
+                 height_m: float | None = None) -> None:
         if not getattr(method, "supports_online", False):
             raise ValueError(f"method {method.name!r} has no online mode; live needs one of "
                              "the methods `imuloco methods` lists as online")
@@ -173,6 +176,9 @@ class LiveSession:
         self._next_try = calibrate_s
         self.last_t: float | None = None
         self.dropped = 0  # samples not after the previous one
+        from imuloco.evaluate.gait import height_scale
+
+        self.scale = 1.0 if height_m is None else height_scale(method.skeleton_, height_m)
 
     @property
     def num_sensors(self) -> int:
@@ -249,7 +255,8 @@ class LiveSession:
             rot, root = self.stream.step(x)
             if k < d:
                 continue
-            pos = fk(rot, root, sk.offsets, sk.parents)[1]
+            root = root * self.scale
+            pos = fk(rot, root, sk.offsets * self.scale, sk.parents)[1]
             out.append(Frame(k - d, tk - d / self.resampler.fps, t, rot, root, pos))
         return out
 
