@@ -186,7 +186,8 @@ def test_running_lengths_agree_with_speed_and_cadence(sample_db):
 
 
 def test_to_height_scales_every_length_and_speed(demo_clip):
-    from imuloco.evaluate.gait import gait_strides, stature, to_height
+    from imuloco.evaluate.gait import stature, to_height
+    from imuloco.evaluate.strides import stride_rows
 
     h = stature(demo_clip.skeleton)
     assert 1.4 < h < 2.0  # an adult's stature from the leg
@@ -197,8 +198,8 @@ def test_to_height_scales_every_length_and_speed(demo_clip):
     for key in ("stride_length_m", "step_length_m", "speed_mps", "ankle_stride_length_m"):
         assert b[key] == pytest.approx(k * a[key], rel=1e-6)
     assert b["cadence_spm"] == pytest.approx(a["cadence_spm"])
-    la = [r["length_m"] for r in gait_strides(demo_clip)]
-    lb = [r["length_m"] for r in gait_strides(tall)]
+    la = [r["length_m"] for r in stride_rows(demo_clip, digits=9)]
+    lb = [r["length_m"] for r in stride_rows(tall, digits=9)]
     np.testing.assert_allclose(lb, k * np.asarray(la), rtol=1e-6)
     with pytest.raises(ValueError, match="metres"):
         to_height(demo_clip, 175.0)  # centimetres

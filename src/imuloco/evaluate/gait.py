@@ -13,7 +13,8 @@ From the foot strikes and contacts that :func:`imuloco.phases.gait_phases` detec
   ankles' separation at a strike, ``ankle_step_length_m``, the "heel to heel" step length, is
   shorter than the distance covered per step when running: the flight adds to it.)
 - ``ankle_stride_length_m``: the median horizontal distance the striking ankle travelled
-  between two strikes of the same foot (:func:`gait_strides` has each stride).
+  between two strikes of the same foot (:func:`imuloco.evaluate.strides.stride_rows` has
+  each stride).
 - ``stance_pct`` / ``swing_pct``: per foot, the share of the frames between that foot's first
   and last strike (whole gait cycles) spent in contact / in the air; ``stance_swing_ratio`` is
   stance over swing (about 60/40 = 1.5 in normal walking, Perry and Burnfield 2010).
@@ -26,7 +27,6 @@ reconstruction). Values that need more strikes than the motion has are NaN (``No
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -114,27 +114,6 @@ def gait_parameters(motion: Motion, phases: GaitPhases | None = None) -> dict[st
         "stance_swing_ratio": ratio,
         "double_support_pct": 100.0 * double,
     }
-
-
-def gait_strides(motion: Motion, phases: GaitPhases | None = None) -> list[dict]:
-    """One row per stride of each foot, strike to next strike of the same foot: ``foot``,
-    ``start_s``, ``end_s``, ``length_m`` (the ankle's horizontal travel), ``speed_mps``
-    (length over duration), ``stance_pct`` and ``swing_pct`` (share of the stride with that
-    foot down / in the air), sorted by start."""
-    ph = gait_phases(motion) if phases is None else phases
-    fps = motion.fps
-    rows = []
-    for foot in FEET:
-        ankle = motion.part_positions([f"{foot}_ankle"])[:, 0][:, [0, 2]]
-        strikes = ph.steps[foot]
-        down = ph.contacts[f"{foot}_foot"]
-        for a, b in itertools.pairwise(strikes):
-            length = float(np.linalg.norm(ankle[b] - ankle[a]))
-            stance = float(np.mean(down[a:b]))
-            rows.append({"foot": foot, "start_s": a / fps, "end_s": b / fps, "length_m": length,
-                         "speed_mps": length * fps / (b - a), "stance_pct": 100 * stance,
-                         "swing_pct": 100 * (1 - stance)})
-    return sorted(rows, key=lambda r: r["start_s"])
 
 
 # Stature from the leg: hip joint (greater trochanter) at 0.530 and ankle at 0.039 of body

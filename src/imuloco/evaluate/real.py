@@ -232,7 +232,7 @@ def reconstruction_gait(trial: RealTrial, placement: str, fitted) -> SensorGait:
     from the motion's strikes (:func:`imuloco.evaluate.gait.gait_parameters`)."""
     from imuloco.app.pipeline import reconstruct_recording
     from imuloco.core.recording import Recording
-    from imuloco.evaluate.gait import gait_strides
+    from imuloco.evaluate.strides import stride_rows
     from imuloco.phases import gait_phases
 
     rec = trial.recording.select([placement])
@@ -241,7 +241,7 @@ def reconstruction_gait(trial: RealTrial, placement: str, fitted) -> SensorGait:
     ph = gait_phases(motion)
     strikes = np.sort(np.concatenate([ph.steps["left"], ph.steps["right"]])) / motion.fps
     ankle = motion.part_positions(["right_ankle"])[:, 0]
-    rows = [r for r in gait_strides(motion, ph) if r["foot"] == "right"]
+    rows = [r for r in stride_rows(motion, ph) if r["foot"] == "right"]
     t = np.arange(motion.num_frames) / motion.fps + rec.times[0]
     return SensorGait(placement, f"reconstruction ({fitted.name}) strikes", strides=rows,
                       initial_contacts=strikes + rec.times[0], steps_per_contact=1, times=t,

@@ -50,8 +50,9 @@ class SensorGait:
     ----------
     placement, method : where the sensor was and what measured the gait.
     measured : False when no gait could be measured; ``reason`` says why.
-    strides : one dict per stride: ``foot``, ``start_s``, ``end_s`` (its initial contacts),
-        ``length_m``, ``speed_mps``, ``stance_pct``, ``swing_pct`` (NaN when unknown).
+    strides : one dict per stride (:func:`stride_row`): ``foot``, ``start_s``, ``end_s`` (its
+        initial contacts), ``duration_s``, ``length_m``, ``speed_mps``, ``stance_s``,
+        ``swing_s`` (NaN when unknown), ``confidence`` (None).
     initial_contacts : ndarray (K,), seconds, every initial contact found (of the worn foot
         for a foot sensor, of both feet for the lower back).
     steps_per_contact : steps the walker takes per initial contact found (2 for one foot).
@@ -91,13 +92,13 @@ class SensorGait:
         lengths = np.array([s["length_m"] for s in self.strides], dtype=float)
         lengths = lengths[np.isfinite(lengths)]
         stride = float(np.mean(lengths)) if len(lengths) else nan
-        mean = lambda k: float(np.nanmean([s[k] for s in self.strides])) if any(
-            np.isfinite(s[k]) for s in self.strides) else nan
+        stance = np.array([s["stance_s"] / s["duration_s"] for s in self.strides], float)
+        stance = float(100 * np.nanmean(stance)) if np.isfinite(stance).any() else nan
         return {"steps": steps, "strides": float(len(self.strides)),
                 "cadence_spm": cadence if self.measured else nan,
                 "stride_length_m": stride, "step_length_m": stride / 2.0,
                 "speed_mps": stride * cadence / 120.0,
-                "stance_pct": mean("stance_pct"), "swing_pct": mean("swing_pct")}
+                "stance_pct": stance, "swing_pct": 100 - stance}
 
     def to_json(self) -> dict:
         """JSON-ready: placement, method, measured, reason, summary and per-stride rows."""
@@ -106,8 +107,18 @@ class SensorGait:
         return {"placement": self.placement, "method": self.method,
                 "measured": self.measured, "reason": self.reason or None,
                 "summary": to_json(self.summary()),
-                "strides": [{k: (v if isinstance(v, str) else to_json({"v": v})["v"])
-                             for k, v in s.items()} for s in self.strides]}
+                "strides": [{k: (v if isinstance(v, str) or v is None else
+                                 to_json({"v": v})["v"]) for k, v in s.items()}
+                            for s in self.strides]}
+
+
+def stride_row(foot: str, start: float, end: float, length: float, stance: float) -> dict:
+    """A stride in the fields of :data:`imuloco.evaluate.strides.STRIDE_FIELDS` (times in
+    seconds, ``stance`` the share of the stride in contact, NaN when unknown)."""
+    dur = end - start
+    return {"foot": foot, "start_s": start, "end_s": end, "duration_s": dur,
+            "length_m": length, "speed_mps": length / dur, "stance_s": stance * dur,
+            "swing_s": (1 - stance) * dur, "confidence": None}
 
 
 def not_measured(placement: str, method: str, reason: str) -> SensorGait:
@@ -233,13 +244,10 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
         a, b = int(ic[k]), int(ic[k + 1])
         length = float(np.linalg.norm(pos[rest[k + 2], :2] - pos[rest[k + 1], :2])) if (
             k + 2 < len(rest)) else math.nan
-        dur = (b - a) / rate
         stance = (tc[k + 1] - a) / (b - a) if np.isfinite(tc[k + 1]) else math.nan
         if not (0 < stance < 1):
             stance = math.nan
-        rows.append({"foot": foot, "start_s": float(t[a]), "end_s": float(t[b]),
-                     "length_m": length, "speed_mps": length / dur,
-                     "stance_pct": 100 * stance, "swing_pct": 100 * (1 - stance)})
+        rows.append(stride_row(foot, float(t[a]), float(t[b]), length, stance))
     ics = t[ic[np.isfinite(ic)].astype(int)]
     if len(rows) < MIN_STRIDES:
         return not_measured(placement, FOOT_METHOD, f"{len(rows)} stride(s) with both "
@@ -313,10 +321,7 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
         for k in range(len(ic) - 2):  # a stride spans two steps
             length = float(steps[k] + steps[k + 1])
             a0, b0 = int(gs["start"]) + ic[k], int(gs["start"]) + ic[k + 2]
-            dur = (b0 - a0) / rate
-            rows.append({"foot": "either", "start_s": float(t[a0]), "end_s": float(t[b0]),
-                         "length_m": length, "speed_mps": length / dur,
-                         "stance_pct": math.nan, "swing_pct": math.nan})
+            rows.append(stride_row("either", float(t[a0]), float(t[b0]), length, math.nan))
     if len(rows) < MIN_STRIDES:
         return not_measured(LOWER_BACK, BACK_METHOD, "fewer than 2 strides found in the "
                             "walking bouts")
@@ -360,15 +365,15 @@ def gait_report(motion, rec, placement: str, height_m: float | None = None) -> d
     -------
     dict: ``gait`` (JSON-ready parameters; NaN/None where nothing could be measured),
     ``gait_source`` (what measured them), ``gait_note`` (why nothing was measured, or None)
-    and ``strides`` (one row per stride: foot, start_s, end_s, length_m, speed_mps,
-    stance_pct, swing_pct).
+    and ``strides`` (one row per stride, :data:`imuloco.evaluate.strides.STRIDE_FIELDS`).
     """
-    from imuloco.evaluate.gait import gait_parameters, gait_strides, stature, to_json
+    from imuloco.evaluate.gait import gait_parameters, stature, to_json
+    from imuloco.evaluate.strides import stride_rows
     from imuloco.phases import gait_phases
 
     phases = gait_phases(motion)
     gait = gait_parameters(motion, phases)
-    strides = gait_strides(motion, phases)
+    strides = stride_rows(motion, phases)
     source, note = "the reconstructed motion", None
     if placement in (*FOOT_PLACEMENTS, LOWER_BACK):
         if height_m is None:
@@ -389,5 +394,5 @@ def gait_report(motion, rec, placement: str, height_m: float | None = None) -> d
     if note and note.startswith("no gait"):
         gait = {k: (v if k == "duration_s" else math.nan) for k, v in gait.items()}
     return {"gait": to_json(gait), "gait_source": source, "gait_note": note,
-            "strides": [{k: (v if isinstance(v, str) else to_json({"v": v})["v"])
-                         for k, v in r.items()} for r in strides]}
+            "strides": [{k: (v if isinstance(v, str) or v is None else
+                             to_json({"v": v})["v"]) for k, v in r.items()} for r in strides]}
