@@ -270,8 +270,8 @@ def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequ
 
 
 def demo(out_dir: str | Path, method: str | None = None, model: str | Path | None = None,
-         clip: str = DEMO_CLIP, overwrite: bool = False, progress: bool = False
-         ) -> dict[str, Any]:
+         clip: str = DEMO_CLIP, overwrite: bool = False, progress: bool = False,
+         unit: str = "cm") -> dict[str, Any]:
     """The README's first command: a bundled clip, a simulated phone, a reconstruction.
 
     Takes ``clip`` from the bundled sample, simulates a phone on the right ankle with phone
@@ -281,6 +281,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     reconstruction ``demo.mp4`` and ``demo.gif``, the viewer ``demo.html``, plots
     (``signals.png``, ``phases.png``, ``errors.png``) and ``report.md`` / ``report.json`` with
     the metrics (:func:`imuloco.evaluate.metrics.evaluate`) and gait parameters of both.
+    ``unit`` is the BVH's length unit (``cm`` or ``m``).
 
     Returns
     -------
@@ -329,7 +330,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     n = min(gt.num_frames, motion.num_frames)
     gt_cut, rec_cut = gt.slice(0, n), motion.slice(0, n)
     rec_cut.name = "reconstruction"
-    write_bvh(rec_cut, paths["reconstruction.bvh"], overwrite=overwrite)
+    write_bvh(rec_cut, paths["reconstruction.bvh"], unit=unit, overwrite=overwrite)
     bar.update()
 
     bar.set_postfix_str("rendering")

@@ -14,7 +14,7 @@ from tqdm.auto import tqdm
 
 from imuloco.core.motion import MotionDatabase
 from imuloco.errors import FormatError
-from imuloco.io.bvh import read_bvh
+from imuloco.io.cache import read_motion_cached
 
 
 def _label_names(folder: Path, kind: str) -> list[str] | None:
@@ -69,6 +69,9 @@ def load_database(
         names: see :func:`spread`), for quick runs.
     up, skip_frames : as for :func:`imuloco.io.bvh.read_bvh` (the vertical axis, ``"auto"``
         by default; leading frames to drop, such as a prepended T-pose).
+
+    Parsed clips are cached by file content (:mod:`imuloco.io.cache`): a second load of the
+    same folder reads ``.npz`` entries instead of parsing text.
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -86,7 +89,7 @@ def load_database(
             continue
         chosen.append((f, lab))
     chosen = [chosen[i] for i in spread(len(chosen), limit)]
-    clips = [read_bvh(f, up=up, skip_frames=skip_frames) for f, _ in tqdm(chosen, desc="loading clips", disable=not progress,
+    clips = [read_motion_cached(f, up=up, skip_frames=skip_frames) for f, _ in tqdm(chosen, desc="loading clips", disable=not progress,
                                           unit="clip")]
     return MotionDatabase(clips, [lab for _, lab in chosen])
 
