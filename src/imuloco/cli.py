@@ -85,42 +85,68 @@ def _csv(value: str | None) -> list[str]:
     return [v.strip() for v in (value or "").split(",") if v.strip()]
 
 
+def _folders(values: tuple[str, ...]) -> list[Path] | None:
+    """Folders given as a repeatable and/or comma separated option; each must exist."""
+    folders = [Path(v) for item in values for v in _csv(item)]
+    for f in folders:
+        if not f.is_dir():
+            raise click.BadParameter(f"folder {f} does not exist", param_hint="--data")
+    return folders or None
+
+
+DATA_HELP = ("Folder(s) of clips, repeatable or comma separated; several become one set on "
+             "the first one's skeleton and frame rate (others retargeted) [default: the "
+             "bundled sample].")
+
+
 @cli.command()
 @click.option("--method", "method_names", required=True,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
                    "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm].")
-@click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
-              default="random-clips", show_default=True)
+@click.option("--split", "split_name",
+              type=click.Choice(["random-clips", "heldout-styles", "heldout-contents",
+                                 "cross-dataset"]),
+              default="random-clips", show_default=True,
+              help="Protocol (imuloco.evaluate.protocols); cross-dataset takes --train/--test.")
 @click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
               show_default=True)
 @click.option("--placement", default="right_ankle", show_default=True,
               help="Sensor placement preset(s), comma separated.")
-@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
-              default=None, help="Folder of clips [default: the bundled sample].")
+@click.option("--data", "data_items", multiple=True, help=DATA_HELP)
+@click.option("--train", "train_items", multiple=True,
+              help="cross-dataset: training folder(s), repeatable or comma separated.")
+@click.option("--test", "test_items", multiple=True, help="cross-dataset: the test folder.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
               help="Folder for results.json and results.md.")
-@click.option("--limit", type=int, default=None, help="Read at most N clips (quick runs).")
+@click.option("--limit", type=int, default=None,
+              help="Read at most N clips per folder (quick runs).")
 @click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seeds", "n_seeds", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Train each method with N seeds (seed, seed+1, ...): mean and spread.")
 @click.option("--speed", is_flag=True,
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
-def bench(method_names: str, split_name: str, noise: str, placement: str, data: Path | None,
-          out: Path, limit: int | None, seed: int, speed: bool, db_frames: str | None) -> None:
+def bench(method_names: str, split_name: str, noise: str, placement: str,
+          data_items: tuple[str, ...], train_items: tuple[str, ...],
+          test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
+          speed: bool, db_frames: str | None) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
     names = _csv(method_names)
+    data = _folders(data_items)
     if speed:
         from imuloco.evaluate.speed import speed_benchmark
 
         frames = [int(v) for v in _csv(db_frames)] or None
-        speed_benchmark(names, out, data, frames)
+        speed_benchmark(names, out, data[0] if data else None, frames)
         return
     from imuloco.evaluate.bench import run_bench
     from imuloco.evaluate.report import COLUMNS, table
 
     try:
         records = run_bench(names, split_name, noise, _csv(placement), data, out, limit, seed,
-                            progress=True)
+                            progress=True, seeds=n_seeds, train=_folders(train_items),
+                            test=_folders(test_items))
     except KeyError as e:
         raise click.UsageError(str(e.args[0])) from None
     click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
@@ -165,8 +191,7 @@ def _param(items: tuple[str, ...]) -> dict:
 
 @cli.command()
 @click.option("--method", "method_name", required=True, help="Method name (`imuloco methods`).")
-@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
-              default=None, help="Folder of clips [default: the bundled sample].")
+@click.option("--data", "data_items", multiple=True, help=DATA_HELP)
 @click.option("--placement", default="right_ankle", show_default=True,
               help="Sensor placement preset(s), comma separated.")
 @click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
@@ -180,7 +205,7 @@ def _param(items: tuple[str, ...]) -> dict:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Model file to write (.npz).")
 @click.option("--force", is_flag=True, help="Overwrite the output file.")
-def train(method_name: str, data: Path | None, placement: str, noise: str,
+def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: str,
           split_name: str | None, params: tuple[str, ...], limit: int | None, seed: int,
           output: Path, force: bool) -> None:
     """Fit a method on motion clips with simulated sensors and save the model.
@@ -189,8 +214,8 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
     epoch beside it as OUTPUT.history.json and, with matplotlib, OUTPUT.curves.png.
     """
 
+    from imuloco.evaluate.bench import data_label, load_data
     from imuloco.evaluate.protocols import split
-    from imuloco.io.database import load_database, load_sample, spread
     from imuloco.methods import get_method
 
     if output.exists() and not force:
@@ -201,14 +226,13 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
         raise click.UsageError(str(e.args[0])) from None
     except TypeError as e:
         raise click.UsageError(f"--param: {e}") from None
-    db = load_sample() if data is None else load_database(data, limit=limit)
-    if data is None and limit is not None:
-        db = db.subset(spread(len(db), limit))
+    data = _folders(data_items)
+    db = load_data(data, limit, progress=True)
     if split_name is not None:
         db = split(db, split_name)[0]
     placements = _csv(placement)
     method.fit(db, placements, noise, seed, progress=True)
-    method.protocol_.update(data="bundled sample" if data is None else Path(data).name,
+    method.protocol_.update(data="bundled sample" if data is None else data_label(data),
                             split=split_name or "all")
     seconds = method.protocol_["train_seconds"]
     method.save(output, overwrite=force)
