@@ -316,6 +316,113 @@ def test_moving_non_root_translation_is_refused(tmp_path: Path):
     assert e.value.line == path.read_text().splitlines().index("    JOINT LeftLeg") + 1
 
 
+def test_moving_root_and_moving_hips_are_folded(tmp_path: Path):
+    """bandai-namco-1's `normal` layout: joint_Root walks and the Hips' position channels
+    move too; both translations are applied (the Hips' world path is the root's transform
+    applied to the Hips' own), not refused."""
+    joints = [("joint_Root", -1, (0, 0, 0))] + [
+        (n, p + 1, (0, 0, 0) if p < 0 else o) for n, p, o in BODY]
+    channels = [POS + rot("ZXY")] * len(joints)
+    data = sinusoid(joints, channels)
+    t = np.arange(len(data))
+    data[:, :6] = np.stack([np.zeros_like(t), np.zeros_like(t), 14.0 * t, 5 * np.sin(t / 7),
+                            np.zeros_like(t), np.zeros_like(t)], axis=1)  # walks, turns
+    data[:, 6:9] = np.array([0.2, 82.0, -5.0]) + np.stack(
+        [np.sin(t / 3), 2 * np.cos(t / 2), 0.5 * t], axis=1)  # the hips move as well
+    text = bvh_text(joints, channels, data, ends=BODY_ENDS)
+    m = read_bvh(write(tmp_path, "normal.bvh", text), unit="cm")
+    assert m.skeleton.names == [n for n, _, _ in BODY]
+    np.testing.assert_allclose(m.positions(), reference_positions(text, 0.01)[1][:, 1:],
+                               atol=1e-9)
+
+
+def test_skip_frames(tmp_path: Path):
+    channels = [POS + rot("ZXY")] + [rot("ZXY")] * (len(BODY) - 1)
+    text = bvh_text(BODY, channels, sinusoid(BODY, channels))
+    path = write(tmp_path, "tpose.bvh", text)
+    m = read_bvh(path, skip_frames=1)
+    ref = reference_positions(text, 0.01)[1]
+    assert m.num_frames == len(ref) - 1
+    np.testing.assert_allclose(m.positions(), ref[1:], atol=1e-9)
+    with pytest.raises(FormatError, match="leaves none") as e:
+        read_bvh(path, skip_frames=len(ref))
+    assert e.value.path == str(path)
+    with pytest.raises(ValueError, match="skip_frames"):
+        read_bvh(path, skip_frames=-1)
+
+
+def test_z_up_files_come_out_y_up(tmp_path: Path):
+    """A Z-up file (the Y-up body turned by +90 degrees about X) is detected and turned back;
+    ``up="y"`` keeps it as written; the rig's rest pose turns with it."""
+    from imuloco.io.upaxis import Z_TO_Y, detect_up, to_y_up
+    channels = [POS + rot("ZXY")] + [rot("ZXY")] * (len(BODY) - 1)
+    text = bvh_text(BODY, channels, sinusoid(BODY, channels), ends=BODY_ENDS)
+    y_up = read_bvh(write(tmp_path, "y.bvh", text), unit="cm")
+    assert detect_up(y_up) == "y"
+    z_up = to_y_up(y_up, "z")  # the inverse turn, applied 3 times, is Y -> Z up
+    for _ in range(2):
+        z_up = to_y_up(z_up, "z")
+    np.testing.assert_allclose(z_up.positions()[..., 2], y_up.positions()[..., 1], atol=1e-9)
+    path = write_bvh(z_up, tmp_path / "z.bvh")
+    assert detect_up(read_bvh(path, up="y")) == "z"
+    # the written Z-up file, read by the independent reference, turned by hand: (x, z, -y)
+    ref = reference_positions(path.read_text(), 0.01)[1]
+    turned = np.stack([ref[..., 0], ref[..., 2], -ref[..., 1]], axis=-1)
+    for up in ("auto", "z"):
+        back = read_bvh(path, up=up)
+        np.testing.assert_allclose(back.positions(), y_up.positions(), atol=1e-6, rtol=0)
+        np.testing.assert_allclose(back.positions(), turned, atol=1e-6, rtol=0)
+        np.testing.assert_allclose(back.skeleton.offsets, y_up.skeleton.offsets, atol=1e-8)
+    np.testing.assert_allclose(read_bvh(path, up="y").positions(), ref, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(qrot(Z_TO_Y, [0, 0, 1.0]), [0, 1, 0], atol=1e-12)
+    with pytest.raises(ValueError, match="up must be"):
+        read_bvh(path, up="x")
+
+
+def test_root_offset_added_when_the_channels_are_relative(tmp_path: Path):
+    """iClone's layout: the root's OFFSET holds the hip height and its position channels only
+    the motion about it. Read as the format says the feet would be under the floor; ``auto``
+    adds the OFFSET, ``replace`` does not, and an absolute file is left as it is."""
+    channels = [POS + rot("ZXY")] + [rot("ZXY")] * (len(BODY) - 1)
+    data = sinusoid(BODY, channels)
+    data[:, 1] -= 90.0  # channels relative to the OFFSET (0, 90, 0)
+    text = bvh_text(BODY, channels, data)
+    path = write(tmp_path, "relative.bvh", text)
+    ref = reference_positions(text, 0.01)[1]  # the format's reading
+    np.testing.assert_allclose(read_bvh(path, root_offset="replace").positions(), ref,
+                               atol=1e-9)
+    for how in ("auto", "add"):
+        np.testing.assert_allclose(read_bvh(path, root_offset=how).positions(),
+                                   ref + [0, 0.9, 0], atol=1e-9)
+    absolute = write(tmp_path, "absolute.bvh", bvh_text(BODY, channels, sinusoid(BODY, channels)))
+    np.testing.assert_allclose(read_bvh(absolute).positions(),
+                               reference_positions(absolute.read_text(), 0.01)[1], atol=1e-9)
+
+
+def test_cli_reading_options(tmp_path: Path):
+    import json
+
+    from click.testing import CliRunner
+
+    from imuloco.cli import cli
+    channels = [POS + rot("ZXY")] + [rot("ZXY")] * (len(BODY) - 1)
+    path = write(tmp_path, "c.bvh", bvh_text(BODY, channels, sinusoid(BODY, channels)))
+    for args, frames in (([], 45), (["--skip-frames", "1", "--up", "y"], 44)):
+        res = CliRunner().invoke(cli, ["info", str(path), "--json", *args])
+        assert res.exit_code == 0, res.output
+        assert json.loads(res.output)["frames"] == frames
+    res = CliRunner().invoke(cli, ["info", str(path), "--up", "x"])
+    assert res.exit_code == 2 and "--up" in res.output
+
+
+@pytest.mark.parametrize("frame_time, fps", [("0.0333333", 30.0), ("0.016667", 60.0),
+                                             ("0.008333", 120.0), ("0.04", 25.0),
+                                             ("0.03", 100 / 3), ("0.0166666666667", 60.0)])
+def test_frame_rate_from_printed_frame_time(tmp_path: Path, frame_time: str, fps: float):
+    text = TWO_JOINT.replace("Frame Time: 0.0333333", f"Frame Time: {frame_time}")
+    assert read_bvh(write(tmp_path, "f.bvh", text)).fps == pytest.approx(fps, rel=1e-12)
+
+
 def test_names_with_spaces_crlf_and_bom(tmp_path: Path):
     text = TWO_JOINT.replace("JOINT child", "JOINT left knee {").replace(
         "\tJOINT left knee {\n\t{", "\tJOINT left knee {")
@@ -395,6 +502,8 @@ MALFORMED = {
     "missing frame count": (_edit(17, None), 17, "Frames"),
     "zero frame time": (_edit(18, "Frame Time: 0"), 18, "Frame Time"),
     "nan frame time": (_edit(18, "Frame Time: nan"), 18, "Frame Time"),
+    "frame time of 1000 s": (_edit(18, "Frame Time: 1000"), 18, "0.1 to 10000 fps"),
+    "frame rate of 1e6": (_edit(18, "Frame Time: 1e-6"), 18, "0.1 to 10000 fps"),
     "no MOTION": (lambda t: t.replace("MOTION", "MOTON"), 16, "MOTION"),
     "missing brace": (_edit(15, None), 14, "ends early"),
     "extra brace": (_edit(15, "}\n}"), 16, "expected MOTION after the ROOT joint, found '}'"),
@@ -548,6 +657,28 @@ def test_shared_clip_round_trip(shared_dir: Path, tmp_path: Path):
     assert back.skeleton.names == m.skeleton.names and back.num_frames == m.num_frames
     err = np.abs(back.positions() - m.positions()).max()
     assert err < 1e-6, err
+
+
+@pytest.mark.shared
+@pytest.mark.parametrize("folder, joints, fps", [("bandai-namco-1", {21}, 30.0),
+                                                 ("cmu-iclone", {100, 101}, 60.0)])
+def test_every_shared_clip_loads(shared_dir: Path, folder: str, joints: set, fps: float):
+    """Every clip of the other shared folders loads, Y up, feet near the floor:
+    bandai-namco-1 (the `normal` style's moving Hips) and cmu-iclone (Character Creator rig,
+    T-pose frame 0 skipped). cmu-iclone holds two rigs: 4 clips under an `RL_BoneRoot` (101
+    joints, the rig Z up at rest, turned Y up by the root in every frame) and 26 rooted at
+    `CC_Base_Hip` (100 joints) whose root position channels are meant to be added to its
+    OFFSET (read as the format says, the feet would be 0.96 m under the floor)."""
+    files = sorted((shared_dir.parent / folder).glob("*.bvh"))
+    assert len(files) >= 30
+    for f in files:
+        m = read_bvh(f, skip_frames=1)
+        assert m.skeleton.num_joints in joints and m.fps == fps, f
+        p = m.positions()
+        height = np.ptp(p, axis=1).max(axis=0)
+        assert 1.0 < height[1] < 2.2, (f, height)  # a person, in metres, standing along Y
+        lowest = np.median(p[..., 1].min(axis=1))
+        assert -0.01 < lowest < 0.5, (f, lowest)  # on the floor (or on uneven terrain)
 
 
 def test_limited_database_spreads_over_the_folder(sample_db):

@@ -17,15 +17,27 @@ def cli() -> None:
     """Full-body locomotion reconstruction from one body-worn inertial sensor."""
 
 
+def _reading_options(f):
+    """``--up`` and ``--skip-frames``: how motion files are read (``read_bvh``'s options)."""
+    f = click.option("--skip-frames", type=click.IntRange(min=0), default=0, show_default=True,
+                     help="Drop this many leading frames of each motion file (a prepended "
+                          "T-pose).")(f)
+    return click.option("--up", type=click.Choice(["auto", "y", "z"]), default="auto",
+                        show_default=True,
+                        help="Vertical axis of the motion files; Z-up files are turned Y up "
+                             "(auto: detected from the animated body).")(f)
+
+
 @cli.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
-def info(file: Path, as_json: bool) -> None:
+@_reading_options
+def info(file: Path, as_json: bool, up: str, skip_frames: int) -> None:
     """Joints, frames, fps, duration and the body map found for a motion FILE."""
     from imuloco.core.bodymap import PARTS
     from imuloco.io.motionfile import read_motion
 
-    motion = read_motion(file)
+    motion = read_motion(file, up=up, skip_frames=skip_frames)
     sk = motion.skeleton
     report = {
         "file": str(file), "joints": sk.num_joints, "names": sk.names,
@@ -47,12 +59,14 @@ def info(file: Path, as_json: bool) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
 @click.option("--reference", type=click.Choice(["right", "left"]), default="right",
               show_default=True, help="Leg whose 8-phase cycle is labelled.")
-def phases(motion_file: Path, as_json: bool, reference: str) -> None:
+@_reading_options
+def phases(motion_file: Path, as_json: bool, reference: str, up: str, skip_frames: int) -> None:
     """Per-frame foot contacts and gait phases, and step events, of a MOTION file."""
     from imuloco.io.motionfile import read_motion
     from imuloco.phases import gait_phases
 
-    report = gait_phases(read_motion(motion_file), reference=reference).to_dict()
+    report = gait_phases(read_motion(motion_file, up=up, skip_frames=skip_frames),
+                         reference=reference).to_dict()
     if as_json:
         click.echo(json.dumps(report))
         return
@@ -127,10 +141,11 @@ DATA_HELP = ("Folder(s) of clips, repeatable or comma separated; several become 
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
+@_reading_options
 def bench(method_names: str, split_name: str, noise: str, placement: str,
           data_items: tuple[str, ...], train_items: tuple[str, ...],
           test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
-          speed: bool, db_frames: str | None) -> None:
+          speed: bool, db_frames: str | None, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
     names = _csv(method_names)
     data = _folders(data_items)
@@ -146,7 +161,7 @@ def bench(method_names: str, split_name: str, noise: str, placement: str,
     try:
         records = run_bench(names, split_name, noise, _csv(placement), data, out, limit, seed,
                             progress=True, seeds=n_seeds, train=_folders(train_items),
-                            test=_folders(test_items))
+                            test=_folders(test_items), up=up, skip_frames=skip_frames)
     except KeyError as e:
         raise click.UsageError(str(e.args[0])) from None
     click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
@@ -205,9 +220,10 @@ def _param(items: tuple[str, ...]) -> dict:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
               help="Model file to write (.npz).")
 @click.option("--force", is_flag=True, help="Overwrite the output file.")
+@_reading_options
 def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: str,
           split_name: str | None, params: tuple[str, ...], limit: int | None, seed: int,
-          output: Path, force: bool) -> None:
+          output: Path, force: bool, up: str, skip_frames: int) -> None:
     """Fit a method on motion clips with simulated sensors and save the model.
 
     Writes OUTPUT, and for methods that keep a training history (``learned``) its losses per
@@ -227,7 +243,7 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
     except TypeError as e:
         raise click.UsageError(f"--param: {e}") from None
     data = _folders(data_items)
-    db = load_data(data, limit, progress=True)
+    db = load_data(data, limit, progress=True, up=up, skip_frames=skip_frames)
     if split_name is not None:
         db = split(db, split_name)[0]
     placements = _csv(placement)

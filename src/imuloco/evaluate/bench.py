@@ -73,17 +73,19 @@ def data_folders(data: DataArg) -> list[Path]:
     return [Path(data)] if isinstance(data, (str, Path)) else [Path(d) for d in data]
 
 
-def load_data(data: DataArg, limit: int | None = None, progress: bool = False
-              ) -> MotionDatabase:
+def load_data(data: DataArg, limit: int | None = None, progress: bool = False,
+              up: str = "auto", skip_frames: int = 0) -> MotionDatabase:
     """The clips of folder(s) ``data`` as one database on the first folder's skeleton
     (:func:`imuloco.io.database.load_databases`; ``limit`` per folder), or the bundled
-    sample when ``data`` is None."""
+    sample when ``data`` is None (``up`` and ``skip_frames`` as for
+    :func:`imuloco.io.bvh.read_bvh`)."""
     from imuloco.io.database import load_databases, load_sample, spread
 
     if data is None:
         db = load_sample(progress=progress)
         return db.subset(spread(len(db), limit))
-    return load_databases(data_folders(data), limit=limit, progress=progress)
+    return load_databases(data_folders(data), limit=limit, progress=progress, up=up,
+                          skip_frames=skip_frames)
 
 
 def data_label(data: DataArg) -> str:
@@ -210,6 +212,8 @@ def run_bench(
     seeds: int = 1,
     train: DataArg = None,
     test: DataArg = None,
+    up: str = "auto",
+    skip_frames: int = 0,
 ) -> list[dict[str, Any]]:
     """Run the benchmark protocol and return its records (one per method x motion type).
 
@@ -228,6 +232,7 @@ def run_bench(
     seed : first training seed; test recordings use ``seed + TEST_SEED_OFFSET``.
     seeds : number of training seeds (see the module docstring).
     train, test : the folders of ``cross-dataset`` (training: one or several; test: one).
+    up, skip_frames : how motion files are read (see :func:`imuloco.io.bvh.read_bvh`).
     """
     from imuloco.core.retarget import resampled
     from imuloco.methods import method_class
@@ -242,16 +247,16 @@ def run_bench(
         if not data_folders(train) or len(data_folders(test)) != 1:
             raise KeyError("cross-dataset needs training folder(s) and one test folder "
                            "(--train DIR[,DIR] --test DIR)")
-        train_db = load_data(train, limit, progress)
+        train_db = load_data(train, limit, progress, up, skip_frames)
         fps = float(train_db.clips[0].fps)
-        test_db = load_data(test, limit, progress)
+        test_db = load_data(test, limit, progress, up, skip_frames)
         test_db = MotionDatabase([resampled(c, fps) for c in test_db.clips], test_db.labels)
         protocol = [("all", train_db, test_db)]
         label = f"{data_label(train)} -> {data_label(test)}"
     else:
         if train is not None or test is not None:
             raise KeyError("--train/--test are for --split cross-dataset; use --data")
-        protocol = folds(load_data(data, limit, progress), split_name)
+        protocol = folds(load_data(data, limit, progress, up, skip_frames), split_name)
         label = data_label(data)
     header = {"split": split_name, "noise": noise, "placements": placements,
               "protocol_version": PROTOCOL_VERSION, "seed": seed, "data": label,

@@ -34,6 +34,7 @@ import numpy as np
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
+from imuloco.io.upaxis import check_skip, check_up, to_y_up
 from imuloco.ops.rotations import IDENTITY, from_euler, qinv, qmul
 
 INCH = 0.0254
@@ -370,7 +371,8 @@ def find_asf(amc_path: str | Path) -> Path:
 
 
 def read_asf_amc(asf_path: str | Path, amc_path: str | Path, fps: float = CMU_FPS,
-                 length_unit: float | None = None) -> Motion:
+                 length_unit: float | None = None, up: str = "auto",
+                 skip_frames: int = 0) -> Motion:
     """Read a CMU-style ASF skeleton and AMC motion as a Motion in metres.
 
     Parameters
@@ -378,6 +380,9 @@ def read_asf_amc(asf_path: str | Path, amc_path: str | Path, fps: float = CMU_FP
     asf_path, amc_path : the skeleton and motion files.
     fps : frame rate; AMC files do not store one (CMU captured at 120 fps).
     length_unit : metres per ASF length unit; default ``0.0254 / L`` from ``:units length L``.
+    up : the vertical axis, ``"y"`` (CMU's), ``"z"`` or ``"auto"`` (see
+        :mod:`imuloco.io.upaxis`); Z-up motion is turned Y up.
+    skip_frames : leading frames to drop.
 
     Raises
     ------
@@ -386,11 +391,15 @@ def read_asf_amc(asf_path: str | Path, amc_path: str | Path, fps: float = CMU_FP
     asf_path, amc_path = Path(asf_path), Path(amc_path)
     if not fps > 0:
         raise ValueError(f"fps must be positive, got {fps}")
+    up = check_up(up)
     asf = _parse_asf(asf_path)
     scale = length_unit if length_unit is not None else INCH / asf.length
     skeleton = _skeleton(asf, scale)
     channels = {"root": asf.root_order} | {b: asf.bones[b].dof for b in asf.order}
     values, degrees, t = _parse_amc(amc_path, channels, asf.degrees)
+    check_skip(skip_frames, t, amc_path)
+    values = {k: v[skip_frames:] for k, v in values.items()}
+    t -= skip_frames
 
     rotations = np.tile(IDENTITY, (t, skeleton.num_joints, 1))
     root = np.tile(asf.position, (t, 1))
@@ -410,4 +419,4 @@ def read_asf_amc(asf_path: str | Path, amc_path: str | Path, fps: float = CMU_FP
             c = _fixed_axes(bone.axis, bone.axis_order, asf.degrees)
             m = _fixed_axes(values[b], "".join(d[1] for d in bone.dof), degrees)
             rotations[:, j] = _conjugated(c, m)
-    return Motion(skeleton, rotations, root * scale, fps, amc_path.stem)
+    return to_y_up(Motion(skeleton, rotations, root * scale, fps, amc_path.stem), up, amc_path)

@@ -4,9 +4,17 @@ Any channel layout is read: position and rotation channels on any joint, in any 
 Euler order (BVH rotation channels are intrinsic: the first listed is applied first from the
 parent's side, so ``Zrotation Xrotation Yrotation`` is ``R = Rz Rx Ry``). Position channels
 replace the joint's OFFSET; constant ones on non-root joints (as in files with 6 channels on
-every joint) become that joint's offset, moving ones are refused (only the root translates in a
-:class:`Motion`). A static root whose single child has position channels (``joint_Root`` and
-``Hips`` in the Bandai-Namco data) is folded into that child, so the Motion's root is the pelvis.
+every joint) become that joint's offset. A :class:`Motion` translates its root only, so a root
+whose single child has position channels is folded into that child (the child's world path is
+the root's transform applied to its own) when the root never moves (``joint_Root`` above
+``Hips`` in the Bandai-Namco data) or the child's translation moves (``Hips`` in
+bandai-namco-1's ``normal`` style), repeatedly down a chain of single children; moving
+translations below a branching joint are refused.
+
+Root position channels replace the root's OFFSET, as the format says and Blender reads it; some
+exporters (iClone, in 26 clips of ``cmu-iclone``) mean them to be added to it: ``root_offset``
+chooses, and by default the OFFSET is added when that puts the body's lowest joint nearer the
+floor (height 0). Z-up files are turned Y up (:mod:`imuloco.io.upaxis`).
 
 Files keep their units: the reader scales to metres and the writer writes centimetres by default.
 ``unit="auto"`` guesses from the leg (hip to ankle) when the body map finds one: under 3 units is
@@ -17,6 +25,7 @@ units, else metres. Inches are never guessed: pass ``unit="in"``.
 
 from __future__ import annotations
 
+import decimal
 import math
 import re
 from dataclasses import dataclass, field
@@ -28,12 +37,14 @@ from imuloco.core.bodymap import resolve_body_map
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
+from imuloco.io.upaxis import Z_TO_Y, check_skip, check_up, resolve_up, to_y_up
 from imuloco.ops.rotations import IDENTITY, from_euler, qmul, qrot, to_euler
 
 # Metres per file unit. "cmu": the CMU motion capture unit, (1 / 0.45) inch.
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
 CHANNELS = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 _CANON = {c.lower(): c for c in CHANNELS}  # "XROTATION" and "XRotation" are seen in the wild
+MIN_FPS, MAX_FPS = 0.1, 10_000.0  # plausible frame rates; others are corrupt headers
 _MAX_ABS = 1e9  # larger numbers are corrupt data in any unit, and would overflow products
 
 
@@ -171,14 +182,22 @@ def _decode(path: Path) -> str:
         return raw.decode("latin-1")  # old exporters write joint names in Latin-1
 
 
-def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True) -> Motion:
-    """Read a BVH file as a Motion in metres.
+def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True,
+             up: str = "auto", skip_frames: int = 0, root_offset: str = "auto") -> Motion:
+    """Read a BVH file as a Motion in metres, Y up.
 
     Parameters
     ----------
     path : the .bvh file.
     unit : the file's length unit, one of ``m, cm, mm, in, cmu`` or ``auto`` (see the module).
-    fold_static_root : fold a root that never moves into its single child with position channels.
+    fold_static_root : fold the root into its single child with position channels when the
+        root never moves or the child moves (see the module).
+    up : the file's vertical axis, ``"y"``, ``"z"`` or ``"auto"`` (detected from the animated
+        body, see :mod:`imuloco.io.upaxis`); Z-up files are turned Y up.
+    skip_frames : leading frames to drop (the T-pose some converters prepend).
+    root_offset : whether the root's position channels ``"replace"`` its OFFSET (the format's
+        meaning, as Blender reads it) or are ``"add"``-ed to it (some iClone exports);
+        ``"auto"`` adds it when that puts the body's lowest joint nearer the floor.
 
     Raises
     ------
@@ -187,6 +206,9 @@ def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True
     path = Path(path)
     if unit != "auto" and unit not in UNITS:
         raise ValueError(f"unit must be one of {sorted(UNITS)} or 'auto', got {unit!r}")
+    up = check_up(up)
+    if root_offset not in ("auto", "replace", "add"):
+        raise ValueError(f"root_offset must be 'auto', 'replace' or 'add', got {root_offset!r}")
     lines = _decode(path).splitlines()
     motion_at = next((i for i, ln in enumerate(lines) if ln.strip() == "MOTION"), None)
     if motion_at is None:  # parse what there is, to say where MOTION was expected
@@ -194,15 +216,55 @@ def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True
         raise FormatError(path, max(len(lines), 1), "file ends early: expected a MOTION line "
                           "after the HIERARCHY")
     joints = _parse_hierarchy(_Tokens(path, lines[:motion_at]))
-    frame_time, data = _parse_motion(path, lines, motion_at, joints)
+    fps, data = _parse_motion(path, lines, motion_at, joints)
+    check_skip(skip_frames, len(data), path)
+    motion, scale = _build_motion(path, joints, data[skip_frames:], fps, UNITS.get(unit),
+                                  fold_static_root)
+    up = resolve_up(motion, up)
+    motion = to_y_up(motion, up, path)
+    # The root's OFFSET on the axes its position channels replace (see the module).
+    shift = joints[0].offset * [f"{a}position" in joints[0].channels for a in "XYZ"] * scale
+    shift = qrot(Z_TO_Y, shift) if up == "z" else shift
+    if root_offset == "add" or (root_offset == "auto" and _offset_is_added(motion, shift)):
+        motion.root += shift
+    return motion
+
+
+def _offset_is_added(motion: Motion, shift: np.ndarray) -> bool:
+    """Whether adding the root's replaced OFFSET ``shift`` (3,) m, Y up, puts the body's lowest
+    joint nearer the floor (height 0) over up to 64 frames than leaving it out does."""
+    if abs(shift[1]) < 1e-6:
+        return False
+    idx = np.unique(np.linspace(0, motion.num_frames - 1, 64).astype(int))
+    sub = Motion(motion.skeleton, motion.rotations[idx], motion.root[idx], motion.fps)
+    lowest = float(np.median(sub.positions()[..., 1].min(axis=1)))
+    return abs(lowest + shift[1]) < abs(lowest)
+
+
+def frame_rate(path: Path, line: int, token: str) -> float:
+    """Frames per second of a ``Frame Time`` token, rounded to a whole number when the token is
+    that rate's frame time printed to its decimals, to at least 3 significant digits
+    (``0.016667`` is 60 fps, not 59.9988; ``0.03`` stays 33.33)."""
+    frame_time = _number(path, line, token, "Frame Time")
+    if not 1.0 / MAX_FPS <= frame_time <= 1.0 / MIN_FPS:
+        raise FormatError(path, line, f"expected a Frame Time from {1 / MAX_FPS:g} to "
+                          f"{1 / MIN_FPS:g} s ({MIN_FPS:g} to {MAX_FPS:g} fps), found {token!r}")
     fps = 1.0 / frame_time
-    if abs(fps - round(fps)) < 1e-3:  # "0.0333333" means 30 fps, not 30.00003
-        fps = float(round(fps))
-    return _build_motion(path, joints, data, fps, UNITS.get(unit), fold_static_root)
+    whole = float(round(fps))
+    try:
+        exponent = decimal.Decimal(token).as_tuple().exponent
+    except decimal.InvalidOperation:  # float() reads a few spellings Decimal does not
+        exponent = 0
+    half_ulp = 0.5 * 10.0 ** max(int(exponent), -300) if isinstance(exponent, int) else 0.0
+    printed = abs(1.0 / max(whole, 1.0) - frame_time) <= half_ulp * (1 + 1e-9)
+    if whole >= 1 and ((printed and half_ulp <= 2e-3 * frame_time) or abs(fps - whole) < 1e-3):
+        return whole
+    return fps
 
 
 def _parse_motion(path: Path, lines: list[str], at: int, joints: list[_Joint]
                   ) -> tuple[float, np.ndarray]:
+    """Frames per second and the channel values (T, C) of the MOTION block at line ``at``."""
     # (line number, text) of the non-blank lines after MOTION
     body = [(i + 1, ln) for i, ln in enumerate(lines[at + 1:], start=at + 1) if ln.strip()]
 
@@ -221,10 +283,7 @@ def _parse_motion(path: Path, lines: list[str], at: int, joints: list[_Joint]
                           f"found {frames_s!r}")
     frames = int(frames_s)
     ft_s, ft_line = header(1, "Frame Time")
-    frame_time = _number(path, ft_line, ft_s, "Frame Time")
-    if not frame_time >= 1e-6:
-        raise FormatError(path, ft_line, f"expected a Frame Time of at least 1e-6 s, "
-                          f"found {ft_s!r}")
+    fps = frame_rate(path, ft_line, ft_s)
     width = sum(len(j.channels) for j in joints)
     if width == 0:
         raise FormatError(path, at + 1, "expected channels on at least one joint, found none")
@@ -254,7 +313,7 @@ def _parse_motion(path: Path, lines: list[str], at: int, joints: list[_Joint]
             raise FormatError(path, lineno, f"expected a finite number below {_MAX_ABS:g} in "
                               f"size for channel {col + 1} ({_channel_name(joints, col)}), "
                               f"found {parts[col]!r}")
-    return frame_time, data
+    return fps, data
 
 
 def _channel_name(joints: list[_Joint], col: int) -> str:
@@ -274,7 +333,8 @@ def _is_float(s: str) -> bool:
 
 
 def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float,
-                  scale: float | None, fold_static_root: bool) -> Motion:
+                  scale: float | None, fold_static_root: bool) -> tuple[Motion, float]:
+    """The Motion of channel values ``data`` (T, C), and the metres per file unit used."""
     t = data.shape[0]
     n = len(joints)
     local_pos = np.empty((t, n, 3))
@@ -295,21 +355,29 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
 
     names = [j.name for j in joints]
     parents = np.array([j.parent for j in joints])
-    children_of_root = [k for k, j in enumerate(joints) if j.parent == 0]
     first = 0
-    if (fold_static_root and len(children_of_root) == 1
-            and any(c.endswith("position") for c in joints[children_of_root[0]].channels)
-            and np.ptp(local_pos[:, 0], axis=0).max() == 0.0
-            and np.ptp(local_rot[:, 0], axis=0).max() == 0.0):
-        # The child's world transform is the static root's transform applied to its own.
-        local_pos[:, 1] = local_pos[:, 0] + qrot(local_rot[:, 0], local_pos[:, 1])
-        local_rot[:, 1] = qmul(local_rot[:, 0], local_rot[:, 1])
-        first = 1
+    while fold_static_root and first + 1 < n:
+        # Fold the root into its single child when that child has position channels and
+        # either it moves (its translation must be kept: "applied") or the root never moves
+        # (a floor marker such as joint_Root); the child's world transform is the root's
+        # transform applied to its own.
+        kids = np.flatnonzero(parents == first)
+        child = first + 1
+        if len(kids) != 1 or not any(c.endswith("position") for c in joints[child].channels):
+            break
+        static_root = (np.ptp(local_pos[:, first], axis=0).max() == 0.0
+                       and np.ptp(local_rot[:, first], axis=0).max() == 0.0)
+        if not (static_root or _moves(local_pos[:, child])):
+            break
+        local_pos[:, child] = local_pos[:, first] + qrot(local_rot[:, first],
+                                                         local_pos[:, child])
+        local_rot[:, child] = qmul(local_rot[:, first], local_rot[:, child])
+        first = child
     for k in range(first + 1, n):
-        size = max(1.0, float(np.abs(local_pos[:, k]).max()))
-        if np.ptp(local_pos[:, k], axis=0).max() > 1e-6 * size:
+        if _moves(local_pos[:, k]):
             raise FormatError(path, joints[k].line, f"joint {names[k]!r} has moving position "
-                              "channels; expected constant ones (only the root may translate)")
+                              "channels below the root's chain of single children; expected "
+                              "constant ones there (a Motion translates its root only)")
 
     offsets = local_pos[0, first:].copy()
     offsets[0] = 0.0
@@ -319,7 +387,14 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
     end_sites = {k - first: j.end_site * scale for k, j in enumerate(joints)
                  if j.end_site is not None and k >= first}
     skeleton = Skeleton(names[first:], sk_parents, offsets * scale, end_sites)
-    return Motion(skeleton, local_rot[:, first:], local_pos[:, first] * scale, fps, path.stem)
+    motion = Motion(skeleton, local_rot[:, first:], local_pos[:, first] * scale, fps, path.stem)
+    return motion, scale
+
+
+def _moves(pos: np.ndarray) -> bool:
+    """Whether per-frame positions (T, 3) vary by more than float noise."""
+    size = max(1.0, float(np.abs(pos).max()))
+    return bool(np.ptp(pos, axis=0).max() > 1e-6 * size)
 
 
 def _guess_scale(names: list[str], parents: np.ndarray, offsets: np.ndarray) -> float:

@@ -134,6 +134,8 @@ def load_database(
     style: list[str] | None = None,
     limit: int | None = None,
     progress: bool = True,
+    up: str = "auto",
+    skip_frames: int = 0,
 ) -> MotionDatabase:
     """Read every ``*.bvh`` in ``folder`` (sorted by name) with its labels, each clip without
     a leading pose it jumps out of (:func:`drop_leading_pose`).
@@ -143,6 +145,8 @@ def load_database(
     content, style : keep only clips with these labels (e.g. ``["walk", "run"]``).
     limit : read at most this many clips (after filtering, evenly spaced over the sorted
         names: see :func:`spread`), for quick runs.
+    up, skip_frames : as for :func:`imuloco.io.bvh.read_bvh` (the vertical axis, ``"auto"``
+        by default; leading frames to drop, such as a prepended T-pose).
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -161,7 +165,7 @@ def load_database(
             continue
         chosen.append((f, lab))
     chosen = [chosen[i] for i in spread(len(chosen), limit)]
-    clips = [drop_leading_pose(read_bvh(f))
+    clips = [drop_leading_pose(read_bvh(f, up=up, skip_frames=skip_frames))
              for f, _ in tqdm(chosen, desc=f"loading {folder.name}", disable=not progress,
                               unit="clip")]
     return MotionDatabase(clips, [lab for _, lab in chosen])
@@ -211,10 +215,12 @@ def combine(dbs: Sequence[MotionDatabase], progress: bool = False) -> MotionData
 
 
 def load_databases(folders: Sequence[str | Path], limit: int | None = None,
-                   progress: bool = True) -> MotionDatabase:
-    """The clips of several folders as one database (:func:`combine`); ``limit`` applies to
-    each folder."""
-    dbs = [load_database(f, limit=limit, progress=progress) for f in folders]
+                   progress: bool = True, up: str = "auto", skip_frames: int = 0
+                   ) -> MotionDatabase:
+    """The clips of several folders as one database (:func:`combine`); ``limit`` and the
+    reading options apply to each folder."""
+    dbs = [load_database(f, limit=limit, progress=progress, up=up, skip_frames=skip_frames)
+           for f in folders]
     return dbs[0] if len(dbs) == 1 else combine(dbs, progress=progress)
 
 
