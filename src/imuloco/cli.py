@@ -339,7 +339,7 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
               type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
               help="Sensor log format.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="BVH file to write (on the model's training skeleton).")
+              help="BVH file to write (on the model's training skeleton, or --skeleton's).")
 @click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also render a stick-figure video (.mp4 or .gif).")
 @click.option("--video-seconds", type=float, default=None,
@@ -348,12 +348,17 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
               default=None, help="Also write the interactive HTML viewer.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Also write the report (gait, checks) as JSON.")
+@click.option("--skeleton", "skeleton", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
+                   "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
-                report_path: Path | None, no_calibrate: bool, force: bool) -> None:
+                report_path: Path | None, skeleton: Path | None, no_calibrate: bool,
+                force: bool) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -368,7 +373,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     try:
         motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                           placement=placement, fmt=fmt,
-                                          calibrate=not no_calibrate, progress=True)
+                                          calibrate=not no_calibrate, progress=True,
+                                          skeleton=skeleton)
     except (FormatError, KeyError, ValueError) as e:
         raise click.ClickException(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {report['model']}", err=True)
@@ -397,17 +403,22 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 @click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
                                                        path_type=Path), default=None,
               help="Model file from `imuloco train`.")
+@click.option("--skeleton", "skeleton", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
+                   "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
-def demo(out_dir: Path, method_name: str | None, model_path: Path | None, force: bool) -> None:
+def demo(out_dir: Path, method_name: str | None, model_path: Path | None,
+         skeleton: Path | None, force: bool) -> None:
     """Simulate a phone on the right ankle of a bundled walk, reconstruct it and write the
     BVH, a side-by-side video (MP4, GIF), the HTML viewer, plots and a report."""
     from imuloco.app.pipeline import demo as run_demo
 
     try:
         report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
-                          progress=True)
-    except FileExistsError as e:
-        raise click.UsageError(str(e)) from None
+                          progress=True, skeleton=skeleton)
+    except (FileExistsError, KeyError) as e:
+        raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     m = report["metrics"]
     click.echo(f"model: {report['model']}")
     g, gt = report["gait"], report["gait_ground_truth"]
@@ -479,11 +490,15 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
 @click.option("--format", "fmt", default="auto", show_default=True,
               type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
               help="Sensor log format.")
+@click.option("--skeleton", "skeleton", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
+                   "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path, jobs: int,
           model_path: Path | None, method_name: str | None, placement: str, fmt: str,
-          no_calibrate: bool, force: bool) -> None:
+          skeleton: Path | None, no_calibrate: bool, force: bool) -> None:
     """Reconstruct many RECORDINGS (one walker each) in parallel: a BVH and a gait report
     per recording, and a summary.csv / summary.json of cadence, speed and step length."""
     from imuloco.app.batch import find_recordings, run_batch
@@ -493,7 +508,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
         raise click.UsageError("no recordings: give files or --glob PATTERN")
     try:
         summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
-                            calibrate=not no_calibrate, overwrite=force, progress=True)
+                            calibrate=not no_calibrate, overwrite=force, progress=True,
+                            skeleton=skeleton)
     except (FileExistsError, KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {summary['model']}", err=True)

@@ -78,7 +78,7 @@ def _load(model_path: str):
 
 def reconstruct_one(recording: str | Path, out_dir: str | Path, name: str, model_path: str,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
-                    overwrite: bool = False) -> dict[str, Any]:
+                    overwrite: bool = False, skeleton: str | None = None) -> dict[str, Any]:
     """Reconstruct one recording, write ``NAME.bvh`` and ``NAME.json`` into ``out_dir``.
 
     Returns its summary row (see :data:`COLUMNS`); errors are caught and reported in the row.
@@ -90,7 +90,8 @@ def reconstruct_one(recording: str | Path, out_dir: str | Path, name: str, model
     row: dict[str, Any] = {"name": name, "recording": str(recording)}
     try:
         motion, report = reconstruct_file(recording, placement=placement, fmt=fmt,
-                                          calibrate=calibrate, fitted=_load(model_path))
+                                          calibrate=calibrate, fitted=_load(model_path),
+                                          skeleton=skeleton)
         out = Path(out_dir)
         write_bvh(motion, out / f"{name}.bvh", overwrite=overwrite)
         (out / f"{name}.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -125,8 +126,8 @@ def _results(tasks: list[dict], jobs: int) -> Iterator[dict]:
 def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int = 1,
               model: str | Path | None = None, method: str | None = None,
               placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
-              overwrite: bool = False, progress: bool = False, fitted=None
-              ) -> dict[str, Any]:
+              overwrite: bool = False, progress: bool = False, fitted=None,
+              skeleton: str | Path | None = None) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` (see the module docstring).
 
     Parameters
@@ -139,6 +140,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
     overwrite : replace existing outputs (otherwise refuse before starting).
     progress : a progress bar (tqdm) on stderr.
     fitted : an already fitted method (skips the choice).
+    skeleton : a motion file of the user's rig: every BVH comes out on it (checked before
+        starting; see :func:`imuloco.app.pipeline.onto_rig`).
 
     Returns
     -------
@@ -161,6 +164,10 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
     if taken and not overwrite:
         raise FileExistsError(f"{', '.join(taken[:5])}{' ...' if len(taken) > 5 else ''} "
                               "exist(s); pass overwrite=True (--force) to replace")
+    if skeleton is not None:
+        from imuloco.app.pipeline import load_rig
+
+        load_rig(skeleton)  # refuse a rig that cannot be mapped before any work
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     if fitted is None:
@@ -174,7 +181,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
         model_path = str(fitted.save(Path(tmp) / "model.npz"))
         tasks = [{"recording": str(p), "out_dir": str(out), "name": n,
                   "model_path": model_path, "placement": placement, "fmt": fmt,
-                  "calibrate": calibrate, "overwrite": overwrite}
+                  "calibrate": calibrate, "overwrite": overwrite,
+                  "skeleton": None if skeleton is None else str(skeleton)}
                  for p, n in zip(paths, names)]
         bar = tqdm(total=len(tasks), desc="batch", unit="rec", disable=not progress)
         for row in _results(tasks, jobs):

@@ -16,8 +16,9 @@ Protocol details fixed here (see also :mod:`imuloco.evaluate.protocols`):
   without ground-truth contact. ``heldout-contents`` pools the test clips of all its folds
   (each clip is tested once, by the model trained without its content), so its rows per
   motion type are the left-out contents.
-- Seeds: with ``seeds`` N > 1 each method is trained N times (seeds ``seed .. seed+N-1``) on
-  the same test signals; each metric is the mean over the runs, ``<metric>_std`` their
+- Seeds: with ``seeds`` N > 1 each method is trained N times (seeds ``seed .. seed+N-1``,
+  for the training signals and for a method's own ``seed`` hyperparameter unless the spec
+  sets it) on the same test signals; each metric is the mean over the runs, ``<metric>_std`` their
   standard deviation (ddof 1; None for one run), ``mpjpe_cm_per_seed`` the runs' values.
 - ``cross-dataset``: the training folders become one set on the first one's skeleton
   (:func:`imuloco.io.database.load_databases`); test clips stay on their own skeleton,
@@ -38,6 +39,7 @@ Everything but the timings is deterministic: the same arguments give the same nu
 
 from __future__ import annotations
 
+import inspect
 import json
 import tempfile
 import time
@@ -145,9 +147,12 @@ def evaluate_method(
     (:func:`imuloco.evaluate.metrics.evaluate_parts`) and leave ``per_joint`` and ``curves``
     out (None / {}).
     """
-    from imuloco.methods import get_method
+    from imuloco.methods import get_method, method_class
 
-    method = get_method(name, **(params or {}))
+    params = dict(params or {})
+    if "seed" in inspect.signature(method_class(name).__init__).parameters:
+        params.setdefault("seed", seed)  # a method's own seed (initial weights) follows too
+    method = get_method(name, **params)
     t0, saved = time.perf_counter(), saved_seconds()
     method.fit(train, placements, noise, seed, progress=progress)
     train_s = time.perf_counter() - t0 + (saved_seconds() - saved)  # as if nothing cached
