@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from tests.test_retarget import other_rig
 
 from imuloco.cli import cli
 from imuloco.core.motion import Motion
@@ -22,7 +23,6 @@ from imuloco.io.database import (
     load_databases,
     load_sample,
 )
-from tests.test_retarget import other_rig
 
 
 @pytest.fixture(scope="module")
