@@ -8,6 +8,8 @@ import zipfile
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from imuloco.errors import ModelFileError
 from imuloco.methods import get_method, load_model
@@ -145,3 +147,133 @@ def test_training_protocol_travels_with_the_model(models, tmp_path):
     assert model.protocol_["clips"] > 0 and model.protocol_["noise"] == model.noise_
     back = load_model(model.save(tmp_path / "m.npz"))
     assert back.protocol_ == model.protocol_
+
+
+# --- limits and the header's schema (issue 18): every bad file is a ModelFileError with its path
+
+@pytest.mark.parametrize("changes, field", [
+    ({"fps": -1}, "fps"), ({"fps": 0}, "fps"), ({"fps": 1e308}, "fps"), ({"fps": True}, "fps"),
+    ({"fps": "30"}, "fps"), ({"placements": []}, "placements"),
+    ({"placements": "nose"}, "placements"), ({"placements": ["nose"]}, "placements"),
+    ({"placements": ["right_ankle", "right_ankle"]}, "placements"),
+    ({"params": [1, 2]}, "params"), ({"noise": "loud"}, "noise"), ({"values": None}, "values"),
+    ({"skeleton": {"names": []}}, "skeleton.names"), ({"method": 3}, "method")])
+def test_header_schema(models, tmp_path, changes, field):
+    path = models["ridge"].save(tmp_path / "r.npz")
+    bad = tmp_path / "bad.npz"
+    _rewrite_header(path, bad, **changes)
+    with pytest.raises(ModelFileError, match=f"{bad}: header field '{field}'"):
+        load_model(bad)
+
+
+def test_deeply_nested_header(models, tmp_path):
+    path = models["ridge"].save(tmp_path / "r.npz")
+    with np.load(path, allow_pickle=False) as z:
+        data = {k: z[k] for k in z.files}
+    text = bytes(data["__header__"]).decode()
+    for depth in (40, 100_000):  # past the limit, and past Python's recursion limit
+        deep = text.replace('"protocol": {', '"protocol": {"x": ' + "[" * depth + "]" * depth + ",")
+        data["__header__"] = np.frombuffer(deep.encode(), dtype=np.uint8)
+        np.savez(tmp_path / "deep.npz", **data)
+        with pytest.raises(ModelFileError, match="nests deeper"):
+            load_model(tmp_path / "deep.npz")
+
+
+def _add_member(src, dst, name, header_bytes):
+    """Copy a model file and add a member whose raw .npy bytes are given."""
+    with zipfile.ZipFile(src) as a, zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as b:
+        for info in a.infolist():
+            b.writestr(info, a.read(info))
+        b.writestr(name, header_bytes)
+
+
+def test_unused_huge_member_is_refused_before_decompressing(models, tmp_path, monkeypatch):
+    """A member that unzips to more than the limit (here lowered to 1 MiB; 32 MiB of zeros
+    compress to 32 KB) is refused from its declared size: never opened."""
+    from imuloco.methods import modelfile
+
+    monkeypatch.setattr(modelfile, "MAX_ARRAY_BYTES", 1 << 20)
+    path = models["ridge"].save(tmp_path / "r.npz")
+    big = tmp_path / "big.npz"
+    with zipfile.ZipFile(path) as a, zipfile.ZipFile(big, "w", zipfile.ZIP_DEFLATED) as b:
+        for info in a.infolist():
+            b.writestr(info, a.read(info))
+        b.writestr("junk.npy", bytes(32 << 20))
+    assert big.stat().st_size < 200_000
+    opened = []
+    real_open = zipfile.ZipFile.open
+    monkeypatch.setattr(zipfile.ZipFile, "open",
+                        lambda self, name, *a, **k: opened.append(str(getattr(name, "filename",
+                                                                                name)))
+                        or real_open(self, name, *a, **k))
+    with pytest.raises(ModelFileError, match="'junk.npy' unzips to 33,554,432 bytes"):
+        load_model(big)
+    assert opened == []
+
+
+def test_unused_small_member_is_never_read(models, tmp_path):
+    path = models["ridge"].save(tmp_path / "r.npz")
+    _add_member(path, tmp_path / "extra.npz", "unused.npy", b"not even an npy array")
+    assert load_model(tmp_path / "extra.npz").fps_ == models["ridge"].fps_
+
+
+def test_forged_array_shape_is_refused(models, tmp_path):
+    """A .npy header declaring 10^12 floats in a few bytes: no MemoryError, no allocation."""
+    path = models["ridge"].save(tmp_path / "r.npz")
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buf, {"descr": "<f8", "fortran_order": False,
+                                               "shape": (10**6, 10**6)})
+    forged = tmp_path / "forged.npz"
+    with zipfile.ZipFile(path) as a, zipfile.ZipFile(forged, "w") as b:
+        for info in a.infolist():
+            b.writestr(info, buf.getvalue() + b"\0" * 64 if info.filename == "coef.npy"
+                       else a.read(info))
+    with pytest.raises(ModelFileError, match=f"{forged}: array 'coef' declares"):
+        load_model(forged)
+
+
+def test_csv_given_as_model_gives_no_pickle_advice(tmp_path):
+    (tmp_path / "some.csv").write_text("time_s,acc_x\n0,1\n")
+    with pytest.raises(ModelFileError) as e:
+        load_model(tmp_path / "some.csv")
+    assert str(tmp_path / "some.csv") in str(e.value) and "pickle" not in str(e.value)
+
+
+@pytest.mark.skipif(not __import__("importlib").util.find_spec("torch"), reason="needs torch")
+def test_reshaped_weight_is_a_model_file_error(tmp_path):
+    from imuloco.data import MODELS_DIR
+
+    src = MODELS_DIR / "learned_right_ankle.npz"
+    dst = tmp_path / "reshaped.npz"
+    with zipfile.ZipFile(src) as a, zipfile.ZipFile(dst, "w") as b:
+        for info in a.infolist():
+            data = a.read(info)
+            if info.filename == "net.inp.0.bias.npy":
+                arr = np.lib.format.read_array(io.BytesIO(data))
+                out = io.BytesIO()
+                np.lib.format.write_array(out, arr[: len(arr) // 2])
+                data = out.getvalue()
+            b.writestr(info, data)
+    with pytest.raises(ModelFileError, match=f"{dst}: learned model file is incomplete"):
+        load_model(dst)
+
+
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(key=st.sampled_from(["fps", "placements", "noise", "params", "values", "skeleton",
+                            "protocol", "method", "format_version"]),
+       value=st.recursive(st.none() | st.booleans() | st.floats() | st.integers() | st.text(),
+                          lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(), c,
+                                                                            max_size=3),
+                          max_leaves=8))
+def test_any_header_value_loads_or_fails_cleanly(models, tmp_path, key, value):
+    path = tmp_path / "r.npz"
+    if not path.exists():
+        models["ridge"].save(path)
+    _rewrite_header(path, tmp_path / "h.npz", **{key: value})
+    try:
+        m = load_model(tmp_path / "h.npz")
+    except ModelFileError as e:
+        assert str(tmp_path / "h.npz") in str(e)
+        return
+    assert 1 <= m.fps_ <= 1000 and m.placements_

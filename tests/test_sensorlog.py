@@ -240,10 +240,10 @@ def test_realworld_shin_pair(shared_dir):
 
 @settings(max_examples=25, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.integers(2, 40), st.integers(1, 3), st.integers(0, 2**31 - 1))
+@given(st.integers(50, 120), st.integers(1, 3), st.integers(0, 2**31 - 1))
 def test_generic_round_trip_property(tmp_path, n, sensors, seed):
-    rng = np.random.default_rng(seed)
-    times = np.cumsum(rng.uniform(0.001, 0.05, n)) + rng.uniform(0, 1e3)
+    rng = np.random.default_rng(seed)  # >= 50 samples 20-50 ms apart: more than MIN_DURATION
+    times = np.cumsum(rng.uniform(0.02, 0.05, n)) + rng.uniform(0, 1e3)
     acc = rng.normal(0, 50, (n, sensors, 3))
     gyro = rng.normal(0, 10, (n, sensors, 3))
     names = ["right_ankle", "pelvis", "head"][:sensors]
@@ -255,3 +255,178 @@ def test_generic_round_trip_property(tmp_path, n, sensors, seed):
     np.testing.assert_allclose(back.times, times - times[0], atol=2e-6)
     np.testing.assert_allclose(back.acc, acc, rtol=1e-7, atol=1e-6)
     np.testing.assert_allclose(back.gyro, gyro, rtol=1e-7, atol=1e-6)
+
+
+# --- limits and plausibility ranges (issue 18): every bad log is a FormatError naming it ------
+
+@pytest.fixture()
+def rows(walk_rec, tmp_path) -> list[str]:
+    """The lines of the sample walk as a generic CSV (header first)."""
+    return write_generic_csv(walk_rec, tmp_path / "walk.csv").read_text().splitlines()
+
+
+def _write(tmp_path: Path, lines: list[str], name: str = "bad.csv") -> Path:
+    path = tmp_path / name
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _set_cell(lines: list[str], row: int, col: int, value: str) -> list[str]:
+    cells = lines[row].split(",")
+    cells[col] = value
+    return lines[:row] + [",".join(cells)] + lines[row + 1:]
+
+
+@pytest.mark.parametrize("value, match", [
+    ("1e308", "magnitude"), ("nan", "magnitude"), ("-inf", "magnitude"), ("abc", "a number"),
+    ("5e4", "not a sensor reading")])
+def test_bad_cells_name_the_line(rows, tmp_path, value, match):
+    path = _write(tmp_path, _set_cell(rows, 40, 2, value))
+    with pytest.raises(FormatError, match=match) as e:
+        read_log(path)
+    assert e.value.line == 41 and e.value.path == str(path)
+
+
+def test_a_timestamp_jump_is_refused_not_resampled(rows, tmp_path):
+    """A jump of 1e6 s would resample to 1e8 samples per channel: refused at its line."""
+    t = float(rows[300].split(",")[0])
+    path = _write(tmp_path, rows[:300] + [r.replace(r.split(",")[0], f"{float(r.split(',')[0]) + 1e6:.6f}", 1)
+                                          for r in rows[300:]])
+    with pytest.raises(FormatError, match="jumps by 1e\\+06 s") as e:
+        read_log(path)
+    assert e.value.line == 301 and t > 0
+
+
+def test_rows_a_nanosecond_apart_are_refused(rows, tmp_path):
+    lines = [rows[0]] + [f"{k * 1e-9:.9e}," + r.split(",", 1)[1] for k, r in enumerate(rows[1:])]
+    with pytest.raises(FormatError, match="no sampling rate"):
+        read_log(_write(tmp_path, lines))
+
+
+@pytest.mark.parametrize("n", [1, 2, 40])
+def test_too_short_recordings_are_refused(rows, tmp_path, n):
+    with pytest.raises(FormatError, match="at least"):
+        read_log(_write(tmp_path, rows[:n + 1]))
+
+
+def test_milliseconds_in_a_seconds_column_are_detected(walk_rec, rows, tmp_path, caplog):
+    lines = [rows[0]] + [f"{float(r.split(',')[0]) * 1e3:.3f}," + r.split(",", 1)[1]
+                         for r in rows[1:]]
+    with caplog.at_level("WARNING"):
+        rec, report = read_log(_write(tmp_path, lines))
+    assert report.time_unit == "ms" and "read as ms" in caplog.text
+    span = walk_rec.times[-1] - walk_rec.times[0]
+    assert abs(report.duration - span) < 0.01 and abs(rec.times[-1] - span) < 0.02
+
+
+def test_bytes_that_are_not_text_name_their_line(rows, tmp_path):
+    path = tmp_path / "bin.csv"
+    path.write_bytes(("\n".join(rows[:10]) + "\n").encode() + b"\xff\xfe\x00garbage\n")
+    with pytest.raises(FormatError, match="UTF-8") as e:
+        read_log(path)
+    assert e.value.line == 11
+    path.write_bytes(b"time_s," + b"9" * 100_000 + b"\n")
+    with pytest.raises(FormatError, match="line longer"):
+        read_log(path)
+
+
+def test_options_dataclass_and_keywords_agree(rows, tmp_path):
+    from imuloco.sensors.reallog import LogOptions
+
+    path = _write(tmp_path, rows)
+    a, _ = read_log(path, rate=50.0, sigma_s=0.02)
+    b, _ = read_log(path, options=LogOptions(rate=50.0, sigma_s=0.02))
+    np.testing.assert_array_equal(a.acc, b.acc)
+    with pytest.raises(KeyError, match="on_gap"):
+        read_log(path, on_gap="ignore")
+
+
+@settings(max_examples=40, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(st.integers(0, 200), st.integers(0, 6),
+                          st.sampled_from(["", "x", "1e308", "nan", "1e7", "-1e9", "0,5", '"',
+                                           "\x00", "1" * 30, "1e-9", "1e300"])),
+                min_size=1, max_size=4))
+def test_mutated_tables_fail_cleanly_or_read_finite(walk_rec, tmp_path, edits):
+    """Any cell edits of a valid log: either a FormatError naming the file, or a finite,
+    uniform recording of plausible length."""
+    lines = write_generic_csv(walk_rec, tmp_path / "m.csv", overwrite=True).read_text().splitlines()
+    for row, col, value in edits:
+        row = 1 + row % (len(lines) - 1)
+        cells = lines[row].split(",")
+        cells[col % len(cells)] = value
+        lines[row] = ",".join(cells)
+    path = _write(tmp_path, lines, "m.csv")
+    try:
+        rec, _ = read_log(path)
+    except FormatError as e:
+        assert e.path == str(path)
+        return
+    assert np.isfinite(rec.channels()).all() and rec.is_uniform()
+    assert rec.num_samples <= 100 * (walk_rec.times[-1] - walk_rec.times[0]) * 10 + 6001
+
+
+# --- exports shared as zips; the platform of a Sensor Logger export (issue 19) ----------------
+
+def _zip(folder: Path, target: Path, sub: str = "") -> Path:
+    import zipfile
+
+    with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
+        for f in sorted(folder.iterdir()):
+            z.write(f, sub + f.name)
+    return target
+
+
+def test_zipped_sensor_logger_export_reads_as_its_folder(walk_rec, tmp_path):
+    _sensor_logger(tmp_path / "sl", walk_rec, total=True, ios=True)
+    zipped = _zip(tmp_path / "sl", tmp_path / "export.csv.zip", "Walk-2024/")
+    assert detect_format(zipped) == "sensorlogger"
+    a, _ = read_log(tmp_path / "sl", rate=None)
+    b, rb = read_log(zipped, rate=None)
+    np.testing.assert_array_equal(a.acc, b.acc)
+    assert rb.platform == "ios (Metadata.csv)"
+    assert str(zipped / "Walk-2024/TotalAcceleration.csv") in rb.files
+
+
+def test_zipped_phyphox_export(walk_rec, tmp_path):
+    acc, gyr = _phyphox_rows(walk_rec)
+    (tmp_path / "ph").mkdir()
+    (tmp_path / "ph" / "Accelerometer.csv").write_text(acc)
+    (tmp_path / "ph" / "Gyroscope.csv").write_text(gyr)
+    (tmp_path / "ph" / "device.csv").write_text("property,value\nmodel,x\n")
+    zipped = _zip(tmp_path / "ph", tmp_path / "phyphox.zip")
+    assert detect_format(zipped) == "phyphox"
+    rec, report = read_log(zipped, rate=None)
+    assert report.format == "phyphox"
+    np.testing.assert_allclose(rec.acc, walk_rec.acc[1:], rtol=1e-6, atol=1e-6)
+
+
+def test_a_broken_zip_is_a_format_error(tmp_path):
+    path = tmp_path / "broken.zip"
+    path.write_bytes(b"PK\x03\x04" + b"\x00" * 50)
+    with pytest.raises(FormatError) as e:
+        read_log(path)
+    assert str(path) in str(e.value) and "\\x00" not in str(e.value)
+
+
+def test_platform_without_metadata_is_guessed_with_a_warning(walk_rec, tmp_path, caplog):
+    _sensor_logger(tmp_path / "ios", walk_rec, total=True, ios=True)
+    reference, _ = read_log(tmp_path / "ios", rate=None)
+    (tmp_path / "ios" / "Metadata.csv").unlink()
+    with caplog.at_level("WARNING"):
+        assumed, report = read_log(tmp_path / "ios", rate=None)
+    assert "assuming Android" in caplog.text and report.platform.startswith("android")
+    np.testing.assert_allclose(assumed.acc, -reference.acc)  # why the warning matters
+    given_, report = read_log(tmp_path / "ios", rate=None, platform="ios")
+    np.testing.assert_allclose(given_.acc, reference.acc)
+    assert report.platform == "ios (given)"
+    # the uncalibrated accelerometer is in g on iOS, m/s^2 on Android: enough to tell
+    lines = ["time,seconds_elapsed,z,y,x"] + [f"{1_700_000_000 * 10**9 + k * 10**7},{k / 100},"
+                                              f"{-v[2] / 9.81},{-v[1] / 9.81},{-v[0] / 9.81}"
+                                              for k, v in enumerate(walk_rec.acc[:, 0])]
+    (tmp_path / "ios" / "AccelerometerUncalibrated.csv").write_text("\n".join(lines) + "\n")
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        guessed, report = read_log(tmp_path / "ios", rate=None)
+    assert "guessed ios" in caplog.text and report.platform.startswith("ios")
+    np.testing.assert_allclose(guessed.acc, reference.acc)

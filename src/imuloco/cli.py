@@ -10,8 +10,21 @@ from pathlib import Path
 
 import click
 
+from imuloco.errors import ImulocoError
 
-@click.group()
+
+class Commands(click.Group):
+    """The command group: an :class:`~imuloco.errors.ImulocoError` raised by any command ends
+    it with ``Error: <message>`` and exit status 1, instead of a traceback."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except ImulocoError as e:
+            raise click.ClickException(str(e)) from None
+
+
+@click.group(cls=Commands)
 @click.version_option(package_name="imuloco")
 def cli() -> None:
     """Full-body locomotion reconstruction from one body-worn inertial sensor."""
@@ -114,7 +127,7 @@ DATA_HELP = ("Folder(s) of clips, repeatable or comma separated; several become 
 
 
 @cli.command()
-@click.option("--method", "method_names", required=True,
+@click.option("--method", "method_names", default=None,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
                    "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm].")
 @click.option("--split", "split_name",
@@ -141,12 +154,30 @@ DATA_HELP = ("Folder(s) of clips, repeatable or comma separated; several become 
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
+@click.option("--fuzz", type=click.IntRange(1), default=None, metavar="N",
+              help="Instead: read N generated malformed inputs per reader (imuloco.evaluate."
+                   "fuzz) and write fuzz.md and fuzz.json.")
+@click.option("--readers", default=None,
+              help="With --fuzz: readers, comma separated [default: all].")
 @_reading_options
-def bench(method_names: str, split_name: str, noise: str, placement: str,
+def bench(method_names: str | None, split_name: str, noise: str, placement: str,
           data_items: tuple[str, ...], train_items: tuple[str, ...],
           test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
-          speed: bool, db_frames: str | None, up: str, skip_frames: int) -> None:
+          speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None, up: str,
+          skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
+    if fuzz is not None:
+        from imuloco.evaluate.fuzz import READERS, write_fuzz
+
+        chosen = tuple(_csv(readers)) or READERS
+        unknown = sorted(set(chosen) - set(READERS))
+        if unknown:
+            raise click.BadParameter(f"unknown reader(s) {unknown}; expected {list(READERS)}",
+                                     param_hint="--readers")
+        click.echo(write_fuzz(fuzz, out, chosen, seed=seed, progress=True))
+        return
+    if not method_names:
+        raise click.UsageError("Missing option '--method' (or pass --fuzz N).")
     names = _csv(method_names)
     data = _folders(data_items)
     if speed:
@@ -247,7 +278,13 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
     if split_name is not None:
         db = split(db, split_name)[0]
     placements = _csv(placement)
-    method.fit(db, placements, noise, seed, progress=True)
+    try:
+        method.fit(db, placements, noise, seed, progress=True)
+    except (ValueError, TypeError) as e:
+        if not params:
+            raise
+        raise click.BadParameter(f"{e} (rejected by {method_name})", param_hint="--param"
+                                 ) from None
     method.protocol_.update(data="bundled sample" if data is None else data_label(data),
                             split=split_name or "all")
     seconds = method.protocol_["train_seconds"]
@@ -288,7 +325,8 @@ def export_onnx_command(model_path: Path, output: Path, force: bool) -> None:
               help="Sensor placement(s), comma separated (e.g. right_ankle,pelvis).")
 @click.option("--noise", default="phone", show_default=True,
               help="Noise preset: clean, phone or imu.")
-@click.option("--rate", default=100.0, show_default=True, type=float, help="Sampling rate, Hz.")
+@click.option("--rate", default=100.0, show_default=True, type=click.FloatRange(1.0, 10_000.0),
+              help="Sampling rate, Hz.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the noise draws.")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s).")
@@ -353,12 +391,18 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
               help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
                    "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
+@click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
+              help="Phone of a Sensor Logger export [default: from its Metadata.csv, else "
+                   "guessed with a warning].")
+@click.option("--piece-seconds", type=click.FloatRange(10.0), default=None,
+              help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
+                   "(bounded memory for long recordings; not with --video/--html).")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
                 report_path: Path | None, skeleton: Path | None, no_calibrate: bool,
-                force: bool) -> None:
+                platform: str | None, piece_seconds: float | None, force: bool) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -366,15 +410,36 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     """
     from imuloco.app.pipeline import reconstruct_file, render_outputs
     from imuloco.errors import FormatError
+    from imuloco.io.atomic import atomic_write, check_output
     from imuloco.io.bvh import write_bvh
 
     _refuse_existing([output, video, html_path, report_path], force)
+    for out in (output, video, html_path, report_path):
+        if out is not None:
+            check_output(out, force=True, inputs=[*recording, *([skeleton] if skeleton else [])])
     source = recording[0] if len(recording) == 1 else list(recording)
+    if piece_seconds is not None:
+        if video or html_path or skeleton:
+            raise click.UsageError("--piece-seconds writes the BVH on the model's skeleton "
+                                   "only: drop --video/--html/--skeleton")
+        from imuloco.app.chunked import reconstruct_to_bvh
+
+        report = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
+                                    not no_calibrate, platform=platform, overwrite=force,
+                                    piece_s=piece_seconds, progress=True)
+        if report_path:
+            with atomic_write(report_path, "w") as f:
+                f.write(json.dumps(report, indent=2) + "\n")
+        m = report["motion"]
+        click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
+                   f"{report['pieces']['count']} piece(s); wrote "
+                   + ", ".join(str(p) for p in (output, report_path) if p))
+        return
     try:
         motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                           placement=placement, fmt=fmt,
                                           calibrate=not no_calibrate, progress=True,
-                                          skeleton=skeleton)
+                                          platform=platform, skeleton=skeleton)
     except (FormatError, KeyError, ValueError) as e:
         raise click.ClickException(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {report['model']}", err=True)
@@ -385,7 +450,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                                   [video] if video else [], html_path, overwrite=force,
                                   progress=True, max_seconds=video_seconds)
     if report_path:
-        report_path.write_text(json.dumps(report, indent=2) + "\n")
+        with atomic_write(report_path, "w") as f:
+            f.write(json.dumps(report, indent=2) + "\n")
         written.append(report_path)
     g = report["gait"]
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
@@ -495,10 +561,14 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
               help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
                    "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
+@click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
+              help="Phone of Sensor Logger exports [default: from their Metadata.csv, else "
+                   "guessed with a warning].")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path, jobs: int,
           model_path: Path | None, method_name: str | None, placement: str, fmt: str,
-          skeleton: Path | None, no_calibrate: bool, force: bool) -> None:
+          skeleton: Path | None, no_calibrate: bool, platform: str | None,
+          force: bool) -> None:
     """Reconstruct many RECORDINGS (one walker each) in parallel: a BVH and a gait report
     per recording, and a summary.csv / summary.json of cadence, speed and step length."""
     from imuloco.app.batch import find_recordings, run_batch
@@ -509,7 +579,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     try:
         summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
                             calibrate=not no_calibrate, overwrite=force, progress=True,
-                            skeleton=skeleton)
+                            platform=platform, skeleton=skeleton)
     except (FileExistsError, KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {summary['model']}", err=True)

@@ -78,7 +78,8 @@ def _load(model_path: str):
 
 def reconstruct_one(recording: str | Path, out_dir: str | Path, name: str, model_path: str,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
-                    overwrite: bool = False, skeleton: str | None = None) -> dict[str, Any]:
+                    overwrite: bool = False, platform: str | None = None,
+                    skeleton: str | None = None) -> dict[str, Any]:
     """Reconstruct one recording, write ``NAME.bvh`` and ``NAME.json`` into ``out_dir``.
 
     Returns its summary row (see :data:`COLUMNS`); errors are caught and reported in the row.
@@ -91,7 +92,7 @@ def reconstruct_one(recording: str | Path, out_dir: str | Path, name: str, model
     try:
         motion, report = reconstruct_file(recording, placement=placement, fmt=fmt,
                                           calibrate=calibrate, fitted=_load(model_path),
-                                          skeleton=skeleton)
+                                          platform=platform, skeleton=skeleton)
         out = Path(out_dir)
         write_bvh(motion, out / f"{name}.bvh", overwrite=overwrite)
         (out / f"{name}.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -127,7 +128,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
               model: str | Path | None = None, method: str | None = None,
               placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
               overwrite: bool = False, progress: bool = False, fitted=None,
-              skeleton: str | Path | None = None) -> dict[str, Any]:
+              platform: str | None = None, skeleton: str | Path | None = None
+              ) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` (see the module docstring).
 
     Parameters
@@ -136,7 +138,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
     out_dir : folder for the outputs (created).
     jobs : worker processes (``-1``: one per CPU; ``1``: in this process).
     model, method, placement : the model, as :func:`imuloco.app.pipeline.choose_method` picks it.
-    fmt, calibrate : see :func:`imuloco.app.pipeline.reconstruct_file`.
+    fmt, calibrate, platform : see :func:`imuloco.app.pipeline.reconstruct_file`.
     overwrite : replace existing outputs (otherwise refuse before starting).
     progress : a progress bar (tqdm) on stderr.
     fitted : an already fitted method (skips the choice).
@@ -181,7 +183,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
         model_path = str(fitted.save(Path(tmp) / "model.npz"))
         tasks = [{"recording": str(p), "out_dir": str(out), "name": n,
                   "model_path": model_path, "placement": placement, "fmt": fmt,
-                  "calibrate": calibrate, "overwrite": overwrite,
+                  "calibrate": calibrate, "overwrite": overwrite, "platform": platform,
                   "skeleton": None if skeleton is None else str(skeleton)}
                  for p, n in zip(paths, names)]
         bar = tqdm(total=len(tasks), desc="batch", unit="rec", disable=not progress)

@@ -174,7 +174,8 @@ def onto_rig(motion: Motion, rig) -> Motion:
 def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=None,
                      method: str | None = None, placement: str = "right_ankle",
                      fmt: str = "auto", calibrate: bool = True, pin: bool | None = None,
-                     progress: bool = False, fitted=None, skeleton: str | Path | None = None
+                     progress: bool = False, fitted=None, platform: str | None = None,
+                     skeleton: str | Path | None = None
                      ) -> tuple[Motion, dict[str, Any]]:
     """Import a phone's sensor log and reconstruct the wearer's motion.
 
@@ -188,6 +189,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     calibrate, pin : see :func:`reconstruct_recording`.
     progress : show progress bars (tqdm) on stderr.
     fitted : an already fitted method (skips :func:`choose_method`).
+    platform : Sensor Logger exports: ``"ios"`` or ``"android"`` (default: from the export's
+        metadata, else guessed with a warning).
     skeleton : a motion file of the user's rig: the motion comes out on it (:func:`onto_rig`;
         gait is measured before, on the model's skeleton).
 
@@ -208,7 +211,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar = tqdm(total=len(steps), desc="reconstruct", unit="step", disable=not progress)
     t0 = time.perf_counter()
     bar.set_postfix_str("reading the log")
-    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt)
+    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform)
     bar.update()
     bar.set_postfix_str("model")
     if fitted is None:

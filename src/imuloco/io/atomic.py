@@ -3,7 +3,8 @@
 :func:`atomic_write` writes to a temporary file in the target's folder and renames it over the
 target only when the writing succeeded (``os.replace`` is atomic on one file system), so an
 interrupted run leaves the old file or none, never a truncated one. :func:`check_output`
-refuses a target that exists (unless ``force``) or that is one of the inputs.
+refuses a target that exists (unless ``force``), that is one of the inputs, or whose folder
+cannot be written.
 """
 
 from __future__ import annotations
@@ -28,6 +29,11 @@ def check_output(path: str | Path, force: bool = False,
                                "output path")
     if path.exists() and not force:
         raise OutputExistsError(f"{path} exists; pass --force to replace it")
+    if path.parent.is_dir():  # fail now, not after the work: /proc, a read-only mount, ...
+        try:
+            tempfile.TemporaryFile(dir=path.parent).close()
+        except OSError as e:
+            raise ImulocoError(f"{path}: cannot write there ({e.strerror or e})") from None
     return path
 
 
@@ -40,8 +46,11 @@ def atomic_write(path: str | Path, mode: str = "wb") -> Iterator:
     if mode not in ("wb", "w"):
         raise ValueError(f"atomic_write: mode must be 'wb' or 'w', not {mode!r}")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as e:  # a read-only or virtual file system (/proc), no permission, ...
+        raise ImulocoError(f"{path}: cannot write there ({e.strerror or e})") from None
     try:
         with os.fdopen(fd, mode, **({"encoding": "utf-8"} if mode == "w" else {})) as f:
             yield f

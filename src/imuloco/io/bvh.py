@@ -28,6 +28,7 @@ from __future__ import annotations
 import decimal
 import math
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,6 +38,7 @@ from imuloco.core.bodymap import resolve_body_map
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
+from imuloco.io.atomic import atomic_write
 from imuloco.io.upaxis import Z_TO_Y, check_skip, check_up, resolve_up, to_y_up
 from imuloco.ops.rotations import IDENTITY, from_euler, qmul, qrot, to_euler
 
@@ -430,20 +432,45 @@ def write_bvh(motion: Motion, path: str | Path, unit: str = "cm", order: str = "
     (``m, cm, mm, in, cmu``), angles in degrees with 6 decimals, lengths with enough decimals
     for 1e-8 m. Refuses to replace an existing file unless ``overwrite``. Returns the path.
     """
+    return write_bvh_pieces([motion], motion.num_frames, path, unit, order, overwrite)
+
+
+def write_bvh_pieces(pieces: Iterable[Motion], frames: int, path: str | Path, unit: str = "cm",
+                     order: str = "ZXY", overwrite: bool = False) -> Path:
+    """Write consecutive Motions (one skeleton and frame rate, ``frames`` frames in all) as one
+    BVH file, a piece at a time: a long reconstruction never needs to be in memory whole. See
+    :func:`write_bvh` for the options; the file appears (atomically) only when complete."""
     path = Path(path)
     if unit not in UNITS:
         raise ValueError(f"unit must be one of {sorted(UNITS)}, got {unit!r}")
     order = order.upper()
     if sorted(order) != ["X", "Y", "Z"]:
         raise ValueError(f"order must be a permutation of 'XYZ' such as 'ZXY', got {order!r}")
-    sk = motion.skeleton
-    for name in sk.names:
-        if not name.strip() or name != name.strip() or any(c in name for c in "{}\r\n\t"):
-            raise ValueError(f"joint name {name!r} cannot be written to BVH")
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True (or --force) to replace it")
     k = 1.0 / UNITS[unit]
     dec = _decimals(UNITS[unit])
+    written = 0
+    with atomic_write(path, "w") as f:
+        for motion in pieces:
+            if written == 0:
+                f.write("\n".join(_hierarchy(motion.skeleton, k, dec, order)) + "\n")
+                f.write(f"MOTION\nFrames: {frames}\nFrame Time: {1.0 / motion.fps:.10g}\n")
+            eul = to_euler(motion.rotations, order).reshape(motion.num_frames, -1)
+            f.writelines(" ".join(f"{x:.{dec}f}" for x in root) + " "
+                         + " ".join(f"{a:.6f}" for a in angles) + "\n"
+                         for root, angles in zip(motion.root * k, eul))
+            written += motion.num_frames
+        if written != frames:
+            raise ValueError(f"{path}: the pieces hold {written} frames, not {frames}")
+    return path
+
+
+def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
+    """The HIERARCHY section's lines of ``sk`` (lengths times ``k``, ``dec`` decimals)."""
+    for name in sk.names:
+        if not name.strip() or name != name.strip() or any(c in name for c in "{}\r\n\t"):
+            raise ValueError(f"joint name {name!r} cannot be written to BVH")
     rot_channels = " ".join(f"{a}rotation" for a in order)
     out: list[str] = ["HIERARCHY"]
 
@@ -469,10 +496,4 @@ def write_bvh(motion: Motion, path: str | Path, unit: str = "cm", order: str = "
         out.append(f"{pad}}}")
 
     emit(0, 0)
-    eul = to_euler(motion.rotations, order)  # (T, J, 3)
-    out += ["MOTION", f"Frames: {motion.num_frames}", f"Frame Time: {1.0 / motion.fps:.10g}"]
-    for root, angles in zip(motion.root * k, eul.reshape(motion.num_frames, -1)):
-        out.append(vec(root) + " " + " ".join(f"{a:.6f}" for a in angles))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(out) + "\n")
-    return path
+    return out

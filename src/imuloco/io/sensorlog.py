@@ -21,24 +21,36 @@ and resampling to :mod:`imuloco.sensors.reallog`. Supported layouts:
   export, where the gyroscope has its own time column or shares the first one). Comma, tab or
   semicolon separators; the semicolon export uses decimal commas. "Linear Acceleration"
   (without g) is refused: the sensor's attitude is lost without gravity.
-``sensorlogger`` — a Sensor Logger (Kelvin Choi) zip-CSV export folder: ``TotalAcceleration.csv``
+``sensorlogger`` — a Sensor Logger (Kelvin Choi) zip-CSV export (the zip or its folder): ``TotalAcceleration.csv``
   (with gravity) or ``Accelerometer.csv`` (without gravity) plus ``Gravity.csv``, and
   ``Gyroscope.csv``; columns ``time,seconds_elapsed,z,y,x`` (``time`` in Unix ns), m/s^2 and
   rad/s. iOS reports acceleration with the opposite sign (awesome-sensor-logger COORDINATES.md);
-  the platform is read from ``Metadata.csv`` unless given.
+  the platform is read from ``Metadata.csv`` unless given, and guessed with a warning when the
+  export has none (:func:`sensorlogger_platform`).
+
+phyphox and Sensor Logger exports are read from the zip the app shares as well as from its
+unzipped folder (:class:`Export`; members are size-checked before they are decompressed).
 """
 
 from __future__ import annotations
 
 import csv
+import logging
 import math
 import re
+import zipfile
+import zlib
+from array import array
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO, Self
 
 import numpy as np
 
-from imuloco.errors import FormatError
+from imuloco.errors import FormatError, UnknownNameError
+
+log = logging.getLogger(__name__)
 
 GENERIC_COLUMNS = ("acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z")
 FORMATS = ("generic", "realworld", "phyphox", "sensorlogger")
@@ -58,6 +70,8 @@ class Stream:
         ``None`` when the format leaves it open and it must be detected.
     placement : body placement named in the file, or ``None``.
     lines : ndarray, shape (N,), 1-based line number of each sample in ``path``.
+    platform : Sensor Logger: the platform whose sign convention was applied, and how it was
+        found (``"ios (Metadata.csv)"``).
     """
 
     path: Path
@@ -67,13 +81,20 @@ class Stream:
     unit: str | None = None
     placement: str | None = None
     lines: np.ndarray | None = None
+    platform: str | None = None
 
 
 # ---------------------------------------------------------------------------------------------
-# table reading with line numbers (csv + float: the error must name the line, which
-# numpy.loadtxt does not do in a form we can report)
+# table reading with line numbers. Hand-written rather than numpy.loadtxt or pandas: the error
+# must name the file, line and column of a bad cell, and every limit below must hold while
+# reading (a line without end, a billion rows, undecodable bytes), which neither reports.
 
-def _sniff(path: Path, header: str) -> tuple[str, bool]:
+MAX_LINE_BYTES = 1 << 16  # longer lines are refused: no CSV export has lines of 64 KiB
+MAX_ROWS = 50_000_000  # ~28 h at 500 Hz; beyond that the table alone would take > 2.8 GB
+MAX_CELL = 1e20  # above any timestamp (Unix ns are ~1.7e18) or sensor value; larger is garbage
+
+
+def _sniff(header: str) -> tuple[str, bool]:
     """Delimiter and whether decimals use commas, from the header line."""
     if "\t" in header:
         return "\t", False
@@ -82,54 +103,92 @@ def _sniff(path: Path, header: str) -> tuple[str, bool]:
     return ",", False
 
 
-def _read_table(path: Path, allow_empty: bool = False
+def _text_lines(path: Path, f: BinaryIO) -> Iterator[tuple[int, str]]:
+    """(1-based line number, text) of each line of ``f``, decoded as UTF-8 line by line so that
+    an undecodable byte is reported on its own line."""
+    for i, raw in enumerate(iter(lambda: f.readline(MAX_LINE_BYTES + 1), b""), 1):
+        if len(raw) > MAX_LINE_BYTES:
+            raise FormatError(path, i, f"line longer than {MAX_LINE_BYTES} bytes: not a sensor "
+                                       "log table")
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise FormatError(path, i, f"not UTF-8 text (byte {exc.start + 1} of the line: "
+                                       f"{exc.reason})") from None
+        yield i, (text.removeprefix("\ufeff") if i == 1 else text).rstrip("\r\n")
+
+
+def _split(path: Path, i: int, line: str, delim: str) -> list[str]:
+    if '"' not in line and "\0" not in line:
+        return line.split(delim)  # the common case, ~5x faster than the csv module
+    try:
+        return next(csv.reader([line], delimiter=delim))
+    except csv.Error as exc:
+        raise FormatError(path, i, f"malformed CSV line ({exc})") from None
+
+
+def _read_table(path: Path, allow_empty: bool = False, data: BinaryIO | None = None
                 ) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Header names, values (N, C) float and the 1-based line of each row.
 
-    Skips blank lines and ``#`` comments. Empty cells become NaN when ``allow_empty``.
+    Skips blank lines and ``#`` comments. Empty cells become NaN when ``allow_empty``; other
+    cells must be finite numbers of magnitude at most :data:`MAX_CELL`. ``data`` reads from an
+    open binary file (a zip member, closed here) instead of ``path``, which then only names
+    it in errors.
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise FormatError(path, None, f"not a UTF-8 text file ({exc.reason})") from None
-    lines = text.splitlines()
-    start = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.startswith("#")), None)
-    if start is None:
-        raise FormatError(path, None, "empty file: expected a header line")
-    delim, decimal_comma = _sniff(path, lines[start])
-    header = [h.strip() for h in next(csv.reader([lines[start]], delimiter=delim))]
-    rows, numbers = [], []
-    for i in range(start + 1, len(lines)):
-        ln = lines[i]
-        if not ln.strip() or ln.startswith("#"):
-            continue
-        cells = next(csv.reader([ln], delimiter=delim))
-        if len(cells) != len(header):
-            raise FormatError(path, i + 1, f"expected {len(header)} values for columns "
-                                           f"{','.join(header)}, got {len(cells)}")
-        row = []
-        for name, cell in zip(header, cells):
-            cell = cell.strip()
-            if decimal_comma:
-                cell = cell.replace(",", ".")
-            if not cell and allow_empty:
-                row.append(math.nan)
+        header, values, rows, start = _parse(path, allow_empty, data)
+    except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+        raise FormatError(path, None, f"corrupted zip member ({exc})") from None
+    if not rows:
+        raise FormatError(path, start, "no data rows after the header")
+    table = np.frombuffer(values, dtype=np.float64).reshape(len(rows), len(header))
+    return header, table, np.frombuffer(rows, dtype=np.int64)
+
+
+def _parse(path: Path, allow_empty: bool, data: BinaryIO | None
+           ) -> tuple[list[str], array, array, int]:
+    with (open(path, "rb") if data is None else data) as f:
+        lines = _text_lines(path, f)
+        start, head = next(((i, ln) for i, ln in lines if ln.strip() and not ln.startswith("#")),
+                           (None, ""))
+        if start is None:
+            raise FormatError(path, None, "empty file: expected a header line")
+        delim, decimal_comma = _sniff(head)
+        header = [h.strip() for h in _split(path, start, head, delim)]
+        values, rows = array("d"), array("q")
+        for i, ln in lines:
+            if not ln.strip() or ln.startswith("#"):
                 continue
-            try:
-                v = float(cell)
-            except ValueError:
-                raise FormatError(path, i + 1, f"column {name!r}: expected a number, got "
-                                               f"{cell!r}") from None
-            if not math.isfinite(v):
-                raise FormatError(path, i + 1, f"column {name!r}: expected a finite number, "
-                                               f"got {cell!r}")
-            row.append(v)
-        numbers.append(row)
-        rows.append(i + 1)
-    if not numbers:
-        raise FormatError(path, start + 1, "no data rows after the header")
-    return header, np.asarray(numbers, dtype=np.float64), np.asarray(rows)
+            if len(rows) >= MAX_ROWS:
+                raise FormatError(path, i, f"more than {MAX_ROWS:,} rows: split the recording")
+            cells = _split(path, i, ln, delim)
+            if len(cells) != len(header):
+                raise FormatError(path, i, f"expected {len(header)} values for columns "
+                                           f"{','.join(header)}, got {len(cells)}")
+            for name, cell in zip(header, cells):
+                values.append(_number(path, i, name, cell, decimal_comma, allow_empty))
+            rows.append(i)
+    return header, values, rows, start
+
+
+def _number(path: Path, line: int, name: str, cell: str, decimal_comma: bool,
+            allow_empty: bool) -> float:
+    cell = cell.strip()
+    if decimal_comma:
+        cell = cell.replace(",", ".")
+    if not cell and allow_empty:
+        return math.nan
+    try:
+        v = float(cell)
+    except ValueError:
+        raise FormatError(path, line, f"column {name!r}: expected a number, got "
+                                      f"{cell[:40]!r}") from None
+    if not abs(v) <= MAX_CELL:  # also catches NaN and inf
+        raise FormatError(path, line, f"column {name!r}: expected a finite number of magnitude "
+                                      f"at most {MAX_CELL:g}, got {cell[:40]!r}")
+    return v
 
 
 def _columns(path: Path, header: list[str], wanted: list[str]) -> list[int]:
@@ -213,14 +272,14 @@ _UNITS = {"m/s^2": "m/s^2", "m/s²": "m/s^2", "g": "g", "rad/s": "rad/s", "deg/s
           "°/s": "deg/s"}
 
 
-def read_phyphox(path: str | Path) -> list[Stream]:
+def read_phyphox(path: str | Path, data: BinaryIO | None = None) -> list[Stream]:
     """A phyphox CSV export: acceleration with g, gyroscope, or both in one table.
 
     Each signal takes the nearest ``Time (s)`` column to its left, so tables with one time
     column per sensor and tables with one shared time column both read.
     """
     path = Path(path)
-    header, data, lines = _read_table(path, allow_empty=True)
+    header, data, lines = _read_table(path, True, data)
     found: dict[str, dict[str, int]] = {}
     units: dict[str, str] = {}
     times: dict[str, int] = {}
@@ -264,75 +323,235 @@ def read_phyphox(path: str | Path) -> list[Stream]:
 
 
 # ---------------------------------------------------------------------------------------------
+# app exports: a folder or the zip the app shares
+
+MAX_MEMBER_BYTES = 4 << 30  # a zip member that decompresses to more is refused unread
+MAX_MEMBERS = 10_000
+
+
+class Export:
+    """The files of an app's export (Sensor Logger, phyphox), unzipped in a folder or in the zip
+    the app shares, by file name (a zip's sub-folders are looked through, shallowest first)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._zip: zipfile.ZipFile | None = None
+        if self.path.is_dir():
+            self._members: dict[str, object] = {p.name: p for p in sorted(self.path.iterdir())
+                                                 if p.is_file()}
+            return
+        try:
+            self._zip = zipfile.ZipFile(self.path)
+            infos = self._zip.infolist()
+        except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
+            raise FormatError(self.path, None, f"not a readable zip archive ({exc})") from None
+        if len(infos) > MAX_MEMBERS:
+            raise FormatError(self.path, None, f"zip with {len(infos)} members; an app export "
+                                               f"has fewer than {MAX_MEMBERS}")
+        self._members = {}
+        for info in sorted(infos, key=lambda i: i.filename.count("/")):
+            name = info.filename.rsplit("/", 1)[-1]
+            if not info.is_dir() and name and not name.startswith(".") \
+                    and "__MACOSX" not in info.filename:
+                self._members.setdefault(name, info)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._zip is not None:
+            self._zip.close()
+
+    def names(self) -> list[str]:
+        return list(self._members)
+
+    def has(self, name: str) -> bool:
+        return name in self._members
+
+    def label(self, name: str) -> Path:
+        """The member's path for messages: ``folder/name`` or ``export.zip/sub/name``."""
+        m = self._members[name]
+        return m if isinstance(m, Path) else self.path / m.filename
+
+    def open(self, name: str) -> BinaryIO:
+        m = self._members[name]
+        if isinstance(m, Path):
+            return open(m, "rb")
+        if m.file_size > MAX_MEMBER_BYTES:
+            raise FormatError(self.label(name), None, f"{m.file_size:,} bytes once unzipped, "
+                                                      f"more than the {MAX_MEMBER_BYTES:,} allowed")
+        try:
+            return self._zip.open(m)
+        except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError,
+                ValueError) as exc:  # damaged, encrypted or of an unknown compression
+            raise FormatError(self.label(name), None, f"unreadable zip member ({exc})") from None
+
+    def header(self, name: str) -> str:
+        """The first line that is neither blank nor a comment, lower case ('' when none)."""
+        try:
+            with self.open(name) as f:
+                for _, line in _text_lines(self.label(name), f):
+                    if line.strip() and not line.startswith("#"):
+                        return line.strip().lower()
+        except (FormatError, zipfile.BadZipFile, zlib.error, EOFError, OSError):
+            pass
+        return ""
+
+    def table(self, name: str, allow_empty: bool = False
+              ) -> tuple[list[str], np.ndarray, np.ndarray]:
+        return _read_table(self.label(name), allow_empty, self.open(name))
+
+    def kind(self) -> str | None:
+        """``"sensorlogger"``, ``"phyphox"`` or ``None`` from the members' headers."""
+        if any(self.header(n).startswith("time,seconds_elapsed") for n in _SENSOR_LOGGER_FILES
+               if self.has(n)):
+            return "sensorlogger"
+        if any("time (s)" in self.header(n) for n in self.names() if n.lower().endswith(".csv")):
+            return "phyphox"
+        return None
+
+
+def read_phyphox_export(path: str | Path) -> list[Stream]:
+    """Every accelerometer and gyroscope table of a phyphox export (zip or folder)."""
+    streams: list[Stream] = []
+    refused: FormatError | None = None
+    with Export(path) as ex:
+        for name in ex.names():
+            h = ex.header(name)
+            if not name.lower().endswith(".csv") or "time (s)" not in h or \
+                    not ("acceleration" in h or "gyroscope" in h):
+                continue
+            try:
+                streams += read_phyphox(ex.label(name), ex.open(name))
+            except FormatError as exc:  # linear acceleration: fine if another table has g
+                if "without gravity" not in exc.message:
+                    raise
+                refused = exc
+    if refused is not None and not any(s.quantity == "acc" for s in streams):
+        raise refused
+    if not streams:
+        raise FormatError(path, None, "no phyphox table with 'Time (s)' and acceleration or "
+                                      "gyroscope columns in the export")
+    return streams
+
+
+# ---------------------------------------------------------------------------------------------
 # Sensor Logger
 
-def _sensorlogger_file(path: Path, quantity: str, unit: str) -> Stream:
-    header, data, lines = _read_table(path)
+_SENSOR_LOGGER_FILES = ("Gyroscope.csv", "TotalAcceleration.csv", "Accelerometer.csv")
+PLATFORMS = ("android", "ios")
+
+
+def _sensorlogger_file(ex: Export, name: str, quantity: str, unit: str) -> Stream:
+    header, data, lines = ex.table(name)
+    path = ex.label(name)
     idx = _columns(path, header, ["time", "x", "y", "z"])
     # ``time`` (Unix ns) rather than ``seconds_elapsed``: the same clock in every file, and
     # float64 keeps ~0.2 us at today's epoch, finer than any phone's timestamps.
     return Stream(path, quantity, data[:, idx[0]] * 1e-9, data[:, idx[1:]], unit, None, lines)
 
 
-def _sensorlogger_platform(folder: Path) -> str:
-    """``"ios"`` when Metadata.csv says so and units were not standardised, else android."""
-    meta = folder / "Metadata.csv"
-    if not meta.exists():
-        return "android"
-    with meta.open(encoding="utf-8-sig", newline="") as f:
-        rows = list(csv.DictReader(f))
-    if not rows:
-        return "android"
-    row = {k.strip().lower(): (v or "").strip().lower() for k, v in rows[0].items() if k}
-    standard = any("standardis" in k or "standardiz" in k for k, v in row.items()
-                   if v in ("true", "1", "yes"))
-    return "ios" if row.get("platform", "") == "ios" and not standard else "android"
+def sensorlogger_platform(ex: Export) -> tuple[str, str]:
+    """The export's platform and how it was found.
+
+    ``Metadata.csv`` says it (``"ios"`` only when "Standardise Units & Frames" was off: on iOS
+    acceleration then has the opposite sign, awesome-sensor-logger CROSSPLATFORM.md). Without
+    it the platform is guessed, with a warning: ``AccelerometerUncalibrated.csv`` is in g on
+    iOS and in m/s^2 on Android (UNITS.md), so its median magnitude tells them apart; when
+    that file is missing too, Android is assumed. Acceleration and angular velocity alone
+    cannot tell: negating the acceleration is a mirror image of a possible movement.
+    """
+    if ex.has("Metadata.csv"):
+        try:
+            with ex.open("Metadata.csv") as f:
+                text = f.read(MAX_LINE_BYTES).decode("utf-8-sig", errors="replace")
+        except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+            raise FormatError(ex.label("Metadata.csv"), None, f"corrupted zip member ({exc})"
+                              ) from None
+        rows = list(csv.DictReader(text.splitlines()))
+        if rows:
+            row = {k.strip().lower(): (v or "").strip().lower()
+                   for k, v in rows[0].items() if isinstance(k, str) and isinstance(v, str)}
+            standard = any("standardis" in k or "standardiz" in k for k, v in row.items()
+                           if v in ("true", "1", "yes"))
+            if row.get("platform") in PLATFORMS:
+                ios = row["platform"] == "ios" and not standard
+                return ("ios" if ios else "android"), "Metadata.csv"
+    if ex.has("AccelerometerUncalibrated.csv"):
+        _, data = ex.table("AccelerometerUncalibrated.csv")[:2]
+        mag = float(np.median(np.linalg.norm(data[:, -3:], axis=1)))
+        platform = "ios" if mag < math.sqrt(9.80665) else "android"
+        log.warning("%s: no platform in Metadata.csv; guessed %s from AccelerometerUncalibrated"
+                    ".csv (median %.2f: %s); pass --platform to say it", ex.path, platform, mag,
+                    "g, as iOS writes it" if platform == "ios" else "m/s^2, as Android does")
+        return platform, "guessed from AccelerometerUncalibrated.csv"
+    log.warning("%s: no Metadata.csv to say whether the phone was an iPhone (whose acceleration "
+                "has the opposite sign) or Android; assuming Android: pass --platform ios if it "
+                "was an iPhone", ex.path)
+    return "android", "assumed (no metadata)"
 
 
 def read_sensor_logger(folder: str | Path, platform: str | None = None) -> list[Stream]:
-    """A Sensor Logger export folder (unzipped): specific force with gravity and rotation rate.
+    """A Sensor Logger export (a folder or its zip): specific force with gravity and rotation
+    rate.
 
     ``platform``: ``"android"`` or ``"ios"`` (iOS acceleration has the opposite sign); ``None``
-    reads it from Metadata.csv (android when absent or when "Standardise Units & Frames" is on).
+    reads it from Metadata.csv or guesses it with a warning (:func:`sensorlogger_platform`).
+    The accelerometer stream's ``platform`` says which was used.
     """
-    folder = Path(folder)
-    platform = (platform or _sensorlogger_platform(folder)).lower()
-    if platform not in ("android", "ios"):
-        raise ValueError(f"platform must be 'android' or 'ios', got {platform!r}")
-    gyro_path = folder / "Gyroscope.csv"
-    if not gyro_path.exists():
-        raise FormatError(folder, None, "expected Gyroscope.csv in the Sensor Logger export")
-    total = folder / "TotalAcceleration.csv"
-    if total.exists():
-        acc = _sensorlogger_file(total, "acc", "m/s^2")
-    else:
-        user, grav = folder / "Accelerometer.csv", folder / "Gravity.csv"
-        if not (user.exists() and grav.exists()):
+    if platform is not None and platform.lower() not in PLATFORMS:
+        raise UnknownNameError(f"platform must be one of {list(PLATFORMS)}, got {platform!r}")
+    with Export(folder) as ex:
+        found = (platform.lower(), "given") if platform else sensorlogger_platform(ex)
+        if not ex.has("Gyroscope.csv"):
+            raise FormatError(folder, None, "expected Gyroscope.csv in the Sensor Logger export")
+        if ex.has("TotalAcceleration.csv"):
+            acc = _sensorlogger_file(ex, "TotalAcceleration.csv", "acc", "m/s^2")
+        elif ex.has("Accelerometer.csv") and ex.has("Gravity.csv"):
+            acc = _sensorlogger_file(ex, "Accelerometer.csv", "acc", "m/s^2")
+            g = _sensorlogger_file(ex, "Gravity.csv", "acc", "m/s^2")
+            order = np.argsort(g.times, kind="stable")
+            acc.values = acc.values + np.stack(
+                [np.interp(acc.times, g.times[order], g.values[order, k]) for k in range(3)], 1)
+        else:
             raise FormatError(folder, None, "expected TotalAcceleration.csv, or Accelerometer.csv "
                                             "(without gravity) together with Gravity.csv")
-        acc = _sensorlogger_file(user, "acc", "m/s^2")
-        g = _sensorlogger_file(grav, "acc", "m/s^2")
-        order = np.argsort(g.times, kind="stable")
-        for k in range(3):
-            acc.values[:, k] += np.interp(acc.times, g.times[order], g.values[order, k])
-    if platform == "ios":
+        gyro = _sensorlogger_file(ex, "Gyroscope.csv", "gyro", "rad/s")
+    if found[0] == "ios":
         acc.values = -acc.values
-    return [acc, _sensorlogger_file(gyro_path, "gyro", "rad/s")]
+    acc.platform = f"{found[0]} ({found[1]})"
+    return [acc, gyro]
 
 
 # ---------------------------------------------------------------------------------------------
 
-def detect_format(path: str | Path) -> str:
-    """Which reader fits ``path`` (a file, or a Sensor Logger folder)."""
+def is_export(path: str | Path) -> bool:
+    """Whether ``path`` is an export folder or a zip (by its signature, even when damaged)."""
     path = Path(path)
     if path.is_dir():
-        if (path / "Gyroscope.csv").exists():
-            return "sensorlogger"
-        raise FormatError(path, None, "a folder must be a Sensor Logger export (Gyroscope.csv, "
-                                      "TotalAcceleration.csv or Accelerometer.csv + Gravity.csv)")
-    with path.open(encoding="utf-8-sig", errors="replace") as f:
-        header = next((ln for ln in f if ln.strip() and not ln.startswith("#")), "")
+        return True
+    with open(path, "rb") as f:
+        return f.read(4) == b"PK\x03\x04" or zipfile.is_zipfile(path)
+
+
+def detect_format(path: str | Path) -> str:
+    """Which reader fits ``path`` (a file, an export folder or an export zip)."""
+    path = Path(path)
+    if is_export(path):
+        with Export(path) as ex:
+            kind = ex.kind()
+        if kind is None:
+            raise FormatError(path, None, "expected a Sensor Logger export (Gyroscope.csv with "
+                                          "TotalAcceleration.csv, or Accelerometer.csv + "
+                                          "Gravity.csv) or a phyphox export (tables with "
+                                          f"'Time (s)' columns); found {ex.names()[:10]}")
+        return kind
+    with open(path, "rb") as f:
+        header = next((ln for _, ln in _text_lines(path, f)
+                       if ln.strip() and not ln.startswith("#")), "")
     h = header.strip().lower()
+    if not header.isprintable():
+        header = "binary data"
     if h.startswith("time_s"):
         return "generic"
     if "attr_time" in h:

@@ -27,16 +27,21 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from imuloco.core.recording import Recording
-from imuloco.errors import FormatError
+from imuloco.errors import FormatError, UnknownNameError
 from imuloco.io.sensorlog import (
+    FORMATS,
+    PLATFORMS,
     Stream,
     detect_format,
+    is_export,
     read_generic_csv,
     read_phyphox,
+    read_phyphox_export,
     read_realworld,
     read_sensor_logger,
 )
@@ -68,6 +73,9 @@ class LogReport:
     duration : seconds covered by both signals.
     gaps : stretches longer than ``max_gap`` without samples in either signal, in the
         recording's time (seconds from ``start_time``).
+    time_unit : the unit the timestamps turned out to have (``"ms"`` in a ``time_s`` column
+        that holds milliseconds, see :func:`_time_scale`).
+    platform : Sensor Logger: the platform applied and how it was found.
     """
 
     format: str
@@ -83,6 +91,8 @@ class LogReport:
     start_time: float = 0.0
     duration: float = 0.0
     gaps: list[Gap] = field(default_factory=list)
+    time_unit: str = "s"
+    platform: str | None = None
 
 
 def clean_times(times: np.ndarray, values: np.ndarray
@@ -144,23 +154,36 @@ def _merge_gaps(gaps: list[Gap]) -> list[Gap]:
     return out
 
 
+# plausibility ranges of an imported log (bad files are refused with the line that breaks them)
+MIN_RATE, MAX_RATE = 5.0, 10_000.0  # Hz, median source rate: gait needs > 5 Hz; IMUs < 10 kHz
+MIN_DURATION = 1.0  # seconds both signals cover: shorter is not a movement to reconstruct
+MAX_DURATION = 48 * 3600.0  # seconds: longer logs are refused rather than resampled
+MAX_SPAN_RATIO = 10.0  # the log may span at most 10x (+ 60 s) the time its samples cover
+MAX_ABS_TIME = 1e13  # seconds: timestamps beyond are garbage (Unix time is ~1.7e9)
+MAX_VALUE = {"acc": 1e4, "gyro": 1e5}  # per axis, in any unit: 1,000 g; 10^5 deg/s
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+FORMAT_NAMES = ("auto", *FORMATS)
+
+
 def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
                   platform: str | None) -> tuple[str, list[Stream]]:
+    """Step 1: the format (detected when ``"auto"``) and the streams the reader found."""
     if isinstance(path, (list, tuple)):
         path, gyro_path = Path(path[0]), Path(path[1])
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or folder")
     fmt = detect_format(path) if fmt == "auto" else fmt
+    export = is_export(path)
     if fmt == "generic":
         return fmt, read_generic_csv(path)
     if fmt == "phyphox":
-        streams = read_phyphox(path)
+        streams = read_phyphox_export(path) if export else read_phyphox(path)
         if gyro_path is not None:
             streams += read_phyphox(gyro_path)
         return fmt, streams
     if fmt == "sensorlogger":
-        return fmt, read_sensor_logger(path if path.is_dir() else path.parent, platform)
+        return fmt, read_sensor_logger(path if export else path.parent, platform)
     if fmt == "realworld":
         if gyro_path is None:
             name = path.name
@@ -173,124 +196,230 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
                 raise FormatError(path, None, "RealWorld logs come as an acc_*.csv and a "
                                               "gyroscope_*.csv file: pass gyro_path=")
         return fmt, read_realworld(path, gyro_path)
-    raise ValueError(f"unknown log format {fmt!r}; expected 'auto', 'generic', 'realworld', "
-                     "'phyphox' or 'sensorlogger'")
+    raise UnknownNameError(f"unknown log format {fmt!r}; expected one of {list(FORMAT_NAMES)}")
 
 
-def read_log(
-    path: str | Path | Sequence[str | Path],
-    placement: str = "right_ankle",
-    fmt: str = "auto",
-    *,
-    gyro_path: str | Path | None = None,
-    acc_unit: str = "auto",
-    gyro_unit: str = "auto",
-    rate: float | None = 100.0,
-    sigma_s: float = 0.01,
-    max_gap: float = 0.2,
-    on_gap: str = "warn",
-    platform: str | None = None,
-) -> tuple[Recording, LogReport]:
-    """Import a phone's sensor log as a :class:`Recording` in m/s^2 and rad/s.
-
-    Parameters
-    ----------
-    path : a log file, a Sensor Logger folder, or an (accelerometer, gyroscope) file pair.
-    placement : placement name of the sensor when the file names none (generic multi-sensor
-        files name theirs).
-    fmt : ``"auto"`` (from the header) or one of :data:`imuloco.io.sensorlog.FORMATS`.
-    gyro_path : the gyroscope file of formats that split the signals (RealWorld, phyphox).
-    acc_unit : ``"auto"``, ``"m/s^2"`` or ``"g"``; gyro_unit : ``"auto"``, ``"rad/s"`` or
-        ``"deg/s"``. ``"auto"`` takes the unit a format declares and detects it otherwise.
-    rate : model rate in Hz to resample to; ``None`` keeps the aligned irregular samples.
-    sigma_s : width of the Gaussian smoothing, seconds (added to resampling's anti-aliasing).
-    max_gap : seconds without samples above which a gap is reported.
-    on_gap : ``"warn"`` (report, log and interpolate across) or ``"raise"``.
-    platform : Sensor Logger only, ``"android"``/``"ios"`` (default: from Metadata.csv).
-
-    Returns
-    -------
-    The recording (times from 0 s) and a :class:`LogReport`.
-    """
-    if acc_unit not in ("auto", *ACC_UNITS):
-        raise ValueError(f"acc_unit must be 'auto' or one of {list(ACC_UNITS)}, got {acc_unit!r}")
-    if gyro_unit not in ("auto", *GYRO_UNITS):
-        raise ValueError(f"gyro_unit must be 'auto' or one of {list(GYRO_UNITS)}, got "
-                         f"{gyro_unit!r}")
-    if on_gap not in ("warn", "raise"):
-        raise ValueError(f"on_gap must be 'warn' or 'raise', got {on_gap!r}")
-    fmt, streams = _read_streams(path, fmt, None if gyro_path is None else Path(gyro_path),
-                                 platform)
-    report = LogReport(fmt, sorted({str(s.path) for s in streams}))
-    # group per sensor: placement named in the file, or the caller's
+def _sensors(streams: list[Stream], placement: str) -> dict[str, dict[str, Stream]]:
+    """Streams grouped per sensor (the placement the file names, or ``placement``), each with
+    an accelerometer and a gyroscope."""
     sensors: dict[str, dict[str, Stream]] = {}
     for s in streams:
         sensors.setdefault(s.placement or placement, {})[s.quantity] = s
     for name, pair in sensors.items():
         for q in ("acc", "gyro"):
             if q not in pair:
-                raise FormatError(report.files[0], None, f"sensor {name!r}: no "
+                raise FormatError(streams[0].path, None, f"sensor {name!r}: no "
                                   f"{'accelerometer' if q == 'acc' else 'gyroscope'} signal found")
-    # clean
+    return sensors
+
+
+def _check_values(s: Stream) -> None:
+    """Values within :data:`MAX_VALUE` and timestamps within :data:`MAX_ABS_TIME`, else the
+    first offending line is named."""
+    for what, bad, limit in (
+            ("value", np.abs(s.values).max(axis=1) > MAX_VALUE[s.quantity], MAX_VALUE[s.quantity]),
+            ("timestamp", np.abs(s.times) > MAX_ABS_TIME, MAX_ABS_TIME)):
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise FormatError(s.path, _line(s, k), f"{s.quantity}: {what} beyond +-{limit:g} "
+                                                   "is not a sensor reading")
+
+
+def _line(s: Stream, k: int) -> int | None:
+    return None if s.lines is None else int(s.lines[k])
+
+
+def _time_scale(s: Stream, times: np.ndarray) -> float:
+    """Seconds per unit of the stream's timestamps: 1 when its median rate is plausible, else
+    the unit (ms, us, ns) that makes it so (a ``time_s`` column holding milliseconds), warned.
+
+    ``times`` : ndarray, shape (N,), sorted distinct timestamps of ``s`` as read."""
+    med = float(np.median(np.diff(times)))
+    for unit, scale in TIME_UNITS.items():
+        if MIN_RATE <= 1.0 / (med * scale) <= MAX_RATE:
+            if unit != "s":
+                log.warning("%s (%s): the timestamps step by %.4g per sample, %.3g Hz in seconds; "
+                            "read as %s (%.3g Hz)", s.path, s.quantity, med, 1.0 / med, unit,
+                            1.0 / (med * scale))
+            return scale
+    raise FormatError(s.path, None, f"{s.quantity}: the timestamps step by a median {med:.3g} "
+                                    f"per sample: in s, ms, us or ns that is no sampling rate "
+                                    f"between {MIN_RATE:g} and {MAX_RATE:g} Hz")
+
+
+def _clean(sensors: dict[str, dict[str, Stream]], report: LogReport
+           ) -> dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """Step 2: per signal, plausible values, sorted distinct timestamps in seconds."""
     cleaned: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
     for name, pair in sensors.items():
         cleaned[name] = {}
         for q, s in pair.items():
+            _check_values(s)
             t, v, n_uns, n_dup = clean_times(s.times, s.values)
-            if len(t) < 2:
-                raise FormatError(s.path, None, f"{q}: expected at least 2 distinct timestamps")
-            cleaned[name][q] = (t, v)
+            if len(t) < 3:
+                raise FormatError(s.path, None, f"{q}: expected at least 3 distinct timestamps, "
+                                                f"found {len(t)}")
+            scale = _time_scale(s, t)
+            _check_span(s, t, scale)
+            if scale != 1.0:
+                report.time_unit = next(u for u, k in TIME_UNITS.items() if k == scale)
+            cleaned[name][q] = (t * scale, v)
             report.unsorted[q] = report.unsorted.get(q, 0) + n_uns
             report.duplicates[q] = report.duplicates.get(q, 0) + n_dup
             report.samples[q] = report.samples.get(q, 0) + len(t)
             if n_uns or n_dup:
                 log.info("%s (%s): %d samples out of order sorted, %d repeated timestamps "
                          "dropped", s.path, q, n_uns, n_dup)
-    # common time interval and reference timestamps (first sensor's accelerometer)
-    t0 = max(t[0] for pair in cleaned.values() for t, _ in pair.values())
-    t1 = min(t[-1] for pair in cleaned.values() for t, _ in pair.values())
-    if t1 <= t0:
-        raise FormatError(report.files[0], None, "the accelerometer and gyroscope recordings "
-                                                 "do not overlap in time")
-    ref_t = next(iter(cleaned.values()))["acc"][0]
-    times = ref_t[(ref_t >= t0) & (ref_t <= t1)]
+    return cleaned
+
+
+def _check_span(s: Stream, t: np.ndarray, scale: float) -> None:
+    """A signal's timestamps ``t`` (sorted, distinct, in the file's unit; seconds = ``t *
+    scale``) must span at most :data:`MAX_DURATION` and not much more than its samples cover:
+    a timestamp jumping by days would otherwise resample to billions of samples."""
+    d = np.diff(t) * scale
+    covered = len(t) * float(np.median(d))
+    span = float(t[-1] - t[0]) * scale
+    if span > min(MAX_SPAN_RATIO * covered + 60.0, MAX_DURATION):
+        k = int(np.argmax(d)) + 1
+        raise FormatError(s.path, _line(s, int(np.flatnonzero(s.times == t[k])[0])),
+                          f"{s.quantity}: the log spans {span:.4g} s but its {len(t)} samples "
+                          f"cover ~{covered:.4g} s (at most {MAX_DURATION / 3600:g} h are read); "
+                          f"the timestamp here jumps by {d.max():.4g} s")
+
+
+def _gaps(cleaned: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]], t0: float, t1: float,
+          max_gap: float) -> list[Gap]:
+    """Stretches longer than ``max_gap`` without samples in any signal, seconds from ``t0``."""
     gaps = []
     for pair in cleaned.values():
         for t, _ in pair.values():
             inside = t[(t >= t0) & (t <= t1)]
             gaps += find_gaps(np.concatenate([[t0], inside, [t1]]), max_gap)
-    report.gaps = [Gap(float(g.start - t0), float(g.stop - t0)) for g in _merge_gaps(gaps)]
+    return [Gap(float(g.start - t0), float(g.stop - t0)) for g in _merge_gaps(gaps)]
+
+
+def _units(signals: np.ndarray, quantity: str, unit: str, declared: set[str]
+           ) -> tuple[np.ndarray, str, bool]:
+    """Step 3: ``signals`` (T, S, 3) in SI units, the unit found and whether it was detected."""
+    detected = False
+    if unit == "auto":
+        if declared:
+            unit = declared.pop()
+        elif quantity == "acc":
+            unit, detected = detect_acc_unit(signals.reshape(-1, 3)), True
+        else:
+            votes = [detect_gyro_unit(signals[:, k]) for k in range(signals.shape[1])]
+            unit, detected = max(set(votes), key=votes.count), True
+    return signals * (ACC_UNITS if quantity == "acc" else GYRO_UNITS)[unit], unit, detected
+
+
+@dataclass(frozen=True)
+class LogOptions:
+    """How :func:`read_log` imports a log (its keyword arguments, documented there)."""
+
+    placement: str = "right_ankle"
+    fmt: str = "auto"
+    gyro_path: str | Path | None = None
+    acc_unit: str = "auto"
+    gyro_unit: str = "auto"
+    rate: float | None = 100.0
+    sigma_s: float = 0.01
+    max_gap: float = 0.2
+    on_gap: str = "warn"
+    platform: str | None = None
+
+    def __post_init__(self) -> None:
+        for name, value, allowed in (("fmt", self.fmt, FORMAT_NAMES),
+                                     ("acc_unit", self.acc_unit, ("auto", *ACC_UNITS)),
+                                     ("gyro_unit", self.gyro_unit, ("auto", *GYRO_UNITS)),
+                                     ("on_gap", self.on_gap, ("warn", "raise")),
+                                     ("platform", self.platform, (None, *PLATFORMS))):
+            if value not in allowed:
+                raise UnknownNameError(f"{name} must be one of {list(allowed)}, got {value!r}")
+        if self.rate is not None and not (MIN_RATE <= self.rate <= 1000.0):
+            raise ValueError(f"rate must be between {MIN_RATE:g} and 1000 Hz, got {self.rate}")
+        if not (0.0 <= self.sigma_s <= 1.0) or not (self.max_gap > 0):
+            raise ValueError("sigma_s must be in 0..1 s and max_gap positive")
+
+
+def read_log(path: str | Path | Sequence[str | Path], placement: str = "right_ankle",
+             fmt: str = "auto", *, options: LogOptions | None = None, **kwargs: Any
+             ) -> tuple[Recording, LogReport]:
+    """Import a phone's sensor log as a :class:`Recording` in m/s^2 and rad/s.
+
+    Parameters
+    ----------
+    path : a log file, an export folder or zip (Sensor Logger, phyphox), or an (accelerometer,
+        gyroscope) file pair.
+    placement : placement name of the sensor when the file names none (generic multi-sensor
+        files name theirs).
+    fmt : ``"auto"`` (from the header) or one of :data:`imuloco.io.sensorlog.FORMATS`.
+    options : a :class:`LogOptions`, or its fields as keyword arguments:
+        gyro_path : the gyroscope file of formats that split the signals (RealWorld, phyphox).
+        acc_unit : ``"auto"``, ``"m/s^2"`` or ``"g"``; gyro_unit : ``"auto"``, ``"rad/s"`` or
+        ``"deg/s"``. ``"auto"`` takes the unit a format declares and detects it otherwise.
+        rate : model rate in Hz to resample to; ``None`` keeps the aligned irregular samples.
+        sigma_s : width of the Gaussian smoothing, seconds (added to resampling's anti-aliasing).
+        max_gap : seconds without samples above which a gap is reported.
+        on_gap : ``"warn"`` (report, log and interpolate across) or ``"raise"``.
+        platform : Sensor Logger only, ``"android"``/``"ios"`` (default: from Metadata.csv, or
+        guessed with a warning).
+
+    Returns
+    -------
+    The recording (times from 0 s) and a :class:`LogReport`.
+
+    Raises
+    ------
+    FormatError naming the file (and line) for a file that cannot be read or fails the
+    plausibility ranges above (:data:`MIN_RATE` ... :data:`MAX_VALUE`).
+    """
+    opts = options or LogOptions(placement, fmt, **kwargs)
+    first = path if isinstance(path, (str, Path)) else path[0]
+    try:
+        return _import(path, opts)
+    except MemoryError:
+        raise FormatError(first, None, "too large to import in memory") from None
+
+
+def _import(path: str | Path | Sequence[str | Path], opts: LogOptions
+            ) -> tuple[Recording, LogReport]:
+    fmt, streams = _read_streams(path, opts.fmt, None if opts.gyro_path is None
+                                 else Path(opts.gyro_path), opts.platform)
+    report = LogReport(fmt, sorted({str(s.path) for s in streams}))
+    report.platform = next((s.platform for s in streams if s.platform), None)
+    sensors = _sensors(streams, opts.placement)
+    cleaned = _clean(sensors, report)
+    # step 4: the common time interval and reference timestamps (first sensor's accelerometer)
+    t0 = max(t[0] for pair in cleaned.values() for t, _ in pair.values())
+    t1 = min(t[-1] for pair in cleaned.values() for t, _ in pair.values())
+    if t1 - t0 < MIN_DURATION:
+        raise FormatError(report.files[0], None, f"the accelerometer and gyroscope cover "
+                                                 f"{max(t1 - t0, 0.0):.3g} s together; expected "
+                                                 f"at least {MIN_DURATION:g} s")
+    ref_t = next(iter(cleaned.values()))["acc"][0]
+    times = ref_t[(ref_t >= t0) & (ref_t <= t1)]
+    report.gaps = _gaps(cleaned, t0, t1, opts.max_gap)
     report.start_time, report.duration = float(t0), float(t1 - t0)
     report.source_rate = float(1.0 / np.median(np.diff(times)))
     names = list(cleaned)
-    acc = np.stack([resample_linear(*cleaned[n]["acc"], times) for n in names], axis=1)
-    gyro = np.stack([resample_linear(*cleaned[n]["gyro"], times) for n in names], axis=1)
-    # units
-    declared = {q: {sensors[n][q].unit for n in names} - {None} for q in ("acc", "gyro")}
-    if acc_unit == "auto":
-        if declared["acc"]:
-            acc_unit = declared["acc"].pop()
-        else:
-            acc_unit = detect_acc_unit(acc.reshape(-1, 3))
-            report.acc_unit_detected = True
-    acc = acc * ACC_UNITS[acc_unit]
-    if gyro_unit == "auto":
-        if declared["gyro"]:
-            gyro_unit = declared["gyro"].pop()
-        else:
-            votes = [detect_gyro_unit(gyro[:, k]) for k in range(len(names))]
-            gyro_unit = max(set(votes), key=votes.count)
-            report.gyro_unit_detected = True
-    gyro = gyro * GYRO_UNITS[gyro_unit]
-    report.acc_unit, report.gyro_unit = acc_unit, gyro_unit
+    signals = {q: np.stack([resample_linear(*cleaned[n][q], times) for n in names], axis=1)
+               for q in ("acc", "gyro")}
+    for q, unit in (("acc", opts.acc_unit), ("gyro", opts.gyro_unit)):
+        declared = {sensors[n][q].unit for n in names} - {None}
+        signals[q], found, detected = _units(signals[q], q, unit, declared)
+        setattr(report, f"{q}_unit", found)
+        setattr(report, f"{q}_unit_detected", detected)
     for g in report.gaps:
         log.warning("%s: no samples from %.3f s to %.3f s (%.3f s gap)", report.files[0],
                     g.start, g.stop, g.stop - g.start)
-    if report.gaps and on_gap == "raise":
+    if report.gaps and opts.on_gap == "raise":
         worst = max(report.gaps, key=lambda g: g.stop - g.start)
-        raise ValueError(f"{report.files[0]}: {len(report.gaps)} gap(s) longer than {max_gap} s, "
-                         f"the longest {worst.stop - worst.start:.3f} s from {worst.start:.3f} s")
-    rec = Recording(times - t0, acc, gyro, names)
-    if rate is not None:
-        rec, _ = resample(rec, rate, sigma_s=sigma_s, max_gap=np.inf)  # gaps reported above
+        raise FormatError(report.files[0], None, f"{len(report.gaps)} gap(s) longer than "
+                          f"{opts.max_gap} s, the longest {worst.stop - worst.start:.3f} s from "
+                          f"{worst.start:.3f} s")
+    rec = Recording(times - t0, signals["acc"], signals["gyro"], names)
+    if opts.rate is not None:  # step 5; gaps were reported above
+        rec, _ = resample(rec, opts.rate, sigma_s=opts.sigma_s, max_gap=np.inf)
     return rec, report

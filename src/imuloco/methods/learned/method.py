@@ -300,7 +300,7 @@ class Learned(Method):
             self.protocol_ = values["protocol"]
         self.net_ = Reconstructor(int(values["channels"]), int(values["pose_dim"]), self.hidden,
                                   self.layers, self.dropout)
-        self.net_.load_state_dict({k[4:]: torch.as_tensor(v) for k, v in arrays.items()
+        self.net_.load_state_dict({k[4:]: torch.as_tensor(arrays[k]) for k in arrays
                                    if k.startswith("net.")})
         self.net_.eval()
 

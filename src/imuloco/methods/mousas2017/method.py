@@ -210,7 +210,7 @@ class Mousas2017(Method):
         return arrays, {}
 
     def set_state(self, arrays: dict[str, np.ndarray], values: dict[str, Any]) -> None:
-        self.states_ = FrameStates(**{k[len("states_"):]: v for k, v in arrays.items()
+        self.states_ = FrameStates(**{k[len("states_"):]: arrays[k] for k in arrays
                                       if k.startswith("states_")})
         self.block_phase_ = arrays["block_phase"]
         self.block_count_ = arrays["block_count"]

@@ -145,7 +145,7 @@ class MotionModel:
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], prefix: str) -> MotionModel:
-        a = {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)}
+        a = {k[len(prefix):]: arrays[k] for k in arrays if k.startswith(prefix)}
         return cls(a["rot_basis"], a["root_basis"], [a["rot_us"], a["rot_ur"]],
                    [a["root_us"], a["root_ur"]], a["period"])
 

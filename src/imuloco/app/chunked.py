@@ -1,0 +1,177 @@
+"""Long recordings in bounded memory: reconstruct in pieces and write the BVH piece by piece.
+
+A reconstruction holds every joint's rotation per frame, and its analysis every joint's
+position: 0.45 MB per second of recording in one piece (16 GB for ten hours). Here the
+imported recording (a few MB per hour) is calibrated whole, as in one piece, then reconstructed
+``piece_s`` seconds at a time. Each piece is preceded by ``warmup_s`` seconds of signal that
+the method runs over and whose frames are dropped, so that a method's windows and filters see
+the same input as in one piece, and is turned about the vertical and moved so that it continues
+the previous piece at the join (the methods integrate the heading and the root's path from
+their own start). For methods with a finite window (the baselines) the result equals the
+one-piece reconstruction to rounding; recurrent methods (``learned``) forget their start
+within the warm-up, so pieces differ from one piece by what their state still remembers.
+Gait parameters are computed per piece and combined (:func:`combine`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from imuloco.core.motion import Motion
+from imuloco.core.recording import Recording
+
+PIECE_SECONDS = 600.0  # 10 min: 18,000 frames at 30 fps, ~100 MB of analysis
+WARMUP_SECONDS = 20.0  # longer than any method's window (learned: 120 frames = 4 s)
+LONG_SECONDS = 1800.0  # recordings longer than this are reconstructed in pieces by default
+
+
+def _yaw(q: np.ndarray) -> np.ndarray:
+    """Heading angle (radians about +Y) of rotations q (..., 4): where they turn +Z."""
+    from imuloco.ops.rotations import qrot
+
+    f = qrot(q, np.broadcast_to([0.0, 0.0, 1.0], q.shape[:-1] + (3,)))
+    return np.arctan2(f[..., 0], f[..., 2])
+
+
+def continue_from(piece: Motion, at: int, root_rotation: np.ndarray, root: np.ndarray
+                  ) -> Motion:
+    """``piece`` turned about the vertical and moved horizontally so that its frame ``at`` has
+    the root heading of ``root_rotation`` (4,) and the horizontal root position of ``root``
+    (3,), metres."""
+    from imuloco.ops.rotations import about_y, qmul, qrot
+
+    turn = about_y(_yaw(root_rotation) - _yaw(piece.rotations[at, 0]))
+    rotations = piece.rotations.copy()
+    rotations[:, 0] = qmul(np.broadcast_to(turn, rotations[:, 0].shape), rotations[:, 0])
+    path = qrot(np.broadcast_to(turn, piece.root.shape[:-1] + (4,)), piece.root)
+    shift = root - path[at]
+    shift[1] = 0.0
+    return Motion(piece.skeleton, rotations, path + shift, piece.fps, piece.name)
+
+
+def reconstruct_pieces(rec: Recording, method, pin: bool = False,
+                       piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS
+                       ) -> Iterator[Motion]:
+    """The reconstruction of ``rec`` (calibrated, at any rate) at the method's frame rate, as
+    consecutive Motions of ``piece_s`` seconds (see the module docstring).
+
+    ``pin``: pin each piece's feet during their detected contacts
+    (:func:`imuloco.methods.postprocess.pin_feet`), as the pipeline does for methods that do
+    not pin them themselves."""
+    from imuloco.methods.training import to_frames
+
+    fps = method.fps_
+    rec = rec.select(method.placements_)
+    frames = frame_count(rec, fps)
+    signals = to_frames(rec, np.arange(frames) / fps, fps)  # (F, 6 S): ~50 MB for 10 h
+    step, warm = max(1, round(piece_s * fps)), max(1, round(warmup_s * fps))
+    last = None
+    for start in range(0, frames, step):
+        begin, stop = max(0, start - warm), min(frames, start + step)
+        motion = method.reconstruct_signals(signals[begin:stop])
+        if pin:
+            motion = _pinned(motion)
+        if last is not None:
+            motion = continue_from(motion, start - begin - 1, *last)
+        piece = motion.slice(start - begin, motion.num_frames)
+        last = (piece.rotations[-1, 0].copy(), piece.root[-1].copy())
+        yield piece
+
+
+def frame_count(rec: Recording, fps: float) -> int:
+    """Frames of ``rec`` at ``fps`` (as :meth:`imuloco.methods.base.Method.reconstruct`)."""
+    return round((rec.times[-1] - rec.times[0]) * fps) + 1
+
+
+def _pinned(motion: Motion) -> Motion:
+    from imuloco.methods.postprocess import pin_feet
+    from imuloco.phases import foot_contacts
+
+    c = foot_contacts(motion)
+    return pin_feet(motion, np.stack([c["left_foot"], c["right_foot"]], axis=1))
+
+
+def combine(reports: list[dict[str, float]], frames: list[int]) -> dict[str, float]:
+    """Per-piece values combined: counts (``steps``, ``duration_s``) summed, the rest averaged
+    with each piece weighted by its frames (NaN pieces left out)."""
+    out: dict[str, float] = {}
+    w = np.asarray(frames, dtype=np.float64)
+    for key in reports[0]:
+        v = np.array([r[key] for r in reports], dtype=np.float64)
+        if key in ("steps", "duration_s"):
+            out[key] = float(np.nansum(v))
+        else:
+            ok = np.isfinite(v)
+            out[key] = float(np.average(v[ok], weights=w[ok])) if ok.any() else float("nan")
+    return out
+
+
+def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=None,
+                       placement: str = "right_ankle", fmt: str = "auto",
+                       calibrate: bool = True, pin: bool | None = None,
+                       platform: str | None = None, overwrite: bool = False,
+                       piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS,
+                       progress: bool = False) -> dict[str, Any]:
+    """Import a log, reconstruct it in pieces and write the BVH to ``output`` piece by piece.
+
+    Parameters as :func:`imuloco.app.pipeline.reconstruct_file` (``method`` a name, or a fitted
+    method); returns the report, with gait parameters and plausibility checks combined over
+    the pieces (:func:`combine`) and ``pieces`` (their count and seconds).
+    """
+    import time
+
+    from tqdm.auto import tqdm
+
+    from imuloco.app.pipeline import choose_method
+    from imuloco.evaluate.gait import gait_parameters, plausibility, to_json
+    from imuloco.io.bvh import write_bvh_pieces
+    from imuloco.phases import gait_phases
+    from imuloco.sensors.reallog import read_log
+
+    t0 = time.perf_counter()
+    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform)
+    if method is None or isinstance(method, str):
+        fitted, note = choose_method(method, model, placement, progress=progress)
+    else:
+        fitted, note = method, f"given fitted method {method.name!r}"
+    info: dict[str, Any] = {}
+    if calibrate:
+        from imuloco.sensors.calibration import calibrate as calibrate_rec
+
+        rec, mounts = calibrate_rec(rec.select(fitted.placements_))
+        info["calibration"] = [{"placement": p, "up_from": m.up_source,
+                                "still_s": round(m.still_s, 2), "swings": m.swings}
+                               for p, m in zip(rec.placements, mounts)]
+    if pin is None:
+        pin = not getattr(fitted, "pins_feet", fitted.name == "learned")
+    frames = frame_count(rec, fitted.fps_)
+    gait, checks, sizes = [], [], []
+    bar = tqdm(total=frames, desc="reconstruct", unit="frame", disable=not progress)
+
+    def pieces() -> Iterator[Motion]:
+        for piece in reconstruct_pieces(rec, fitted, pin, piece_s, warmup_s):
+            gait.append(gait_parameters(piece, gait_phases(piece)))
+            checks.append(plausibility(piece))
+            sizes.append(piece.num_frames)
+            bar.update(piece.num_frames)
+            yield piece
+
+    write_bvh_pieces(pieces(), frames, output, overwrite=overwrite)
+    bar.close()
+    return {
+        "recording": {"files": log_report.files, "format": log_report.format,
+                      "duration_s": round(log_report.duration, 3),
+                      "source_rate_hz": round(log_report.source_rate, 2),
+                      "time_unit": log_report.time_unit, "platform": log_report.platform},
+        **info, "method": fitted.name, "model": note, "placement": placement,
+        "motion": {"frames": frames, "fps": fitted.fps_,
+                   "duration_s": round((frames - 1) / fitted.fps_, 3)},
+        "pieces": {"count": len(sizes), "seconds": piece_s, "warmup_seconds": warmup_s},
+        "gait": to_json(combine(gait, sizes)),
+        "plausibility": to_json(combine(checks, sizes)),
+        "seconds": round(time.perf_counter() - t0, 2),
+    }

@@ -1,0 +1,72 @@
+"""The command line on bad files and arguments: a one-line error naming the file, exit status
+1 (an error) or 2 (a usage error), never a traceback; outputs never replace an input."""
+
+from __future__ import annotations
+
+import pytest
+from click.testing import CliRunner
+
+from imuloco.cli import cli
+from imuloco.data import SAMPLE_DIR
+
+BVH = min(SAMPLE_DIR.glob("*.bvh"))
+
+
+def run(*args: str) -> tuple[int, str]:
+    result = CliRunner().invoke(cli, [str(a) for a in args])
+    # a traceback would leave the exception itself here instead of click's SystemExit
+    assert result.exception is None or isinstance(result.exception, SystemExit), \
+        f"{type(result.exception).__name__}: {result.exception}"
+    return result.exit_code, result.output
+
+
+@pytest.fixture(scope="module")
+def log(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cli") / "walk.csv"
+    code, out = run("simulate", BVH, "-o", path)
+    assert code == 0, out
+    return path
+
+
+@pytest.mark.parametrize("command", ["info", "phases"])
+def test_motion_commands_on_a_non_bvh(tmp_path, command):
+    bad = tmp_path / "notes.bvh"
+    bad.write_text("hello\n")
+    code, out = run(command, bad)
+    assert code == 1 and "notes.bvh:1" in out and "HIERARCHY" in out
+
+
+def test_reconstruct_to_an_unwritable_place(log):
+    code, out = run("reconstruct", log, "-o", "/proc/x.bvh", "--method", "mean")
+    assert code == 1 and "/proc/x.bvh" in out and "cannot write" in out
+
+
+def test_reconstruct_never_replaces_its_input(log):
+    before = log.read_bytes()
+    code, out = run("reconstruct", log, "-o", log, "--force", "--method", "mean")
+    assert code == 1 and "overwrite an input" in out and log.name in out
+    assert log.read_bytes() == before
+
+
+def test_simulate_rate_zero(tmp_path):
+    code, out = run("simulate", BVH, "--rate", "0", "-o", tmp_path / "s.csv")
+    assert code == 2 and "--rate" in out and not (tmp_path / "s.csv").exists()
+
+
+def test_train_with_an_invalid_hyperparameter(tmp_path):
+    code, out = run("train", "--method", "ridge", "--param", "alpha=-1", "--limit", "3",
+                    "-o", tmp_path / "m.npz")
+    assert code == 2 and "--param" in out and "alpha" in out
+    assert not (tmp_path / "m.npz").exists()
+
+
+def test_export_onnx_on_a_non_model(log, tmp_path):
+    code, out = run("export-onnx", "--model", log, "-o", tmp_path / "x.onnx")
+    assert code == 1 and str(log) in out and "pickle" not in out
+
+
+def test_reconstruct_a_bad_log(tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time_s,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z\n0,1,2,3,4,5,1e308\n")
+    code, out = run("reconstruct", bad, "-o", tmp_path / "x.bvh", "--method", "mean")
+    assert code == 1 and "bad.csv:2" in out

@@ -1,0 +1,32 @@
+"""The fuzz harness of `imuloco bench --fuzz`: outcomes judged as the issue defines them."""
+
+from __future__ import annotations
+
+import json
+
+from click.testing import CliRunner
+
+from imuloco.cli import cli
+from imuloco.evaluate.fuzz import OUTCOMES, judge
+
+
+def test_judge_tells_clean_from_foreign_and_accepted(tmp_path, sample_db):
+    from imuloco.methods import get_method
+
+    (tmp_path / "some.csv").write_text("time_s,acc_x\n0,1\n")
+    assert judge("model", [tmp_path / "some.csv"])[0] == "clean"
+    model = get_method("mean").fit(sample_db.subset([0]), ["right_ankle"], "phone", 0)
+    assert judge("model", [model.save(tmp_path / "m.npz")]) == ("accepted", "")
+    (tmp_path / "x.bvh").write_text("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\n")
+    outcome, detail = judge("bvh", [tmp_path / "x.bvh"])
+    assert outcome == "clean" and "x.bvh" in detail
+
+
+def test_bench_fuzz_writes_the_table(tmp_path):
+    result = CliRunner().invoke(cli, ["bench", "--fuzz", "6", "--readers", "sensorlog,model",
+                                      "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    data = json.loads((tmp_path / "fuzz.json").read_text())["results"]
+    for reader in ("sensorlog", "model"):
+        assert sum(data[reader][o] for o in OUTCOMES) == data[reader]["inputs"] == 6
+    assert "| sensor-log tables | 6 |" in (tmp_path / "fuzz.md").read_text()
