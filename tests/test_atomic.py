@@ -27,3 +27,12 @@ def test_check_output_refuses_existing_and_inputs(tmp_path):
     assert check_output(target, force=True) == target
     with pytest.raises(ImulocoError, match="overwrite an input"):
         check_output(tmp_path / "." / "x.csv", force=True, inputs=[target])
+
+
+def test_atomic_write_gives_the_permissions_open_would(tmp_path):
+    with open(tmp_path / "plain.txt", "w") as f:
+        f.write("x")
+    with atomic_write(tmp_path / "atomic.txt", "w") as f:
+        f.write("x")
+    modes = [(tmp_path / n).stat().st_mode & 0o777 for n in ("plain.txt", "atomic.txt")]
+    assert modes[0] == modes[1]

@@ -1,4 +1,5 @@
-"""Batch reconstruction of many walkers: outputs, summary, parallel = serial, bad files."""
+"""Batch reconstruction of many walkers on a real (in-process) Dask cluster: outputs, tables,
+resume, --force, bad files, atomic writes."""
 
 from __future__ import annotations
 
@@ -6,18 +7,38 @@ import csv
 import json
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
 
-from imuloco.app.batch import find_recordings, output_names, run_batch
+from imuloco.app.batch import (
+    LOCAL_CLUSTER,
+    WALKER_FIELDS,
+    find_recordings,
+    output_names,
+    run_batch,
+)
 from imuloco.cli import cli
+from imuloco.errors import OutputExistsError
 from imuloco.evaluate.gait import gait_parameters
+from imuloco.evaluate.strides import STRIDE_FIELDS, stride_rows
 from imuloco.io.bvh import read_bvh
 from imuloco.io.sensorlog import write_generic_csv
 from imuloco.sensors.simulate import simulate
 
+distributed = pytest.importorskip("distributed")
+
 WALKERS = ("dataset-2_walk_normal_001", "dataset-2_walk_active_001",
            "dataset-2_walk-turn-left_normal_001")
+
+
+@pytest.fixture(scope="module")
+def client():
+    """Two worker threads of a real Dask cluster in this process."""
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  **LOCAL_CLUSTER) as cluster, \
+            distributed.Client(cluster) as c:
+        yield c
 
 
 @pytest.fixture(scope="module")
@@ -55,14 +76,32 @@ def test_names_are_distinct_and_globs_expand(logs, tmp_path):
     assert found[0] == paths[0] and len(found) == 4  # paths[0] once, then the other three
 
 
-def test_batch_writes_one_bvh_and_report_per_walker_and_a_summary(logs, fitted, tmp_path,
-                                                                  sample_db):
+def test_strides_follow_the_strikes(sample_db):
+    from imuloco.phases import gait_phases
+
+    clip = next(c for c in sample_db.clips if c.name == WALKERS[0])
+    ph = gait_phases(clip)
+    rows = stride_rows(clip, ph, confidence=np.full(clip.num_frames, 0.05))
+    n = sum(max(len(ph.steps[f]) - 1, 0) for f in ("left", "right"))
+    assert len(rows) == n > 0 and all(tuple(r) == STRIDE_FIELDS for r in rows)
+    for r in rows:
+        assert r["end_s"] - r["start_s"] == pytest.approx(r["duration_s"], abs=2e-4)
+        assert r["stance_s"] + r["swing_s"] == pytest.approx(r["duration_s"], abs=2e-4)
+        assert 0 < r["stance_s"] < r["duration_s"] and r["confidence"] == 0.05
+    # the median stride is the summary's stride length
+    truth = gait_parameters(clip, ph)["stride_length_m"]
+    assert np.median([r["length_m"] for r in rows]) == pytest.approx(truth, abs=1e-3)
+
+
+def test_batch_writes_outputs_tables_and_error_rows(logs, fitted, client, tmp_path,
+                                                    sample_db):
     paths, bad = logs
-    summary = run_batch([*paths, bad], tmp_path, jobs=1, fitted=fitted)
-    assert summary["ok"] == 3 and summary["failed"] == 1
+    summary = run_batch([*paths, bad], tmp_path, fitted=fitted, scheduler=client)
+    assert (summary["done"], summary["skipped"], summary["failed"]) == (3, 0, 1)
     rows = summary["recordings"]
     assert [r["name"] for r in rows] == [*output_names(paths), "broken"]
     assert rows[-1]["status"] == "error" and "broken.csv" in rows[-1]["error"]
+    assert not (tmp_path / "broken.bvh").exists() and not (tmp_path / "broken.json").exists()
     for row, name in zip(rows[:3], WALKERS):
         clip = next(c for c in sample_db.clips if c.name == name)
         motion = read_bvh(tmp_path / f"{row['name']}.bvh")
@@ -81,35 +120,165 @@ def test_batch_writes_one_bvh_and_report_per_walker_and_a_summary(logs, fitted, 
     assert [t["name"] for t in table] == [r["name"] for r in rows]
     assert float(table[0]["cadence_rhythm_spm"]) == pytest.approx(rows[0]["cadence_rhythm_spm"])
     assert json.loads((tmp_path / "summary.json").read_text())["frames"] == summary["frames"]
-    with pytest.raises(FileExistsError):  # never overwrites unless asked
-        run_batch(paths, tmp_path, fitted=fitted)
+
+    walkers = pq.read_table(tmp_path / "walkers.parquet")
+    assert walkers.column_names == list(WALKER_FIELDS) and walkers.num_rows == 4
+    assert str(walkers.schema.field("frames").type) == "int64"
+    assert str(walkers.schema.field("speed_mps").type) == "double"
+    w = walkers.to_pylist()
+    assert [r["status"] for r in w] == ["ok"] * 3 + ["error"]
+    assert w[0]["speed_mps"] == rows[0]["speed_mps"] and w[0]["method"] == "ridge"
+    assert w[0]["placement"] == "right_ankle" and len(w[0]["model_sha256"]) == 64
+    assert w[0]["height_m"] is None and w[3]["frames"] is None
+    strides = pq.read_table(tmp_path / "strides.parquet")
+    assert strides.column_names == ["walker", *STRIDE_FIELDS]
+    reported = sum(len(json.loads((tmp_path / f"{r['name']}.json").read_text())["strides"])
+                   for r in rows[:3])
+    assert strides.num_rows == summary["strides"] == reported > 10
+    s = strides.to_pylist()
+    assert {r["walker"] for r in s} == {r["name"] for r in rows[:3]}
+    assert all(r["confidence"] is None for r in s)  # ridge gives none
 
 
-def test_parallel_batch_gives_the_serial_results(logs, fitted, tmp_path):
-    pytest.importorskip("joblib")
-    paths, _ = logs
-    serial = run_batch(paths, tmp_path / "serial", jobs=1, fitted=fitted)
-    parallel = run_batch(paths, tmp_path / "parallel", jobs=2, fitted=fitted)
-    for a, b in zip(serial["recordings"], parallel["recordings"]):
-        assert {k: v for k, v in a.items() if k != "seconds"} == \
-               {k: v for k, v in b.items() if k != "seconds"}
-        m1 = read_bvh(tmp_path / "serial" / f"{a['name']}.bvh")
-        m2 = read_bvh(tmp_path / "parallel" / f"{b['name']}.bvh")
-        np.testing.assert_allclose(m1.positions(), m2.positions())
-
-
-def test_cli_batch(logs, fitted, tmp_path):
+def test_rerun_skips_complete_outputs_and_force_redoes(logs, fitted, client, tmp_path):
     paths, bad = logs
+    first = run_batch(paths, tmp_path, fitted=fitted, scheduler=client)
+    bvh = tmp_path / f"{first['recordings'][0]['name']}.bvh"
+    stamp = bvh.stat().st_mtime_ns
+    # an interrupted run: the third recording's JSON never got written
+    (tmp_path / f"{first['recordings'][2]['name']}.json").unlink()
+    again = run_batch([*paths, bad], tmp_path, fitted=fitted, scheduler=client)
+    assert (again["done"], again["skipped"], again["failed"]) == (1, 2, 1)
+    assert bvh.stat().st_mtime_ns == stamp  # not rewritten
+    assert again["recordings"][:2] == first["recordings"][:2]  # the same rows, read back
+
+    def timeless(row: dict) -> dict:
+        return {k: v for k, v in row.items() if k != "seconds"}
+
+    assert timeless(again["recordings"][2]) == timeless(first["recordings"][2])  # redone
+    assert pq.read_table(tmp_path / "strides.parquet").num_rows == first["strides"]
+    forced = run_batch(paths, tmp_path, fitted=fitted, scheduler=client, force=True)
+    assert (forced["done"], forced["skipped"]) == (3, 0) and bvh.stat().st_mtime_ns != stamp
+    # another model's outputs are never replaced without --force
+    with pytest.raises(OutputExistsError, match="--force"):
+        run_batch(paths, tmp_path, method="mean", scheduler=client)
+
+
+def test_a_failed_write_leaves_no_partial_file(logs, fitted, client, tmp_path, monkeypatch):
+    import pyarrow.parquet
+
+    paths, _ = logs
+    run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=client)
+    before = (tmp_path / "walkers.parquet").read_bytes()
+    real_write = pyarrow.parquet.write_table
+
+    def disk_full(table, where, **kw):  # half a file, then the disk is full
+        real_write(table, where, **kw)
+        where.truncate(where.tell() // 2)
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(pyarrow.parquet, "write_table", disk_full)
+    with pytest.raises(OSError, match="No space"):
+        run_batch(paths[:2], tmp_path, fitted=fitted, scheduler=client)
+    assert (tmp_path / "walkers.parquet").read_bytes() == before
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
+    # the second walker's own outputs were complete before the tables failed: a re-run
+    # keeps them
+    monkeypatch.undo()
+    again = run_batch(paths[:2], tmp_path, fitted=fitted, scheduler=client)
+    assert (again["done"], again["skipped"]) == (0, 2)
+
+
+def test_a_recording_failing_mid_write_leaves_no_partial_bvh(logs, fitted, client, tmp_path,
+                                                             monkeypatch):
+    from imuloco.io import bvh
+
+    paths, _ = logs
+    real = bvh.to_euler
+
+    def fail(*a, **kw):
+        raise MemoryError("simulated failure while writing")
+
+    monkeypatch.setattr(bvh, "to_euler", fail)  # workers are threads of this process
+    summary = run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=client)
+    assert summary["failed"] == 1 and "simulated failure" in summary["recordings"][0]["error"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "strides.parquet", "summary.csv", "summary.json", "walkers.parquet"]
+    monkeypatch.setattr(bvh, "to_euler", real)
+
+
+def test_cli_batch_on_a_local_cluster_of_processes(logs, fitted, tmp_path):
+    paths, _ = logs
     model = fitted.save(tmp_path / "ridge.npz")
     out = tmp_path / "out"
-    res = CliRunner().invoke(cli, ["batch", str(paths[2]), "--glob",
-                                   str(paths[0].parent / "*.csv"), "--out", str(out),
-                                   "--model", str(model)])
+    args = ["batch", str(paths[2]), "--glob", str(paths[0].parent / "*.csv"), "--out",
+            str(out), "--model", str(model), "--jobs", "1"]
+    res = CliRunner().invoke(cli, args)
     assert res.exit_code == 0, res.output
-    assert "2 of 2 reconstructed" in res.output and "recordings/min" in res.output
+    assert "2 done, 0 skipped, 0 failed of 2" in res.output and "recordings/min" in res.output
     assert (out / f"{WALKERS[2]}.bvh").exists() and (out / "phone.bvh").exists()
-    res = CliRunner().invoke(cli, ["batch", str(bad), "--out", str(tmp_path / "bad"),
-                                   "--model", str(model)])
-    assert res.exit_code == 1 and "1 recording(s) failed" in res.output
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0 and "0 done, 2 skipped, 0 failed" in res.output
     res = CliRunner().invoke(cli, ["batch", "--out", str(out)])
     assert res.exit_code == 2 and "no recordings" in res.output
+
+
+def test_cli_batch_on_a_scheduler_reports_failures(logs, fitted, client, tmp_path):
+    _, bad = logs
+    model = fitted.save(tmp_path / "ridge.npz")
+    res = CliRunner().invoke(cli, ["batch", str(bad), "--out", str(tmp_path / "bad"),
+                                   "--model", str(model), "--scheduler",
+                                   client.scheduler.address])
+    assert res.exit_code == 1 and "0 done, 0 skipped, 1 failed" in res.output
+    assert "1 recording(s) failed" in res.output
+
+
+def test_benchmark_walkers_are_continuous_and_seeded(sample_db):
+    from imuloco.evaluate.batchbench import WALKING, walker_motion
+    from imuloco.ops.heading import heading_from_hips, wrap_angle
+
+    clips = [c for c, lab in zip(sample_db.clips, sample_db.labels)
+             if lab["content"] in WALKING]
+    m = walker_motion(clips, 60.0, seed=3)
+    assert m.num_frames == 1800 and m.fps == 30.0
+    # chained clips start where and facing where the last one ended: no jump at a seam
+    step = np.linalg.norm(np.diff(m.root[:, [0, 2]], axis=0), axis=1)
+    assert step.max() < 0.1  # m per frame: 3 m/s
+    hips = m.part_positions(["left_hip", "right_hip"])
+    turn = np.abs(wrap_angle(np.diff(heading_from_hips(hips[:, 0], hips[:, 1]))))
+    assert np.degrees(turn.max()) < 20
+    again, other = walker_motion(clips, 60.0, seed=3), walker_motion(clips, 60.0, seed=4)
+    np.testing.assert_array_equal(again.rotations, m.rotations)
+    assert not np.array_equal(other.root, m.root)
+
+
+def test_a_worker_lost_mid_task_is_retried_elsewhere(logs, fitted, tmp_path, monkeypatch):
+    """The first reconstruction closes the worker running it: Dask reschedules the task on
+    the other worker and the recording completes."""
+    import time
+
+    from distributed.core import Status
+
+    from imuloco.app import pipeline
+
+    paths, _ = logs
+    real, calls = pipeline.reconstruct_file, []
+
+    def lose_worker(*args, **kwargs):
+        calls.append(distributed.get_worker().address)
+        if len(calls) == 1:
+            worker = distributed.get_worker()
+            worker.loop.add_callback(worker.close, executor_wait=False)
+            deadline = time.monotonic() + 60
+            while worker.status != Status.closed and time.monotonic() < deadline:
+                time.sleep(0.05)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "reconstruct_file", lose_worker)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  **LOCAL_CLUSTER) as cluster, \
+            distributed.Client(cluster) as c:
+        summary = run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=c)
+    assert len(calls) == 2 and calls[0] != calls[1]
+    assert summary["done"] == 1 and summary["failed"] == 0
+    assert read_bvh(tmp_path / f"{summary['recordings'][0]['name']}.bvh").num_frames > 0

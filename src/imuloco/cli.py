@@ -129,7 +129,8 @@ DATA_HELP = ("Folder(s) of clips, repeatable or comma separated; several become 
 @cli.command()
 @click.option("--method", "method_names", default=None,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
-                   "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm].")
+                   "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm] [required "
+                   "but with --batch, which defaults to the shipped model].")
 @click.option("--split", "split_name",
               type=click.Choice(["random-clips", "heldout-styles", "heldout-contents",
                                  "cross-dataset"]),
@@ -159,12 +160,15 @@ DATA_HELP = ("Folder(s) of clips, repeatable or comma separated; several become 
                    "fuzz) and write fuzz.md and fuzz.json.")
 @click.option("--readers", default=None,
               help="With --fuzz: readers, comma separated [default: all].")
+@click.option("--batch", "batch_walkers", type=click.IntRange(1), default=None, metavar="N",
+              help="Instead: the batch benchmark (imuloco.evaluate.batchbench) on N simulated "
+                   "walkers of 60 s; writes batch_bench.md and batch_bench.json.")
 @_reading_options
 def bench(method_names: str | None, split_name: str, noise: str, placement: str,
           data_items: tuple[str, ...], train_items: tuple[str, ...],
           test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
-          speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None, up: str,
-          skip_frames: int) -> None:
+          speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None,
+          batch_walkers: int | None, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
     if fuzz is not None:
         from imuloco.evaluate.fuzz import READERS, write_fuzz
@@ -176,8 +180,15 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
                                      param_hint="--readers")
         click.echo(write_fuzz(fuzz, out, chosen, seed=seed, progress=True))
         return
+    if batch_walkers is not None:
+        from imuloco.evaluate.batchbench import batch_benchmark, markdown
+
+        click.echo(markdown(batch_benchmark(batch_walkers, out, method=method_names,
+                                            placement=placement)))
+        click.echo(f"wrote {out / 'batch_bench.json'} and {out / 'batch_bench.md'}")
+        return
     if not method_names:
-        raise click.UsageError("Missing option '--method' (or pass --fuzz N).")
+        raise click.UsageError("Missing option '--method' (or pass --fuzz N or --batch N).")
     names = _csv(method_names)
     data = _folders(data_items)
     if speed:
@@ -543,9 +554,12 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
 @click.option("--glob", "patterns", multiple=True, metavar="PATTERN",
               help="Recordings matching a glob pattern, e.g. 'logs/*.csv' (repeatable).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
-              required=True, help="Folder for NAME.bvh, NAME.json and summary.csv/.json.")
-@click.option("-j", "--jobs", type=int, default=1, show_default=True,
-              help="Worker processes (-1: one per CPU; needs joblib, the [dist] extra).")
+              required=True, help="Folder for NAME.bvh, NAME.json, summary.csv/.json, "
+              "walkers.parquet and strides.parquet.")
+@click.option("-j", "--jobs", type=int, default=None,
+              help="Dask worker processes of the local cluster [default: one per CPU].")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="Run on an existing Dask cluster, e.g. tcp://host:8786 (see the README).")
 @click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
                                                        path_type=Path), default=None,
               help="Model file from `imuloco train` [default: the shipped pretrained model].")
@@ -564,13 +578,15 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
 @click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
               help="Phone of Sensor Logger exports [default: from their Metadata.csv, else "
                    "guessed with a warning].")
-@click.option("--force", is_flag=True, help="Replace existing output files.")
-def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path, jobs: int,
-          model_path: Path | None, method_name: str | None, placement: str, fmt: str,
-          skeleton: Path | None, no_calibrate: bool, platform: str | None,
-          force: bool) -> None:
-    """Reconstruct many RECORDINGS (one walker each) in parallel: a BVH and a gait report
-    per recording, and a summary.csv / summary.json of cadence, speed and step length."""
+@click.option("--force", is_flag=True,
+              help="Redo recordings whose outputs are complete (a re-run skips them).")
+def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path,
+          jobs: int | None, scheduler: str | None, model_path: Path | None,
+          method_name: str | None, placement: str, fmt: str, skeleton: Path | None,
+          no_calibrate: bool, platform: str | None, force: bool) -> None:
+    """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
+    recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
+    finished recordings)."""
     from imuloco.app.batch import find_recordings, run_batch
 
     paths = find_recordings(recordings, patterns)
@@ -578,9 +594,10 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
         raise click.UsageError("no recordings: give files or --glob PATTERN")
     try:
         summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
-                            calibrate=not no_calibrate, overwrite=force, progress=True,
-                            platform=platform, skeleton=skeleton)
-    except (FileExistsError, KeyError, ValueError) as e:
+                            calibrate=not no_calibrate, force=force, progress=True,
+                            scheduler=scheduler, platform=platform,
+                            skeleton=skeleton)
+    except (KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {summary['model']}", err=True)
     click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
@@ -591,10 +608,11 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
         click.echo(f"{r['name'][:28]:<28} {fmt_v(r['cadence_spm'], 1):>8} "
                    f"{fmt_v(r['speed_mps'], 2):>6} {fmt_v(r['step_length_m'], 2):>6}  "
                    f"{r['status'] if r['status'] == 'ok' else r['error']}")
-    rate = len(paths) / max(summary["seconds"], 1e-9) * 60
-    click.echo(f"{summary['ok']} of {len(paths)} reconstructed in {summary['seconds']:.1f} s "
-               f"({rate:.1f} recordings/min, {summary['frames'] / summary['seconds']:.0f} "
-               f"frames/s, {jobs} job(s)); wrote {out_dir}/summary.csv and summary.json")
+    rate = summary["done"] / max(summary["seconds"], 1e-9) * 60
+    click.echo(f"{summary['done']} done, {summary['skipped']} skipped, {summary['failed']} "
+               f"failed of {len(paths)} in {summary['seconds']:.1f} s ({rate:.1f} "
+               f"recordings/min on {summary['jobs']} worker(s)); wrote {out_dir}/summary.csv, "
+               "walkers.parquet and strides.parquet")
     if summary["failed"]:
         raise click.ClickException(f"{summary['failed']} recording(s) failed; see "
                                    f"{out_dir / 'summary.csv'}")

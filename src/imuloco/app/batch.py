@@ -1,29 +1,47 @@
-"""Many recordings at once: one walker per phone log, reconstructed in parallel.
+"""Many recordings at once on Dask: one walker per phone log, resumable, with study tables.
 
-:func:`run_batch` runs :func:`imuloco.app.pipeline.reconstruct_file` on every recording with one
-model, in ``jobs`` worker processes (joblib, the ``[dist]`` extra; serially without it), and
-writes per recording ``NAME.bvh`` and ``NAME.json`` (the reconstruction report: import,
-calibration, gait parameters, plausibility checks), then ``summary.csv`` and ``summary.json``
-with one row per walker (cadence, speed, step and stride length, ...). A recording that fails
-gets a row with its error; the others go on.
+:func:`run_batch` reconstructs every recording with one model on a Dask cluster: by default a
+``distributed.LocalCluster`` of ``jobs`` worker processes started for the run, or an existing
+cluster at ``scheduler`` (started with ``dask scheduler`` and ``dask worker ADDRESS``; its
+workers read the recordings and write ``out_dir`` at the paths given here, so on several
+machines these live on a shared file system). Per recording a worker writes ``NAME.bvh`` and
+``NAME.json`` (the reconstruction report: import, calibration, gait parameters, plausibility
+checks, plus ``strides`` and ``batch``: recording, model hash, placement, height); then this
+process writes ``summary.csv`` and ``summary.json`` (one row per walker: cadence, speed, step
+and stride length, ...), ``walkers.parquet`` (the same rows with height, placement and model,
+:data:`WALKER_FIELDS`) and ``strides.parquet`` (one row per stride, ``walker`` then
+:data:`imuloco.evaluate.strides.STRIDE_FIELDS`).
 
-The model is fitted (or loaded) once, saved to a temporary model file and loaded once per
-worker process, so workers receive a path, never a pickled model.
+- The model travels as its file's bytes, scattered once to the workers and loaded once per
+  worker process (cached by SHA-256): never a pickled method object.
+- Every file is written atomically (:func:`imuloco.io.atomic.atomic_write`), the JSON last: a
+  recording is complete when its JSON names the same recording and model. A re-run skips
+  complete recordings (``force`` redoes them) and refuses to replace another job's outputs.
+- A recording that fails becomes a row with status ``error`` and its error; the others go on.
+  A task whose worker dies is rescheduled by Dask (up to ``distributed.scheduler.allowed-
+  failures`` times), one that raises outside the reconstruction is retried ``retries`` times.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
-import functools
 import glob as globmod
+import hashlib
 import json
 import logging
 import os
 import tempfile
+import threading
 import time
-from collections.abc import Iterator, Sequence
+import uuid
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+from imuloco.errors import ImulocoError, MissingExtraError, OutputExistsError
+from imuloco.evaluate.strides import STRIDE_FIELDS
+from imuloco.io.atomic import atomic_write, check_output
 
 log = logging.getLogger(__name__)
 
@@ -31,7 +49,15 @@ log = logging.getLogger(__name__)
 GAIT_COLUMNS = ("cadence_spm", "cadence_rhythm_spm", "speed_mps", "step_length_m",
                 "stride_length_m", "steps", "stance_pct", "double_support_pct")
 COLUMNS = ("name", "recording", "status", "frames", "duration_s", *GAIT_COLUMNS,
-           "signal_cadence_spm", "seconds", "error")
+           "signal_cadence_spm", "seconds", "error")  # summary.csv
+WALKER_FIELDS = (*COLUMNS, "height_m", "placement", "method", "model", "model_sha256")
+_STRINGS = {"name", "recording", "status", "error", "placement", "method", "model",
+            "model_sha256", "walker", "foot"}
+_INTEGERS = {"frames", "steps"}
+CONNECT_TIMEOUT_S = 30.0  # waiting for a scheduler, then for its first worker
+# no dashboard, and the scheduler's HTTP server (health, metrics) on a free port, not on 8787,
+# which another cluster on the machine may hold
+LOCAL_CLUSTER = {"dashboard_address": None, "scheduler_kwargs": {"dashboard_address": ":0"}}
 
 
 def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = ()
@@ -68,88 +94,189 @@ def output_names(paths: Sequence[Path]) -> list[str]:
     return out
 
 
-@functools.lru_cache(maxsize=2)
-def _load(model_path: str):
-    """The fitted method of a model file, loaded once per process."""
+# ---- on a worker --------------------------------------------------------------------------
+_MODELS: dict[str, Any] = {}  # SHA-256 of a model file -> its fitted method, per process
+_MODELS_LOCK = threading.Lock()
+
+
+def worker_model(sha256: str, data: bytes):
+    """The fitted method of the model file ``data`` (bytes), loaded once per process."""
     from imuloco.methods import load_model
 
-    return load_model(model_path)
+    with _MODELS_LOCK:
+        if sha256 not in _MODELS:
+            with tempfile.TemporaryDirectory(prefix="imuloco-model-") as tmp:
+                path = Path(tmp) / "model.npz"
+                path.write_bytes(data)
+                _MODELS.clear()  # one job's model at a time
+                _MODELS[sha256] = load_model(path)
+        return _MODELS[sha256]
 
 
-def reconstruct_one(recording: str | Path, out_dir: str | Path, name: str, model_path: str,
+def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
-                    overwrite: bool = False, platform: str | None = None,
+                    platform: str | None = None, height_m: float | None = None,
                     skeleton: str | None = None) -> dict[str, Any]:
-    """Reconstruct one recording, write ``NAME.bvh`` and ``NAME.json`` into ``out_dir``.
+    """Reconstruct one recording (a path read here), write ``NAME.bvh`` then ``NAME.json``.
 
-    Returns its summary row (see :data:`COLUMNS`); errors are caught and reported in the row.
-    """
+    Returns ``{"row": ..., "strides": [...]}`` (see :func:`walker_rows`); errors are caught and
+    reported in the row."""
     from imuloco.app.pipeline import reconstruct_file
+    from imuloco.evaluate.strides import stride_rows
     from imuloco.io.bvh import write_bvh
 
     t0 = time.perf_counter()
-    row: dict[str, Any] = {"name": name, "recording": str(recording)}
     try:
+        fitted = worker_model(model_sha256, model)
         motion, report = reconstruct_file(recording, placement=placement, fmt=fmt,
-                                          calibrate=calibrate, fitted=_load(model_path),
+                                          calibrate=calibrate, fitted=fitted,
                                           platform=platform, skeleton=skeleton)
+        report["strides"] = stride_rows(motion)
+        report["seconds"] = round(time.perf_counter() - t0, 3)
+        report["batch"] = {"recording": recording, "model_sha256": model_sha256,
+                           "placement": placement, "height_m": height_m}
         out = Path(out_dir)
-        write_bvh(motion, out / f"{name}.bvh", overwrite=overwrite)
-        (out / f"{name}.json").write_text(json.dumps(report, indent=2) + "\n")
+        write_bvh(motion, out / f"{name}.bvh", overwrite=True)  # atomic; a rerun's leftover
+        with atomic_write(out / f"{name}.json", "w") as f:  # last: marks the outputs complete
+            f.write(json.dumps(report, indent=2) + "\n")
     except Exception as e:  # noqa: BLE001 - one bad recording must not stop the batch
         log.warning("%s: %s: %s", recording, type(e).__name__, e)
-        row.update(status="error", error=f"{type(e).__name__}: {e}")
-    else:
-        gait = report["gait"]
-        row.update(status="ok", frames=motion.num_frames,
-                   duration_s=report["motion"]["duration_s"],
-                   **{k: gait.get(k) for k in GAIT_COLUMNS},
-                   signal_cadence_spm=report["signal_cadence_spm"], error="")
-    row["seconds"] = round(time.perf_counter() - t0, 3)
-    return {k: row.get(k) for k in COLUMNS}
+        return {"row": error_row(name, recording, e, time.perf_counter() - t0), "strides": []}
+    row, strides = walker_rows(name, report)
+    return {"row": row, "strides": strides}
 
 
-def _results(tasks: list[dict], jobs: int) -> Iterator[dict]:
-    """Run :func:`reconstruct_one` on every task, yielding rows as they finish."""
-    if jobs != 1 and len(tasks) > 1:
+# ---- rows ---------------------------------------------------------------------------------
+def walker_rows(name: str, report: dict[str, Any]) -> tuple[dict, list[dict]]:
+    """The walker's row (:data:`WALKER_FIELDS` but the job's ``method`` and ``model``) and its
+    stride rows from a report written by :func:`reconstruct_one`."""
+    gait, batch = report["gait"], report["batch"]
+    row = {"name": name, "recording": batch["recording"], "status": "ok",
+           "frames": report["motion"]["frames"], "duration_s": report["motion"]["duration_s"],
+           **{k: gait.get(k) for k in GAIT_COLUMNS},
+           "signal_cadence_spm": report["signal_cadence_spm"], "seconds": report["seconds"],
+           "error": "", "height_m": batch["height_m"], "placement": batch["placement"],
+           "model_sha256": batch["model_sha256"]}
+    return row, [{"walker": name, **s} for s in report["strides"]]
+
+
+def error_row(name: str, recording: str, error: BaseException, seconds: float) -> dict:
+    """The row of a recording that failed."""
+    return {"name": name, "recording": recording, "status": "error",
+            "error": f"{type(error).__name__}: {error}", "seconds": round(seconds, 3)}
+
+
+def _complete_report(out: Path, name: str, recording: str, sha256: str) -> dict | None | bool:
+    """``NAME.json`` when it completes this recording with this model; ``None`` when there is
+    no JSON (to do); ``False`` when outputs of another recording, model or program are there."""
+    path = out / f"{name}.json"
+    if not path.exists():
+        return None
+    try:
+        report = json.loads(path.read_text())
+        batch = report["batch"]
+        same = (batch["recording"] == recording and batch["model_sha256"] == sha256
+                and (out / f"{name}.bvh").is_file())
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    return report if same else False
+
+
+def write_tables(out: Path, rows: list[dict], strides: list[dict],
+                 inputs: Sequence[Path] = ()) -> list[Path]:
+    """Write ``summary.csv``, ``walkers.parquet`` and ``strides.parquet`` atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    def schema(fields: Sequence[str]) -> pa.Schema:
+        return pa.schema([(f, pa.string() if f in _STRINGS else
+                              pa.int64() if f in _INTEGERS else pa.float64()) for f in fields])
+
+    def whole(v: Any) -> Any:
+        return None if v is None else int(v)
+
+    paths = [check_output(out / n, force=True, inputs=inputs)
+             for n in ("summary.csv", "walkers.parquet", "strides.parquet")]
+    with atomic_write(paths[0], "w") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+    walkers = [{**r, **{k: whole(r.get(k)) for k in _INTEGERS}} for r in rows]
+    for path, fields, table in ((paths[1], WALKER_FIELDS, walkers),
+                                (paths[2], ("walker", *STRIDE_FIELDS), strides)):
+        with atomic_write(path, "wb") as f:
+            pq.write_table(pa.Table.from_pylist(table, schema=schema(fields)), f)
+    return paths
+
+
+# ---- the job ------------------------------------------------------------------------------
+@contextlib.contextmanager
+def dask_client(scheduler=None, jobs: int | None = None):
+    """A ``distributed.Client``: on ``scheduler`` (an address, or a Client used as it is) or on
+    a LocalCluster of ``jobs`` single-threaded worker processes (``None``/``-1``: one per CPU)
+    closed afterwards."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise MissingExtraError("batch", "distributed", "dist") from None
+    if isinstance(scheduler, Client):
+        yield scheduler
+        return
+    if scheduler:
         try:
-            from joblib import Parallel, delayed
-        except ImportError:
-            log.warning("joblib is not installed (pip install imuloco[dist]): running serially")
-        else:
-            yield from Parallel(n_jobs=jobs, return_as="generator_unordered")(
-                delayed(reconstruct_one)(**t) for t in tasks)
-            return
-    for t in tasks:
-        yield reconstruct_one(**t)
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, ValueError, TypeError) as e:
+            raise ImulocoError(f"cannot reach the Dask scheduler at {scheduler!r}: {e}; start "
+                               "one with `dask scheduler` (see the README)") from None
+        with client:
+            try:
+                client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
+            except TimeoutError:
+                raise ImulocoError(f"the Dask scheduler at {scheduler} has no worker after "
+                                   f"{CONNECT_TIMEOUT_S:.0f} s; start one with `dask worker "
+                                   f"{scheduler}`") from None
+            yield client
+        return
+    n = len(os.sched_getaffinity(0)) if jobs in (None, -1) else int(jobs)
+    if n < 1:
+        raise ValueError(f"jobs must be a positive number of workers or -1, got {jobs}")
+    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                      **LOCAL_CLUSTER) as cluster, Client(cluster) as client:
+        yield client
 
 
-def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int = 1,
+def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int | None = None,
               model: str | Path | None = None, method: str | None = None,
               placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
-              overwrite: bool = False, progress: bool = False, fitted=None,
-              platform: str | None = None, skeleton: str | Path | None = None
-              ) -> dict[str, Any]:
-    """Reconstruct every recording into ``out_dir`` (see the module docstring).
+              force: bool = False, progress: bool = False, fitted=None, scheduler=None,
+              platform: str | None = None, height_m: float | None = None, retries: int = 2,
+              skeleton: str | Path | None = None) -> dict[str, Any]:
+    """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
     Parameters
     ----------
     recordings : log files (see :func:`imuloco.sensors.reallog.read_log`), one walker each.
     out_dir : folder for the outputs (created).
-    jobs : worker processes (``-1``: one per CPU; ``1``: in this process).
+    jobs : workers of the local cluster (``None`` or ``-1``: one per CPU).
     model, method, placement : the model, as :func:`imuloco.app.pipeline.choose_method` picks it.
     fmt, calibrate, platform : see :func:`imuloco.app.pipeline.reconstruct_file`.
-    overwrite : replace existing outputs (otherwise refuse before starting).
+    force : redo recordings whose outputs are complete, replace another job's outputs.
     progress : a progress bar (tqdm) on stderr.
     fitted : an already fitted method (skips the choice).
+    scheduler : address of an existing Dask scheduler (``tcp://host:8786``) or a
+        ``distributed.Client`` to use instead of a local cluster.
+    height_m : the walkers' height in metres, recorded in the tables (``None``: not given).
+    retries : Dask retries of a task that raises outside the reconstruction.
     skeleton : a motion file of the user's rig: every BVH comes out on it (checked before
         starting; see :func:`imuloco.app.pipeline.onto_rig`).
 
     Returns
     -------
-    The summary (also written to ``summary.json``): ``model``, ``method``, ``jobs``,
-    ``model_seconds`` (choosing the model), ``seconds`` (reconstructing), ``ok``, ``failed``,
-    ``frames`` (reconstructed) and ``recordings`` (rows in input order).
+    The summary (also written to ``summary.json``): ``model``, ``method``, ``model_sha256``,
+    ``jobs`` (workers), ``scheduler``, ``model_seconds`` (choosing the model), ``seconds``
+    (reconstructing, from the cluster ready to the last result), ``done``, ``skipped`` (complete from an earlier run), ``ok`` (done +
+    skipped), ``failed``, ``frames`` (reconstructed), ``strides`` and ``recordings`` (rows in
+    input order).
     """
     from tqdm.auto import tqdm
 
@@ -159,13 +286,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
     if not paths:
         raise ValueError("no recordings given")
     names = output_names(paths)
-    out = Path(out_dir)
-    files = [out / f"{n}{ext}" for n in names for ext in (".bvh", ".json")]
-    files += [out / "summary.csv", out / "summary.json"]
-    taken = [str(p) for p in files if p.exists()]
-    if taken and not overwrite:
-        raise FileExistsError(f"{', '.join(taken[:5])}{' ...' if len(taken) > 5 else ''} "
-                              "exist(s); pass overwrite=True (--force) to replace")
+    recs = [os.path.normpath(p.absolute()) for p in paths]
+    out = Path(out_dir).absolute()
     if skeleton is not None:
         from imuloco.app.pipeline import load_rig
 
@@ -176,31 +298,69 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int =
         fitted, note = choose_method(method, model, placement, progress=progress)
     else:
         note = f"given fitted method {fitted.name!r}"
-    model_seconds = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    rows: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="imuloco-batch-") as tmp:
-        model_path = str(fitted.save(Path(tmp) / "model.npz"))
-        tasks = [{"recording": str(p), "out_dir": str(out), "name": n,
-                  "model_path": model_path, "placement": placement, "fmt": fmt,
-                  "calibrate": calibrate, "overwrite": overwrite, "platform": platform,
-                  "skeleton": None if skeleton is None else str(skeleton)}
-                 for p, n in zip(paths, names)]
-        bar = tqdm(total=len(tasks), desc="batch", unit="rec", disable=not progress)
-        for row in _results(tasks, jobs):
-            rows[row["name"]] = row
-            bar.set_postfix_str(f"{row['name']}: {row['status']}")
+        blob = fitted.save(Path(tmp) / "model.npz").read_bytes()
+    sha = hashlib.sha256(blob).hexdigest()
+    model_seconds = time.perf_counter() - t0
+
+    reports = {n: _complete_report(out, n, r, sha) for n, r in zip(names, recs)}
+    foreign = [str(out / f"{n}.json") for n, rep in reports.items() if rep is False]
+    if foreign and not force:
+        raise OutputExistsError(f"{', '.join(foreign[:3])}{' ...' if len(foreign) > 3 else ''}"
+                                " hold(s) another recording's or model's outputs; pass --force "
+                                "(force=True) to replace them or choose another --out")
+    rows: dict[str, dict] = {}
+    strides: dict[str, list[dict]] = {}
+    for n, rep in reports.items():
+        if rep and not force:
+            rows[n], strides[n] = walker_rows(n, rep)
+    skipped = len(rows)
+    todo = [(n, r) for n, r in zip(names, recs) if n not in rows]
+    with dask_client(scheduler, jobs) as client:
+        from distributed import as_completed
+
+        t0 = time.perf_counter()
+        workers = len(client.scheduler_info(n_workers=-1)["workers"])
+        futures, jobs_of = [], {}
+        if todo:
+            shared = client.scatter(blob, broadcast=True)
+            job = uuid.uuid4().hex[:8]
+            for n, r in todo:
+                fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
+                                    placement=placement, fmt=fmt, calibrate=calibrate,
+                                    platform=platform, height_m=height_m,
+                                    skeleton=None if skeleton is None else str(skeleton),
+                                    key=f"imuloco-batch-{job}-{n}",
+                                    retries=retries, pure=False)
+                futures.append(fut)
+                jobs_of[fut.key] = (n, r)
+        bar = tqdm(total=len(names), initial=skipped, desc="batch", unit="rec",
+                   disable=not progress)
+        for fut in as_completed(futures):
+            n, r = jobs_of[fut.key]
+            if fut.status == "finished":
+                res = fut.result()
+                rows[n], strides[n] = res["row"], res["strides"]
+            else:  # lost more often than Dask allows, or raised more than ``retries`` times
+                rows[n], strides[n] = error_row(n, r, fut.exception(), 0.0), []
+            fut.release()
+            bar.set_postfix_str(f"{n}: {rows[n]['status']}")
             bar.update()
         bar.close()
-    ordered = [rows[n] for n in names]
     seconds = time.perf_counter() - t0
-    summary = {"model": note, "method": fitted.name, "jobs": jobs,
-               "model_seconds": round(model_seconds, 2), "seconds": round(seconds, 2), "ok": sum(r["status"] == "ok" for r in ordered),
-               "failed": sum(r["status"] != "ok" for r in ordered),
-               "frames": sum(r["frames"] or 0 for r in ordered), "recordings": ordered}
-    with open(out / "summary.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS)
-        writer.writeheader()
-        writer.writerows(ordered)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    ordered = [{k: rows[n].get(k) for k in WALKER_FIELDS} | {"method": fitted.name,
+                                                               "model": note}
+               for n in names]
+    all_strides = [s for n in names for s in strides[n]]
+    write_tables(out, ordered, all_strides, inputs=paths)
+    failed = sum(r["status"] != "ok" for r in ordered)
+    summary = {"model": note, "method": fitted.name, "model_sha256": sha, "jobs": workers,
+               "scheduler": scheduler if isinstance(scheduler, str) else None,
+               "model_seconds": round(model_seconds, 2), "seconds": round(seconds, 2),
+               "done": len(names) - skipped - failed, "skipped": skipped,
+               "ok": len(names) - failed, "failed": failed,
+               "frames": sum(r["frames"] or 0 for r in ordered), "strides": len(all_strides),
+               "recordings": [{k: r[k] for k in COLUMNS} for r in ordered]}
+    with atomic_write(check_output(out / "summary.json", force=True, inputs=paths), "w") as f:
+        f.write(json.dumps(summary, indent=2) + "\n")
     return summary

@@ -18,6 +18,17 @@ from pathlib import Path
 from imuloco.errors import ImulocoError, OutputExistsError
 
 
+def _read_umask() -> int:
+    mask = os.umask(0o022)  # reading the mask sets it: done once, at import
+    os.umask(mask)
+    return mask
+
+
+# mkstemp makes a file only its owner can read; a written output gets the permissions open()
+# would give it (0o666 less the umask), so that others can read a shared study's outputs
+_MODE = 0o666 & ~_read_umask()
+
+
 def check_output(path: str | Path, force: bool = False,
                  inputs: Iterable[str | Path] = ()) -> Path:
     """``path`` as a Path when it may be written: not an input, and new unless ``force``."""
@@ -55,6 +66,7 @@ def atomic_write(path: str | Path, mode: str = "wb") -> Iterator:
         with os.fdopen(fd, mode, **({"encoding": "utf-8"} if mode == "w" else {})) as f:
             yield f
             f.flush()
+            os.fchmod(f.fileno(), _MODE)
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
