@@ -181,3 +181,16 @@ def test_the_character_creator_rig_of_cmu_iclone(shared_dir, clip):
     onto_bandai = retarget(walk, Rig.measure([clip]))
     values = evaluate_parts(walk, onto_bandai)  # other proportions: the legs' within 3 cm
     assert values["lower_cm"] < 3.0 and values["mpjpe_cm"] < 10.0
+
+
+def test_batch_refuses_an_unmappable_rig_before_any_work(clip, tmp_path):
+    from imuloco.app.batch import run_batch
+
+    sk = clip.skeleton
+    names = [n.replace("Head", "Skull") for n in sk.names]
+    write_bvh(Motion(Skeleton(names, sk.parents, sk.offsets), clip.rotations, clip.root,
+                     clip.fps), tmp_path / "nohead.bvh")
+    (tmp_path / "rec.csv").write_text("time_s,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z\n")
+    with pytest.raises(BodyMapError, match=r"nohead\.bvh.*'head'"):
+        run_batch([tmp_path / "rec.csv"], tmp_path / "out", skeleton=tmp_path / "nohead.bvh")
+    assert not (tmp_path / "out").exists()
