@@ -70,3 +70,13 @@ def test_reconstruct_a_bad_log(tmp_path):
     bad.write_text("time_s,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z\n0,1,2,3,4,5,1e308\n")
     code, out = run("reconstruct", bad, "-o", tmp_path / "x.bvh", "--method", "mean")
     assert code == 1 and "bad.csv:2" in out
+
+
+def test_simulate_never_replaces_its_motion_file(tmp_path):
+    import shutil
+
+    motion = tmp_path / "walk.bvh"
+    shutil.copy(BVH, motion)
+    code, out = run("simulate", motion, "-o", motion, "--force")
+    assert code == 1 and "overwrite an input" in out
+    assert motion.read_bytes() == BVH.read_bytes()

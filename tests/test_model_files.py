@@ -277,3 +277,13 @@ def test_any_header_value_loads_or_fails_cleanly(models, tmp_path, key, value):
         assert str(tmp_path / "h.npz") in str(e)
         return
     assert 1 <= m.fps_ <= 1000 and m.placements_
+
+
+def test_zip_of_an_unknown_version_is_a_model_file_error(models, tmp_path):
+    """zipfile raises NotImplementedError for a version it does not know (a flipped byte)."""
+    blob = bytearray(models["ridge"].save(tmp_path / "r.npz").read_bytes())
+    at = blob.find(b"PK\x01\x02")
+    blob[at + 6] = 166  # "version needed to extract" of the first member: 16.6
+    (tmp_path / "v.npz").write_bytes(bytes(blob))
+    with pytest.raises(ModelFileError, match="v.npz"):
+        load_model(tmp_path / "v.npz")

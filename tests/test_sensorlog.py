@@ -430,3 +430,34 @@ def test_platform_without_metadata_is_guessed_with_a_warning(walk_rec, tmp_path,
         guessed, report = read_log(tmp_path / "ios", rate=None)
     assert "guessed ios" in caplog.text and report.platform.startswith("ios")
     np.testing.assert_allclose(guessed.acc, reference.acc)
+
+
+@settings(max_examples=80, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.binary(max_size=300) | st.text(alphabet="0123456789.,;-e\n\t\"#na ", max_size=300))
+def test_any_bytes_as_a_table_fail_cleanly_or_read_finite(tmp_path, content):
+    from imuloco.io.sensorlog import read_generic_csv, read_phyphox
+
+    path = tmp_path / "any.csv"
+    header = b"time_s,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z\n"
+    body = content if isinstance(content, bytes) else content.encode()
+    for data, reader in ((header + body, read_generic_csv), (body, read_phyphox),
+                         (body, detect_format)):
+        path.write_bytes(data)
+        try:
+            out = reader(path)
+        except FormatError as e:
+            assert e.path == str(path)
+            continue
+        if reader is not detect_format:
+            assert all(np.isfinite(s.values).all() and np.isfinite(s.times).all() for s in out)
+
+
+def test_zip_of_an_unknown_version_is_a_format_error(walk_rec, tmp_path):
+    _sensor_logger(tmp_path / "sl", walk_rec, total=True, ios=False)
+    blob = bytearray(_zip(tmp_path / "sl", tmp_path / "export.zip").read_bytes())
+    at = blob.find(b"PK\x01\x02")
+    blob[at + 6] = 166  # "version needed to extract": 16.6, which zipfile refuses
+    (tmp_path / "export.zip").write_bytes(bytes(blob))
+    with pytest.raises(FormatError, match="export.zip"):
+        read_log(tmp_path / "export.zip")

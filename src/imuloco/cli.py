@@ -359,8 +359,9 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
     if noise not in NOISE_PRESETS:
         raise click.BadParameter(f"unknown noise {noise!r}; presets: {sorted(NOISE_PRESETS)}",
                                  param_hint="--noise")
-    if output.exists() and not force:
-        raise click.ClickException(f"{output} exists; pass --force to replace it")
+    from imuloco.io.atomic import check_output
+
+    check_output(output, force, inputs=[motion_file])
     rec = simulate_sensors(read_motion(motion_file), places, rate=rate, noise=noise, seed=seed)
     write_generic_csv(rec, output, overwrite=True)
     click.echo(f"wrote {output}: {rec.num_samples} samples, {len(places)} sensor(s) "

@@ -604,6 +604,11 @@ def run_fuzz(n: int, readers: tuple[str, ...] = READERS, timeout: float = 5.0, s
     with tempfile.TemporaryDirectory(prefix="imuloco-fuzz-") as tmp:
         work = Path(tmp)
         seeds = seed_files(work)
+        # every reader imported before the workers fork: they all run the same code
+        import imuloco.io.asf_amc
+        import imuloco.io.bvh
+        import imuloco.methods.modelfile
+        import imuloco.sensors.reallog  # noqa: F401
         pool = _Pool(timeout)
         try:
             for reader in readers:

@@ -49,6 +49,7 @@ from typing import BinaryIO, Self
 import numpy as np
 
 from imuloco.errors import FormatError, UnknownNameError
+from imuloco.io.atomic import atomic_write
 
 log = logging.getLogger(__name__)
 
@@ -140,6 +141,10 @@ def _read_table(path: Path, allow_empty: bool = False, data: BinaryIO | None = N
     try:
         header, values, rows, start = _parse(path, allow_empty, data)
     except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+        raise FormatError(path, None, f"corrupted zip member ({exc})") from None
+    except OSError as exc:
+        if data is None:  # the file itself: not found, no permission, ...
+            raise
         raise FormatError(path, None, f"corrupted zip member ({exc})") from None
     if not rows:
         raise FormatError(path, start, "no data rows after the header")
@@ -235,7 +240,8 @@ def write_generic_csv(rec, path: str | Path, overwrite: bool = False) -> Path:
     """Write a :class:`~imuloco.core.recording.Recording` as generic CSV (m/s^2, rad/s).
 
     One sensor gives the plain ``time_s,acc_x,...,gyro_z`` header; several sensors prefix the
-    placement (``right_ankle.acc_x``). Refuses to replace a file unless ``overwrite``.
+    placement (``right_ankle.acc_x``). Refuses to replace a file unless ``overwrite``; writes
+    atomically.
     """
     path = Path(path)
     if path.exists() and not overwrite:
@@ -245,8 +251,9 @@ def write_generic_csv(rec, path: str | Path, overwrite: bool = False) -> Path:
     else:
         cols = [f"{p}.{c}" for p in rec.placements for c in GENERIC_COLUMNS]
     data = np.concatenate([rec.times[:, None], rec.channels()], axis=1)
-    np.savetxt(path, data, delimiter=",", header=",".join(["time_s"] + cols), comments="",
-               fmt=["%.6f"] + ["%.9g"] * (data.shape[1] - 1))
+    with atomic_write(path) as f:
+        np.savetxt(f, data, delimiter=",", header=",".join(["time_s"] + cols), comments="",
+                   fmt=["%.6f"] + ["%.9g"] * (data.shape[1] - 1))
     return path
 
 
@@ -343,7 +350,7 @@ class Export:
         try:
             self._zip = zipfile.ZipFile(self.path)
             infos = self._zip.infolist()
-        except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
+        except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as exc:
             raise FormatError(self.path, None, f"not a readable zip archive ({exc})") from None
         if len(infos) > MAX_MEMBERS:
             raise FormatError(self.path, None, f"zip with {len(infos)} members; an app export "
@@ -383,7 +390,7 @@ class Export:
         try:
             return self._zip.open(m)
         except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError,
-                ValueError) as exc:  # damaged, encrypted or of an unknown compression
+                ValueError, OSError) as exc:  # damaged, encrypted or of an unknown compression
             raise FormatError(self.label(name), None, f"unreadable zip member ({exc})") from None
 
     def header(self, name: str) -> str:
@@ -465,7 +472,7 @@ def sensorlogger_platform(ex: Export) -> tuple[str, str]:
         try:
             with ex.open("Metadata.csv") as f:
                 text = f.read(MAX_LINE_BYTES).decode("utf-8-sig", errors="replace")
-        except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
+        except (zipfile.BadZipFile, zlib.error, EOFError, OSError) as exc:
             raise FormatError(ex.label("Metadata.csv"), None, f"corrupted zip member ({exc})"
                               ) from None
         rows = list(csv.DictReader(text.splitlines()))

@@ -124,7 +124,8 @@ def load_model(path: str | Path) -> Method:
     except ModelFileError:
         raise
     except (zipfile.BadZipFile, zlib.error, ValueError, KeyError, OSError, EOFError,
-            MemoryError, RecursionError) as e:  # a corrupted zip or array
+            MemoryError, RecursionError, NotImplementedError) as e:  # a corrupted zip or array
+        # (NotImplementedError: zipfile on a version or compression it does not know)
         raise ModelFileError(f"{path}: not an imuloco model file or corrupted "
                              f"({type(e).__name__}: {e})") from None
 
