@@ -15,6 +15,15 @@ from imuloco.data import shared_data_dir
 from imuloco.ops.rotations import about_y
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _clip_cache(tmp_path_factory) -> None:
+    """Parsed clips are cached in a temporary folder, never in the user's cache."""
+    mp = pytest.MonkeyPatch()
+    mp.setenv("IMULOCO_CACHE", str(tmp_path_factory.mktemp("imuloco-cache")))
+    yield
+    mp.undo()
+
+
 @pytest.fixture(scope="session")
 def shared_dir() -> Path:
     """``../shared/data/bandai-namco-2``; tests that use it are skipped when it is absent."""

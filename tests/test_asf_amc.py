@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from mutations import byte_mutations
 
 from imuloco.core.bodymap import PARTS, resolve_body_map
 from imuloco.errors import FormatError
@@ -308,3 +309,83 @@ def test_parser_fails_only_with_format_error(tmp_path_factory, asf: str, amc: st
         assert e.path in (str(a), str(b)) and e.message
         return
     assert np.all(np.isfinite(m.positions()))
+
+
+def read_or_format_error(a: Path, b: Path) -> None:
+    """The readers' contract: a valid Motion, or a FormatError naming one of the two files."""
+    try:
+        m = read_asf_amc(a, b)
+    except FormatError as e:
+        assert e.path in (str(a), str(b)) and e.message
+        return
+    assert m.num_frames >= 1 and np.all(np.isfinite(m.positions()))
+    assert np.all(np.linalg.norm(m.skeleton.offsets, axis=-1) <= 10.0)
+
+
+@settings(derandomize=True, max_examples=200, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(asf=st.one_of(byte_mutations(LEG_ASF), st.just(LEG_ASF.encode())),
+       amc=st.one_of(byte_mutations(LEG_AMC), st.just(LEG_AMC.encode())))
+def test_byte_mutations_fail_only_with_format_error(tmp_path_factory, asf: bytes, amc: bytes):
+    d = tmp_path_factory.getbasetemp()
+    a, b = d / "bytes.asf", d / "bytes.amc"
+    a.write_bytes(asf)
+    b.write_bytes(amc)
+    read_or_format_error(a, b)
+
+
+NUMBERS = st.one_of(st.floats().map(repr), st.integers().map(str), st.text(max_size=12),
+                    st.sampled_from(["5e-324", "1e9", "0", "-1", "9" * 5000, "1e308"]))
+
+
+@settings(derandomize=True, max_examples=150, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(unit=NUMBERS, length=NUMBERS, value=NUMBERS, frame=NUMBERS)
+def test_malformed_units_lengths_values_and_frame_numbers(tmp_path_factory, unit: str,
+                                                          length: str, value: str, frame: str):
+    d = tmp_path_factory.getbasetemp()
+    cases = [(LEG_ASF.replace("length 0.45", f"length {unit}"), LEG_AMC),
+             (LEG_ASF.replace("length 4.5", f"length {length}"), LEG_AMC),
+             (LEG_ASF, LEG_AMC.replace("ltibia 90", f"ltibia {value}")),
+             (LEG_ASF, LEG_AMC.replace("\n1\n", f"\n{frame}\n"))]
+    for i, (asf, amc) in enumerate(cases):
+        a, b = d / f"f{i}.asf", d / f"f{i}.amc"
+        a.write_text(asf, encoding="utf-8", errors="surrogatepass")
+        b.write_text(amc, encoding="utf-8", errors="surrogatepass")
+        read_or_format_error(a, b)
+
+
+@pytest.mark.parametrize("which, old, new, words", [
+    ("asf", "length 0.45", "length 5e-324", "length unit from 0.001 to 1000"),
+    ("asf", "length 9\n", "length 1e9\n", "expected at most 10 m"),
+    ("amc", "\n1\n", "\n" + "9" * 5000 + "\n", "frame number below 1e9"),
+])
+def test_implausible_values(tmp_path: Path, which, old, new, words):
+    asf = LEG_ASF.replace(old, new, 1) if which == "asf" else LEG_ASF
+    amc = LEG_AMC.replace(old, new, 1) if which == "amc" else LEG_AMC
+    a, b = write(tmp_path, "x.asf", asf), write(tmp_path, "x.amc", amc)
+    with pytest.raises(FormatError, match=words) as e:
+        read_asf_amc(a, b)
+    assert e.value.path == str(a if which == "asf" else b) and e.value.line is not None
+
+
+def _many_bones(n: int, chain: bool) -> str:
+    bones = "".join(f"  begin\n    id {i}\n    name b{i}\n    direction 0 1 0\n    length 1\n"
+                    f"    axis 0 0 0 XYZ\n    dof rx\n  end\n" for i in range(n))
+    links = "".join(f"    {'root' if i == 0 or not chain else f'b{i - 1}'} b{i}\n"
+                    for i in range(n))
+    return (":units\n  length 0.45\n:root\n  order TX TY TZ RX RY RZ\n  axis XYZ\n"
+            f"  position 0 0 0\n  orientation 0 0 0\n:bonedata\n{bones}:hierarchy\n  begin\n"
+            f"{links}  end\n")
+
+
+@pytest.mark.parametrize("n, chain, words", [(300, True, "nested more than 256 deep"),
+                                             (2100, False, "more than 1999 bones")])
+def test_bone_limits(tmp_path: Path, n: int, chain: bool, words: str):
+    """A body has far fewer bones, far less deeply nested: such files are refused at once (the
+    fuzzing of issue 18 found 20,000 chained bones taking over a minute)."""
+    a = write(tmp_path, "many.asf", _many_bones(n, chain))
+    b = write(tmp_path, "many.amc", ":DEGREES\n1\nroot 0 0 0 0 0 0\n")
+    with pytest.raises(FormatError, match=words) as e:
+        read_asf_amc(a, b)
+    assert e.value.path == str(a)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import urllib.error
 import urllib.request
 
 import numpy as np
@@ -253,7 +254,7 @@ def test_replay_streams_a_recorded_file(fitted, sample_db, tmp_path):
     assert np.isfinite(np.array([p["positions"] for p in poses])).all()
 
 
-def test_a_pause_restarts_the_walker_with_the_same_calibration(fitted, phone):
+def test_a_long_pause_restarts_the_model_and_the_walker_stays_where_it_was(fitted, phone):
     pytest.importorskip("websockets")
     from imuloco.app.live.server import LiveServer
 
@@ -262,13 +263,286 @@ def test_a_pause_restarts_the_walker_with_the_same_calibration(fitted, phone):
     server = LiveServer(fitted, calibrate_s=CALIB_S)  # not listening: feed() directly
     server.start_session()
     first = server.feed(rows[:600])
-    calibration = server.session.calibration
+    s = server.session
+    calibration, before = s.calibration, s._recent[-1]
     later = rows[600:700].copy()
     later[:, 0] += 5.0  # the page slept for 5 s
     second = server.feed(later)
-    assert first > 0 and server.session.calibration is calibration
-    assert 0 < second <= 1 + (later[-1, 0] - later[0, 0]) * fitted.fps_
-    assert server.session.resampler.next == second  # frames counted from 0 again
+    assert first > 0 and server.session is s and s.calibration is calibration
+    assert s.dropouts == 1 and 0 < second <= 1 + (later[-1, 0] - later[0, 0]) * fitted.fps_
+    # frames go on counting on the same grid: the first after the pause is the first due
+    k = int(np.ceil((later[0, 0] - rows[0, 0]) * fitted.fps_ - 1e-9))
+    assert k > first + 100 and s.resampler.next == k + second
+    # over DEAD_RECKON_S: the walker resumes where it stopped, facing the same way
+    t, root, yaw = s._recent[-second]
+    assert t == pytest.approx(rows[0, 0] + k / fitted.fps_)
+    assert np.linalg.norm((root - before[1])[[0, 2]]) < 1e-9 and abs(yaw - before[2]) < 1e-9
+
+
+def test_a_one_second_dropout_is_recovered_within_one_second(fitted, sample_db):
+    """Pose error against the run without the gap <= 1 cm from at most 1 s of stream time after
+    the first sample after the gap on (see imuloco.app.live.bench), on three replays."""
+    from imuloco.app.live.bench import dropout_recovery
+
+    clip = next(c for c in sample_db.clips if c.name == CLIP)
+    for seed, gap_start in ((11, 4.5), (12, 5.0), (13, 5.5)):
+        rec = simulate(clip, ["right_ankle"], rate=100.0, noise="phone", seed=seed)
+        r = dropout_recovery(fitted, rec.times, rec.acc, rec.gyro, gap_start, gap_s=1.0,
+                             threshold_cm=1.0, calibrate_s=CALIB_S, window_s=2.0)
+        assert r.errors_cm[0] > r.threshold_cm  # the restarted model starts off: a real test
+        assert r.recovery_s <= 1.0, (seed, r.recovery_s)
+        assert np.all(r.errors_cm[r.times_s >= r.recovery_s] <= 1.0)
+        assert r.times_s[-1] >= 1.8
+
+
+def test_session_buffers_stay_bounded_whatever_the_timestamps(fitted):
+    from imuloco.app.live.session import MAX_RATE_HZ, RATE_BURST
+
+    s = LiveSession(fitted, calibrate_s=2.0)
+    rng = np.random.default_rng(0)
+    t, most = 0.0, 0
+    for i in range(60_000):  # rows 1e-7 s apart, then 1 ms apart
+        t += 1e-7 if i < 30_000 else 1e-3
+        s.push(t, rng.normal(size=3), rng.normal(size=3))
+        most = max(most, s.buffered)
+    assert s.dropped >= 30_000 - 2 * RATE_BURST
+    assert most <= (3 * 2.0 + 1) * MAX_RATE_HZ + RATE_BURST + 1
+    assert s._raw.nbytes < 2e6  # preallocated for the bound, 56 bytes a row
+    with pytest.raises(ValueError, match="calibrate_s"):
+        LiveSession(fitted, calibrate_s=1e6)
+
+
+# ---- access and limits, with the real websockets library on 127.0.0.1 -----------------------
+def _serve(fitted, **kwargs):
+    """An async context: a LiveServer on a free loopback port and its ws:// base address."""
+    import contextlib
+
+    from imuloco.app.live.server import LiveServer
+
+    @contextlib.asynccontextmanager
+    async def serving():
+        server = LiveServer(fitted, calibrate_s=0, **kwargs)
+        await server.start("127.0.0.1", 0)
+        try:
+            yield server, f"ws://127.0.0.1:{server.port}"
+        finally:
+            await server.close()
+
+    return serving()
+
+
+async def _refused(url: str, **kwargs) -> tuple[int, str]:
+    """Status and body of a refused websocket handshake."""
+    from websockets.asyncio.client import connect
+    from websockets.exceptions import InvalidStatus
+
+    with pytest.raises(InvalidStatus) as e:
+        async with connect(url, **kwargs):
+            pass
+    return e.value.response.status_code, e.value.response.body.decode()
+
+
+async def _closed(ws) -> tuple[int, str]:
+    """Code and reason the server closed ``ws`` with (reading what came before)."""
+    from websockets.exceptions import ConnectionClosed
+
+    try:
+        while True:
+            await asyncio.wait_for(ws.recv(), 30)
+    except ConnectionClosed as e:
+        return e.rcvd.code, e.rcvd.reason
+
+
+def _rows(t: np.ndarray) -> str:
+    return json.dumps({"rows": [[ti, 0.0, 9.81, 0.0, 0.0, 0.0, 0.0] for ti in t]})
+
+
+def test_token_is_required_off_loopback_and_checked_when_given(fitted):
+    pytest.importorskip("websockets")
+    from websockets.asyncio.client import connect
+
+    async def main():
+        async with _serve(fitted, require_token=True) as (server, base):
+            token = server.token
+            assert len(token) >= 20 and server.urls("localhost")["phone"].endswith(token)
+            for path in ("/ws/phone", "/ws/view", f"/ws/view?token={token}x"):
+                status, body = await _refused(base + path)
+                assert status == 403 and "token" in body
+            async with connect(f"{base}/ws/view?token={token}") as view:
+                assert json.loads(await asyncio.wait_for(view.recv(), 10))["type"] == "skeleton"
+            page = f"http://127.0.0.1:{server.port}/live"
+            with pytest.raises(urllib.error.HTTPError) as e:
+                await asyncio.to_thread(urllib.request.urlopen, page, timeout=10)
+            e.value.close()
+            assert e.value.code == 403
+            got = await asyncio.to_thread(urllib.request.urlopen, f"{page}?token={token}",
+                                          timeout=10)
+            got.close()
+            assert got.status == 200
+        async with _serve(fitted) as (server, base):  # loopback: no token is fine, a wrong no
+            assert not server.require_token
+            async with connect(base + "/ws/view") as view:
+                assert json.loads(await asyncio.wait_for(view.recv(), 10))["type"] == "skeleton"
+            status, body = await _refused(base + "/ws/phone?token=guess")
+            assert status == 403 and "wrong token" in body
+            assert server.phone is None
+
+    asyncio.run(main())
+
+
+def test_other_origins_and_hosts_are_refused(fitted):
+    pytest.importorskip("websockets")
+    from websockets.asyncio.client import connect
+
+    async def main():
+        async with _serve(fitted, allow_origins=["https://viewer.example:9000/"]) as (
+                server, base):
+            own = f"http://127.0.0.1:{server.port}"
+            status, body = await _refused(base + "/ws/phone", origin="https://evil.example")
+            assert status == 403 and "Origin" in body and "--allow-origin" in body
+            status, _ = await _refused(base + "/ws/view", origin="null")
+            assert status == 403 and server.phone is None and not server.viewers
+            for origin in (own, "https://viewer.example:9000"):
+                async with connect(base + "/ws/view", origin=origin) as view:
+                    assert json.loads(await asyncio.wait_for(view.recv(), 10))["type"] == \
+                        "skeleton"
+            # DNS rebinding: a page whose own name now resolves to 127.0.0.1
+            req = urllib.request.Request(f"{own}/live", headers={"Host": "evil.example:80"})
+            with pytest.raises(urllib.error.HTTPError) as e:
+                await asyncio.to_thread(urllib.request.urlopen, req, timeout=10)
+            body = e.value.read()
+            e.value.close()
+            assert e.value.code == 403 and b"loopback" in body
+
+    asyncio.run(main())
+
+
+def test_limits_close_the_connection_with_a_code_and_a_reason(fitted, caplog):
+    pytest.importorskip("websockets")
+    from websockets.asyncio.client import connect
+
+    from imuloco.app.live.server import Limits
+
+    limits = Limits(max_bytes=64 * 1024, max_rows=100, messages_per_s=1.0, max_viewers=2)
+
+    async def phone_closed(base, *messages) -> tuple[int, str]:
+        async with connect(base + "/ws/phone", max_size=None) as ph:
+            for m in messages:
+                await ph.send(m)
+            return await _closed(ph)
+
+    async def main():
+        async with _serve(fitted, limits=limits) as (_, base):
+            noise = np.random.default_rng(0).normal(size=(14_000, 6))
+            rows = np.round(np.c_[np.arange(14_000) * 0.01, noise], 6)
+            one_mib = json.dumps({"rows": rows.tolist()})  # 14k rows, about 1 MiB
+            assert len(one_mib) > 2**20 * 0.9
+            code, reason = await phone_closed(base, one_mib)
+            assert code == 1009 and "exceeds limit" in reason
+            code, reason = await phone_closed(base, _rows(np.arange(101) * 0.01))
+            assert code == 1009 and "101 rows" in reason
+            code, reason = await phone_closed(base, *[_rows([0.01 * i]) for i in range(50)])
+            assert code == 1008 and "messages/s" in reason
+        async with _serve(fitted, limits=Limits()) as (_, base):
+            # rows 0.9 s apart: 90 s of samples at once, faster than real time
+            code, reason = await phone_closed(base, _rows(np.arange(100) * 0.9))
+            assert code == 1008 and "real time" in reason
+        async with _serve(fitted, limits=limits) as (_, base), \
+                connect(base + "/ws/view") as a, connect(base + "/ws/view") as b:
+            async with connect(base + "/ws/view") as c:
+                assert await _closed(c) == (1013, "too many viewers (at most 2)")
+            await a.send("hello")
+            assert await _closed(a) == (1008, "viewers only listen on /ws/view")
+            assert json.loads(await asyncio.wait_for(b.recv(), 10))["type"] == "skeleton"
+
+    with caplog.at_level("INFO", logger="imuloco"):
+        asyncio.run(main())
+    closing = [r.getMessage() for r in caplog.records if r.getMessage().startswith("closing")]
+    assert len(closing) == 5  # one line per connection a limit closed (1009 is websockets')
+
+
+def test_rows_closer_than_the_rate_limit_do_not_grow_the_servers_buffers(fitted):
+    pytest.importorskip("websockets")
+    from websockets.asyncio.client import connect
+
+    from imuloco.app.live.session import RATE_BURST
+
+    async def main():
+        async with _serve(fitted) as (server, base), connect(base + "/ws/phone") as ph:
+            for i in range(20):  # 20 messages of 1000 rows 1e-7 s apart
+                await ph.send(_rows(i * 1e-4 + np.arange(1000) * 1e-7))
+            await ph.send(_rows([1.0]))
+            while server.session.last_t != 1.0:  # the worker has taken every message
+                await asyncio.sleep(0.01)
+            s = server.session
+            assert s.dropped >= 20_000 - 3 * RATE_BURST and s.buffered <= 3 * RATE_BURST
+
+    asyncio.run(asyncio.wait_for(main(), 120))
+
+
+def test_the_model_runs_off_the_event_loop(fitted):
+    pytest.importorskip("websockets")
+    import threading
+
+    from websockets.asyncio.client import connect
+
+    from imuloco.methods.base import Stream
+
+    threads = set()
+
+    class Recorded(_Late):
+        def stream(self):
+            inner = self.method.stream()
+
+            class S(Stream):
+                def step(self, sample):
+                    threads.add(threading.current_thread().name)
+                    return inner.step(sample)
+
+            return S()
+
+    async def main():
+        async with _serve(Recorded(fitted)) as (_, base), connect(base + "/ws/view") as view, \
+                connect(base + "/ws/phone") as ph:
+            await ph.send(_rows(np.arange(100) * 0.01))
+            while True:
+                msg = json.loads(await asyncio.wait_for(view.recv(), 30))
+                if msg["type"] == "pose":
+                    break
+            return threading.current_thread().name
+
+    loop_thread = asyncio.run(main())
+    assert threads and loop_thread not in threads
+    assert all(name.startswith("imuloco-live-model") for name in threads)
+
+
+def test_a_dropped_viewer_is_one_log_line(fitted, phone, caplog):
+    """A viewer whose connection is lost while poses stream: one line from the server, none of
+    asyncio's 'socket.send() raised exception' per pose."""
+    pytest.importorskip("websockets")
+    from websockets.asyncio.client import connect
+
+    times, acc, gyro = phone
+    rows = np.concatenate([times[:, None], acc[:, 0], gyro[:, 0]], 1)
+
+    async def main():
+        async with _serve(fitted) as (server, base):
+            async with connect(base + "/ws/view") as view:
+                await asyncio.wait_for(view.recv(), 10)
+                (ws,) = server.viewers
+                ws.transport.abort()  # the network dropped it; websockets has not noticed yet
+                server.start_session()
+                frames = server.feed(rows[:300])  # ~90 poses at it
+                while server.viewers:
+                    await asyncio.sleep(0.01)
+            return frames
+
+    with caplog.at_level("INFO"):
+        frames = asyncio.run(asyncio.wait_for(main(), 60))
+    assert frames > 50
+    lines = [r.getMessage() for r in caplog.records]
+    assert not [m for m in lines if "socket.send()" in m]
+    assert len([m for m in lines if m.startswith("viewer ")]) == 1
 
 
 # ---- the pages in a real headless browser (skipped without selenium and Debian chromium) -----
@@ -328,8 +602,8 @@ def test_phone_page_sends_device_motion_in_si_units(threaded_server, browser):
 
     server, _ = threaded_server
     received = []
-    feed = server.feed
-    server.feed = lambda rows: (received.append(rows.copy()), feed(rows))[1]
+    process = server.process  # runs in the server's worker thread
+    server.process = lambda rows: (received.append(rows.copy()), process(rows))[1]
     browser.get(f"http://127.0.0.1:{server.port}/phone")
     browser.find_element(By.ID, "start").click()
     _wait_for(lambda: server.phone is not None)

@@ -286,3 +286,23 @@ def test_real_shin_recording_gives_a_plausible_walk(shared_dir):
     g = gait_parameters(motion)
     assert g["cadence_rhythm_spm"] == pytest.approx(raw, rel=0.1)
     assert 0.3 < g["speed_mps"] < 2.0
+
+
+def test_cli_reconstruct_units(tmp_path, log_file, model_file):
+    """``--units m`` writes the same motion in metres (what Blender reads at scale 1)."""
+    from imuloco.io.bvh import read_bvh
+
+    outs = {}
+    for units in ("cm", "m"):
+        outs[units] = tmp_path / f"{units}.bvh"
+        res = CliRunner().invoke(cli, ["reconstruct", str(log_file), "--model", str(model_file),
+                                       "-o", str(outs[units]), "--units", units])
+        assert res.exit_code == 0, res.output
+    cm, m = read_bvh(outs["cm"], unit="cm"), read_bvh(outs["m"], unit="m")
+    np.testing.assert_allclose(m.positions(), cm.positions(), atol=1e-6)
+    # the numbers themselves are 100 times smaller
+    np.testing.assert_allclose(read_bvh(outs["m"], unit="cm").positions(),
+                               cm.positions() / 100, atol=1e-8)
+    res = CliRunner().invoke(cli, ["reconstruct", str(log_file), "--model", str(model_file),
+                                   "-o", str(tmp_path / "x.bvh"), "--units", "mm"])
+    assert res.exit_code == 2

@@ -41,6 +41,14 @@ def _reading_options(f):
                              "(auto: detected from the animated body).")(f)
 
 
+def _units_option(f):
+    """``--units m|cm``: the length unit of written BVH files."""
+    return click.option("--units", "units", type=click.Choice(["cm", "m"]), default="cm",
+                        show_default=True,
+                        help="Length unit of the written BVH (Blender: import a cm file with "
+                             "scale 0.01, an m file with scale 1).")(f)
+
+
 @cli.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
@@ -163,12 +171,19 @@ DATA_HELP = ("Folder(s) of clips, repeatable or comma separated; several become 
 @click.option("--batch", "batch_walkers", type=click.IntRange(1), default=None, metavar="N",
               help="Instead: the batch benchmark (imuloco.evaluate.batchbench) on N simulated "
                    "walkers of 60 s; writes batch_bench.md and batch_bench.json.")
+@click.option("--load", "load_dirs", multiple=True, metavar="DIR",
+              type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="Instead: time loading these motion folders (repeat or comma-separate): "
+                   "numpy parse, reader, cold and warm cache; writes load.json and load.md.")
+@click.option("--against", default=None, metavar="REV",
+              help="With --load: also time the BVH reader of this git commit.")
 @_reading_options
 def bench(method_names: str | None, split_name: str, noise: str, placement: str,
           data_items: tuple[str, ...], train_items: tuple[str, ...],
           test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
           speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None,
-          batch_walkers: int | None, up: str, skip_frames: int) -> None:
+          batch_walkers: int | None, load_dirs: tuple[Path, ...], against: str | None,
+          up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
     if fuzz is not None:
         from imuloco.evaluate.fuzz import READERS, write_fuzz
@@ -187,8 +202,16 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
                                             placement=placement)))
         click.echo(f"wrote {out / 'batch_bench.json'} and {out / 'batch_bench.md'}")
         return
+    if load_dirs:
+        from imuloco.evaluate.loadspeed import load_benchmark, table
+
+        folders = [Path(p) for d in load_dirs for p in _csv(str(d))]
+        click.echo(table(load_benchmark(folders, out, against), against))
+        click.echo(f"wrote {out / 'load.json'} and {out / 'load.md'}")
+        return
     if not method_names:
-        raise click.UsageError("Missing option '--method' (or pass --fuzz N or --batch N).")
+        raise click.UsageError("Missing option '--method' (or pass --fuzz N, --batch N or "
+                               "--load DIR).")
     names = _csv(method_names)
     data = _folders(data_items)
     if speed:
@@ -410,11 +433,13 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html).")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
+@_units_option
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
                 report_path: Path | None, skeleton: Path | None, no_calibrate: bool,
-                platform: str | None, piece_seconds: float | None, force: bool) -> None:
+                platform: str | None, piece_seconds: float | None, force: bool,
+                units: str) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -438,7 +463,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 
         report = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
                                     not no_calibrate, platform=platform, overwrite=force,
-                                    piece_s=piece_seconds, progress=True)
+                                    piece_s=piece_seconds, progress=True, unit=units)
         if report_path:
             with atomic_write(report_path, "w") as f:
                 f.write(json.dumps(report, indent=2) + "\n")
@@ -455,7 +480,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     except (FormatError, KeyError, ValueError) as e:
         raise click.ClickException(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {report['model']}", err=True)
-    write_bvh(motion, output, overwrite=force)
+    write_bvh(motion, output, unit=units, overwrite=force)
     written = [output]
     if video or html_path:
         written += render_outputs([motion], [f"{motion.name} ({report['method']})"],
@@ -486,15 +511,16 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
               help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
                    "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
+@_units_option
 def demo(out_dir: Path, method_name: str | None, model_path: Path | None,
-         skeleton: Path | None, force: bool) -> None:
+         skeleton: Path | None, force: bool, units: str) -> None:
     """Simulate a phone on the right ankle of a bundled walk, reconstruct it and write the
     BVH, a side-by-side video (MP4, GIF), the HTML viewer, plots and a report."""
     from imuloco.app.pipeline import demo as run_demo
 
     try:
         report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
-                          progress=True, skeleton=skeleton)
+                          progress=True, unit=units, skeleton=skeleton)
     except (FileExistsError, KeyError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     m = report["metrics"]
@@ -581,10 +607,11 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
                    "guessed with a warning].")
 @click.option("--force", is_flag=True,
               help="Redo recordings whose outputs are complete (a re-run skips them).")
+@_units_option
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path,
           jobs: int | None, scheduler: str | None, model_path: Path | None,
           method_name: str | None, placement: str, fmt: str, skeleton: Path | None,
-          no_calibrate: bool, platform: str | None, force: bool) -> None:
+          no_calibrate: bool, platform: str | None, force: bool, units: str) -> None:
     """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
     recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
     finished recordings)."""
@@ -596,7 +623,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     try:
         summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
                             calibrate=not no_calibrate, force=force, progress=True,
-                            scheduler=scheduler, platform=platform,
+                            scheduler=scheduler, platform=platform, unit=units,
                             skeleton=skeleton)
     except (KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
@@ -644,15 +671,18 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
               help="TLS certificate (PEM): serve HTTPS, which phones need for motion sensors.")
 @click.option("--key", "keyfile", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Private key of --cert.")
+@click.option("--allow-origin", "allow_origins", multiple=True, metavar="ORIGIN",
+              help="Also accept browsers on this origin (https://host:port); repeatable.")
 def live(host: str, port: int, model_path: Path | None, method_name: str | None,
          placement: str, calibrate_seconds: float, replay: Path | None, fmt: str, speed: float,
-         loop: bool, certfile: str | None, keyfile: str | None) -> None:
+         loop: bool, certfile: str | None, keyfile: str | None,
+         allow_origins: tuple[str, ...]) -> None:
     """Watch a walker live: a phone on the leg streams its sensors (open /phone on it), a
     browser shows the reconstruction as it walks (open /live). Ctrl-C stops."""
     import asyncio
 
     try:
-        from imuloco.app.live.server import LiveServer, run, ssl_context
+        from imuloco.app.live.server import LiveServer, configure_logging, run, ssl_context
     except ImportError as e:
         raise click.ClickException(f"live mode needs websockets: pip install imuloco[live] "
                                    f"({e})") from None
@@ -660,23 +690,23 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
 
     try:
         fitted, note = choose_method(method_name, model_path, placement, progress=True)
-        server = LiveServer(fitted, calibrate_seconds, note)
+        server = LiveServer(fitted, calibrate_seconds, note, allow_origins=allow_origins)
     except (KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     ssl = ssl_context(certfile, keyfile) if certfile else None
-    scheme = "https" if ssl else "http"
     shown = "localhost" if host in ("127.0.0.1", "0.0.0.0", "::") else host
 
     def started(srv: LiveServer) -> None:
         click.echo(f"model: {note}", err=True)
-        base = f"{scheme}://{shown}:{srv.port}"
-        click.echo(f"viewer: {base}/live    phone: {base}/phone" +
+        urls = srv.urls(shown)
+        click.echo(f"viewer: {urls['live']}\nphone:  {urls['phone']}" +
                    ("" if host != "127.0.0.1" else "  (--host 0.0.0.0 for a phone on the "
                                                    "network)"))
         if not ssl and host != "127.0.0.1":
             click.echo("phones only give motion sensors to https pages: pass --cert and --key",
                        err=True)
 
+    configure_logging()
     replay_args = None if replay is None else {"path": replay, "placement": placement,
                                                "fmt": fmt, "speed": speed, "loop": loop}
     try:

@@ -116,8 +116,9 @@ def worker_model(sha256: str, data: bytes):
 def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
                     platform: str | None = None, height_m: float | None = None,
-                    skeleton: str | None = None) -> dict[str, Any]:
-    """Reconstruct one recording (a path read here), write ``NAME.bvh`` then ``NAME.json``.
+                    unit: str = "cm", skeleton: str | None = None) -> dict[str, Any]:
+    """Reconstruct one recording (a path read here), write ``NAME.bvh`` (lengths in ``unit``)
+    then ``NAME.json``.
 
     Returns ``{"row": ..., "strides": [...]}`` (see :func:`walker_rows`); errors are caught and
     reported in the row."""
@@ -134,9 +135,9 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
         report["strides"] = stride_rows(motion)
         report["seconds"] = round(time.perf_counter() - t0, 3)
         report["batch"] = {"recording": recording, "model_sha256": model_sha256,
-                           "placement": placement, "height_m": height_m}
+                           "placement": placement, "height_m": height_m, "unit": unit}
         out = Path(out_dir)
-        write_bvh(motion, out / f"{name}.bvh", overwrite=True)  # atomic; a rerun's leftover
+        write_bvh(motion, out / f"{name}.bvh", unit=unit, overwrite=True)  # atomic
         with atomic_write(out / f"{name}.json", "w") as f:  # last: marks the outputs complete
             f.write(json.dumps(report, indent=2) + "\n")
     except Exception as e:  # noqa: BLE001 - one bad recording must not stop the batch
@@ -166,9 +167,11 @@ def error_row(name: str, recording: str, error: BaseException, seconds: float) -
             "error": f"{type(error).__name__}: {error}", "seconds": round(seconds, 3)}
 
 
-def _complete_report(out: Path, name: str, recording: str, sha256: str) -> dict | None | bool:
-    """``NAME.json`` when it completes this recording with this model; ``None`` when there is
-    no JSON (to do); ``False`` when outputs of another recording, model or program are there."""
+def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: str = "cm"
+                     ) -> dict | None | bool:
+    """``NAME.json`` when it completes this recording with this model and BVH unit; ``None``
+    when there is no JSON (to do); ``False`` when outputs of another recording, model, unit or
+    program are there."""
     path = out / f"{name}.json"
     if not path.exists():
         return None
@@ -176,7 +179,7 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str) -> dict 
         report = json.loads(path.read_text())
         batch = report["batch"]
         same = (batch["recording"] == recording and batch["model_sha256"] == sha256
-                and (out / f"{name}.bvh").is_file())
+                and batch.get("unit", "cm") == unit and (out / f"{name}.bvh").is_file())
     except (OSError, ValueError, KeyError, TypeError):
         return False
     return report if same else False
@@ -250,7 +253,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
               placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
               force: bool = False, progress: bool = False, fitted=None, scheduler=None,
               platform: str | None = None, height_m: float | None = None, retries: int = 2,
-              skeleton: str | Path | None = None) -> dict[str, Any]:
+              unit: str = "cm", skeleton: str | Path | None = None) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
     Parameters
@@ -267,6 +270,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
         ``distributed.Client`` to use instead of a local cluster.
     height_m : the walkers' height in metres, recorded in the tables (``None``: not given).
     retries : Dask retries of a task that raises outside the reconstruction.
+    unit : length unit of the BVH files (``cm`` or ``m``; see :func:`imuloco.io.bvh.write_bvh`).
     skeleton : a motion file of the user's rig: every BVH comes out on it (checked before
         starting; see :func:`imuloco.app.pipeline.onto_rig`).
 
@@ -303,11 +307,12 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     sha = hashlib.sha256(blob).hexdigest()
     model_seconds = time.perf_counter() - t0
 
-    reports = {n: _complete_report(out, n, r, sha) for n, r in zip(names, recs)}
+    reports = {n: _complete_report(out, n, r, sha, unit) for n, r in zip(names, recs)}
     foreign = [str(out / f"{n}.json") for n, rep in reports.items() if rep is False]
     if foreign and not force:
         raise OutputExistsError(f"{', '.join(foreign[:3])}{' ...' if len(foreign) > 3 else ''}"
-                                " hold(s) another recording's or model's outputs; pass --force "
+                                " hold(s) another recording's, model's or unit's outputs; pass "
+                                "--force "
                                 "(force=True) to replace them or choose another --out")
     rows: dict[str, dict] = {}
     strides: dict[str, list[dict]] = {}
@@ -328,7 +333,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
             for n, r in todo:
                 fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
                                     placement=placement, fmt=fmt, calibrate=calibrate,
-                                    platform=platform, height_m=height_m,
+                                    platform=platform, height_m=height_m, unit=unit,
                                     skeleton=None if skeleton is None else str(skeleton),
                                     key=f"imuloco-batch-{job}-{n}",
                                     retries=retries, pure=False)

@@ -115,12 +115,13 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
                        calibrate: bool = True, pin: bool | None = None,
                        platform: str | None = None, overwrite: bool = False,
                        piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS,
-                       progress: bool = False) -> dict[str, Any]:
+                       progress: bool = False, unit: str = "cm") -> dict[str, Any]:
     """Import a log, reconstruct it in pieces and write the BVH to ``output`` piece by piece.
 
     Parameters as :func:`imuloco.app.pipeline.reconstruct_file` (``method`` a name, or a fitted
     method); returns the report, with gait parameters and plausibility checks combined over
-    the pieces (:func:`combine`) and ``pieces`` (their count and seconds).
+    the pieces (:func:`combine`) and ``pieces`` (their count and seconds). ``unit``: the
+    BVH's length unit (:func:`imuloco.io.bvh.write_bvh`).
     """
     import time
 
@@ -160,7 +161,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
             bar.update(piece.num_frames)
             yield piece
 
-    write_bvh_pieces(pieces(), frames, output, overwrite=overwrite)
+    write_bvh_pieces(pieces(), frames, output, unit=unit, overwrite=overwrite)
     bar.close()
     return {
         "recording": {"files": log_report.files, "format": log_report.format,

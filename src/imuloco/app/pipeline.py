@@ -296,7 +296,7 @@ def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequ
 
 def demo(out_dir: str | Path, method: str | None = None, model: str | Path | None = None,
          clip: str = DEMO_CLIP, overwrite: bool = False, progress: bool = False,
-         skeleton: str | Path | None = None) -> dict[str, Any]:
+         unit: str = "cm", skeleton: str | Path | None = None) -> dict[str, Any]:
     """The README's first command: a bundled clip, a simulated phone, a reconstruction.
 
     Takes ``clip`` from the bundled sample, simulates a phone on the right ankle with phone
@@ -306,6 +306,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     reconstruction ``demo.mp4`` and ``demo.gif``, the viewer ``demo.html``, plots
     (``signals.png``, ``phases.png``, ``errors.png``) and ``report.md`` / ``report.json`` with
     the metrics (:func:`imuloco.evaluate.metrics.evaluate`) and gait parameters of both.
+    ``unit`` is the BVH's length unit (``cm`` or ``m``).
     With ``skeleton`` (a motion file of the user's rig) ``reconstruction.bvh`` is on that rig
     (:func:`onto_rig`); the video, viewer and metrics stay on the model's skeleton.
 
@@ -357,7 +358,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     gt_cut, rec_cut = gt.slice(0, n), motion.slice(0, n)
     rec_cut.name = "reconstruction"
     write_bvh(rec_cut if skeleton is None else onto_rig(rec_cut, load_rig(skeleton)),
-              paths["reconstruction.bvh"], overwrite=overwrite)
+              paths["reconstruction.bvh"], unit=unit, overwrite=overwrite)
     bar.update()
 
     bar.set_postfix_str("rendering")

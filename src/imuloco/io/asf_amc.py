@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,11 +35,14 @@ import numpy as np
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
+from imuloco.io.bvh import MAX_DEPTH, MAX_JOINTS
 from imuloco.io.upaxis import check_skip, check_up, to_y_up
 from imuloco.ops.rotations import IDENTITY, from_euler, qinv, qmul
 
 INCH = 0.0254
 CMU_FPS = 120.0
+LENGTH_UNITS = (1e-3, 1e3)  # plausible ':units length L' (file values per inch)
+MAX_BONE = 10.0  # metres: longer bones are corrupt data
 _ROOT_CHANNELS = ("TX", "TY", "TZ", "RX", "RY", "RZ")
 _BONE_DOF = ("rx", "ry", "rz")
 
@@ -72,19 +76,18 @@ class _Asf:
     order: list[str] = field(default_factory=list)  # bones, parents before children
 
 
-def _lines(path: Path) -> list[tuple[int, list[str]]]:
-    """(1-based line number, tokens) of each line that has tokens once comments are removed."""
+def _lines(path: Path) -> Iterator[tuple[int, list[str]]]:
+    """(1-based line number, tokens) of each line that has tokens once comments are removed,
+    lazily: a parser that stops at a limit does not split the rest of a huge file."""
     raw = path.read_bytes()
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         text = raw.decode("latin-1")
-    out = []
     for i, ln in enumerate(text.splitlines()):
         toks = ln.split("#", 1)[0].split()
         if toks:
-            out.append((i + 1, toks))
-    return out
+            yield i + 1, toks
 
 
 def _num(path: Path, line: int, tok: str, what: str, allow_inf: bool = False) -> float:
@@ -133,8 +136,10 @@ def _parse_asf(path: Path) -> _Asf:
         if section == "units":
             if key == "length":
                 asf.length = _num(path, line, toks[1] if len(toks) > 1 else "", "length unit")
-                if asf.length <= 0:
-                    raise FormatError(path, line, "expected a positive length unit")
+                if not LENGTH_UNITS[0] <= asf.length <= LENGTH_UNITS[1]:
+                    raise FormatError(path, line, f"expected a length unit from "
+                                      f"{LENGTH_UNITS[0]:g} to {LENGTH_UNITS[1]:g} (CMU: 0.45), "
+                                      f"found {toks[1]!r}")
             elif key == "angle":
                 unit = toks[1].lower() if len(toks) > 1 else ""
                 if unit not in ("deg", "rad"):
@@ -229,6 +234,9 @@ def _close_bone(asf: _Asf, bone: _Bone, line: int) -> None:
         raise FormatError(path, line, "bone block ends without a 'name'")
     if bone.name in asf.bones or bone.name == "root":
         raise FormatError(path, bone.line, f"bone name {bone.name!r} is used twice")
+    if len(asf.bones) + 1 >= MAX_JOINTS:
+        raise FormatError(path, bone.line, f"more than {MAX_JOINTS - 1} bones; expected a "
+                          "body's skeleton")
     for what in ("direction", "length"):
         if getattr(bone, what) is None:
             raise FormatError(path, line, f"bone {bone.name!r} has no {what!r}")
@@ -257,12 +265,16 @@ def _link(asf: _Asf, line: int, parent: str, children: list[str]) -> None:
 
 
 def _order_bones(asf: _Asf) -> None:
-    stack = list(reversed(asf.root_children))
+    stack = [(b, 1) for b in reversed(asf.root_children)]
     while stack:  # depth first, children in the order the hierarchy lists them
-        b = stack.pop()
+        b, depth = stack.pop()
+        if depth > MAX_DEPTH:
+            raise FormatError(asf.path, asf.bones[b].line, f"bones nested more than "
+                              f"{MAX_DEPTH} deep; expected a body's skeleton")
         asf.order.append(b)
-        stack.extend(reversed(asf.bones[b].children))
-    missing = [b for b in asf.bones.values() if b.name not in asf.order]
+        stack.extend((c, depth + 1) for c in reversed(asf.bones[b].children))
+    ordered = set(asf.order)
+    missing = [b for b in asf.bones.values() if b.name not in ordered]
     if missing:
         raise FormatError(asf.path, missing[0].line, f"bones {[b.name for b in missing]} are "
                           "not connected to the root in the :hierarchy")
@@ -277,6 +289,10 @@ def _skeleton(asf: _Asf, scale: float) -> Skeleton:
     for b in asf.order:
         bone = asf.bones[b]
         vec = bone.direction * bone.length * scale  # the bone, from its start to its end
+        if not bone.length * scale <= MAX_BONE:
+            raise FormatError(asf.path, bone.line, f"bone {b!r} is {bone.length * scale:.3g} m "
+                              f"long; expected at most {MAX_BONE:g} m (check its length and "
+                              "the length unit)")
         for c in bone.children:
             offsets[index[c]] = vec
         if not bone.children:
@@ -307,6 +323,9 @@ def _parse_amc(path: Path, channels: dict[str, list[str]], degrees: bool
                 degrees = key.upper() == ":DEGREES"
             continue
         if len(toks) == 1 and key.isascii() and key.isdigit():
+            if len(key.lstrip("0")) > 9:
+                raise FormatError(path, line, f"expected a frame number below 1e9, found "
+                                  f"{key[:40]!r}")
             number = int(key)
             if frames and number != frames_start + len(frames):
                 raise FormatError(path, line, f"expected frame {frames_start + len(frames)}, "
@@ -419,4 +438,8 @@ def read_asf_amc(asf_path: str | Path, amc_path: str | Path, fps: float = CMU_FP
             c = _fixed_axes(bone.axis, bone.axis_order, asf.degrees)
             m = _fixed_axes(values[b], "".join(d[1] for d in bone.dof), degrees)
             rotations[:, j] = _conjugated(c, m)
-    return to_y_up(Motion(skeleton, rotations, root * scale, fps, amc_path.stem), up, amc_path)
+    try:
+        motion = Motion(skeleton, rotations, root * scale, fps, amc_path.stem)
+    except ValueError as e:  # values overflowing once scaled; each was checked finite
+        raise FormatError(amc_path, None, f"{e}; expected plausible values") from None
+    return to_y_up(motion, up, amc_path)

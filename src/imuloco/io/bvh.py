@@ -26,8 +26,11 @@ units, else metres. Inches are never guessed: pass ``unit="in"``.
 from __future__ import annotations
 
 import decimal
+import functools
+import io
 import math
 import re
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,14 +42,21 @@ from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
 from imuloco.io.atomic import atomic_write
-from imuloco.io.upaxis import Z_TO_Y, check_skip, check_up, resolve_up, to_y_up
+from imuloco.io.upaxis import Z_TO_Y, check_skip, check_up, resolve_up, spread_frames, to_y_up
 from imuloco.ops.rotations import IDENTITY, from_euler, qmul, qrot, to_euler
 
 # Metres per file unit. "cmu": the CMU motion capture unit, (1 / 0.45) inch.
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
 CHANNELS = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 _CANON = {c.lower(): c for c in CHANNELS}  # "XROTATION" and "XRotation" are seen in the wild
-MIN_FPS, MAX_FPS = 0.1, 10_000.0  # plausible frame rates; others are corrupt headers
+MIN_FPS, MAX_FPS = 1.0, 1000.0  # plausible frame rates; others are corrupt headers
+MAX_FRAMES = 10_000_000  # 23 hours at 120 fps
+MAX_JOINTS, MAX_DEPTH = 2_000, 256  # rigs with face and finger bones have a few hundred
+# The fast reading takes "\n" and "\r\n" only; str.splitlines also breaks at these.
+_ODD_BREAKS = "\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"
+_MOTION = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
+_HEADERS = re.compile(r"(?:[ \t]*\r?\n)*[ \t]*Frames[ \t]*:[ \t]*(\S+)[ \t]*\r?\n"
+                      r"(?:[ \t]*\r?\n)*[ \t]*Frame Time[ \t]*:[ \t]*(\S+)[ \t]*\r?\n")
 _MAX_ABS = 1e9  # larger numbers are corrupt data in any unit, and would overflow products
 
 
@@ -112,6 +122,7 @@ def _number(path: Path, line: int, tok: str, what: str) -> float:
 
 def _parse_hierarchy(tk: _Tokens) -> list[_Joint]:
     joints: list[_Joint] = []
+    names: set[str] = set()
     tk.expect("HIERARCHY")
     tk.expect("ROOT")
 
@@ -123,8 +134,12 @@ def _parse_hierarchy(tk: _Tokens) -> list[_Joint]:
         if not words:
             raise FormatError(tk.path, keyword_line, "expected a joint name after ROOT/JOINT")
         name = " ".join(words)
-        if any(j.name == name for j in joints):
+        if name in names:
             raise FormatError(tk.path, keyword_line, f"joint name {name!r} is used twice")
+        if len(joints) == MAX_JOINTS:
+            raise FormatError(tk.path, keyword_line, f"more than {MAX_JOINTS} joints; expected "
+                              "a body's rig")
+        names.add(name)
         if not brace_on_line:
             tk.expect("{")
         j = _Joint(name, parent, keyword_line)
@@ -136,8 +151,9 @@ def _parse_hierarchy(tk: _Tokens) -> list[_Joint]:
                 seen_offset = True
                 continue
             count, line = tk.next("a channel count")
-            if not (count.isascii() and count.isdigit()):
-                raise FormatError(tk.path, line, f"expected a channel count, found {count!r}")
+            if not (count.isascii() and count.isdigit() and len(count) == 1 and count <= "6"):
+                raise FormatError(tk.path, line, f"expected a channel count from 0 to 6, "
+                                  f"found {count[:40]!r}")
             for _ in range(int(count)):
                 ch, line = tk.next(f"a channel name of {name!r}")
                 if ch.lower() not in _CANON:
@@ -157,6 +173,9 @@ def _parse_hierarchy(tk: _Tokens) -> list[_Joint]:
     while stack:
         tok, line = tk.next("JOINT, End Site or '}'")
         if tok == "JOINT":
+            if len(stack) == MAX_DEPTH:
+                raise FormatError(tk.path, line, f"joints nested more than {MAX_DEPTH} deep; "
+                                  "expected a body's rig")
             open_joint(stack[-1], line)
             stack.append(len(joints) - 1)
         elif tok == "End":
@@ -211,14 +230,7 @@ def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True
     up = check_up(up)
     if root_offset not in ("auto", "replace", "add"):
         raise ValueError(f"root_offset must be 'auto', 'replace' or 'add', got {root_offset!r}")
-    lines = _decode(path).splitlines()
-    motion_at = next((i for i, ln in enumerate(lines) if ln.strip() == "MOTION"), None)
-    if motion_at is None:  # parse what there is, to say where MOTION was expected
-        _parse_hierarchy(_Tokens(path, lines))
-        raise FormatError(path, max(len(lines), 1), "file ends early: expected a MOTION line "
-                          "after the HIERARCHY")
-    joints = _parse_hierarchy(_Tokens(path, lines[:motion_at]))
-    fps, data = _parse_motion(path, lines, motion_at, joints)
+    joints, fps, data = parse_bvh(path, _decode(path))
     check_skip(skip_frames, len(data), path)
     motion, scale = _build_motion(path, joints, data[skip_frames:], fps, UNITS.get(unit),
                                   fold_static_root)
@@ -232,14 +244,101 @@ def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True
     return motion
 
 
+def parse_bvh(path: Path, text: str) -> tuple[list[_Joint], float, np.ndarray]:
+    """The joints, frames per second and channel values (T, C) of a BVH ``text``.
+
+    The MOTION block is read in one pass by ``numpy.loadtxt``; a block it does not take as a
+    clean (T, C) array of finite numbers (and text with line breaks other than ``\n`` and
+    ``\r\n``) goes to the line-by-line reading, which names the line and field at fault.
+    """
+    m = None if _odd_breaks(text) else _MOTION.search(text)
+    hierarchy = None if m is None else _memo_hierarchy(path, text[:m.start()])
+    if hierarchy is not None:
+        joints, motion_line = hierarchy
+        parsed = _parse_motion_fast(path, text, m.end(), motion_line, joints)
+        if parsed is not None:
+            return joints, *parsed
+    lines = text.splitlines()
+    motion_at = next((i for i, ln in enumerate(lines) if ln.strip() == "MOTION"), None)
+    if motion_at is None:  # parse what there is, to say where MOTION was expected
+        _parse_hierarchy(_Tokens(path, lines))
+        raise FormatError(path, max(len(lines), 1), "file ends early: expected a MOTION line "
+                          "after the HIERARCHY")
+    joints = _parse_hierarchy(_Tokens(path, lines[:motion_at]))
+    return joints, *_parse_motion(path, lines, motion_at, joints)
+
+
+_HIERARCHIES: dict[str, tuple[list[_Joint], int]] = {}
+
+
+def _memo_hierarchy(path: Path, head: str) -> tuple[list[_Joint], int] | None:
+    """The joints of the text ``head`` before a MOTION line, and that line's number; None when
+    ``head`` itself has a MOTION line. Memoised by text (a folder's clips share one rig): the
+    joints are shared, read only."""
+    if head not in _HIERARCHIES:
+        lines = head.splitlines()
+        if any(ln.strip() == "MOTION" for ln in lines):
+            return None
+        if len(_HIERARCHIES) >= 64:
+            _HIERARCHIES.clear()
+        _HIERARCHIES[head] = _parse_hierarchy(_Tokens(path, lines)), len(lines) + 1
+    return _HIERARCHIES[head]
+
+
+def _odd_breaks(text: str) -> bool:
+    """Whether ``text`` breaks lines other than by ``\\n`` or ``\\r\\n``."""
+    if any(c in text for c in _ODD_BREAKS):
+        return True
+    return "\r" in text and text.count("\r") != text.count("\r\n")
+
+
+def _parse_motion_fast(path: Path, text: str, start: int, motion_line: int,
+                       joints: list[_Joint]) -> tuple[float, np.ndarray] | None:
+    """Frames per second and values (T, C) of the MOTION block after ``text[start]``, or None
+    when the block needs the line-by-line reading (which then says what is wrong)."""
+    h = _HEADERS.match(text, start)
+    if h is None:
+        return None
+    frames_line = motion_line + text.count("\n", start, h.start(1))
+    frames = _frame_count(path, frames_line, h.group(1))
+    fps = frame_rate(path, motion_line + text.count("\n", start, h.start(2)), h.group(2))
+    width = _width(path, motion_line, joints)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy warns of an empty block: read it line by line
+        try:
+            data = np.loadtxt(io.StringIO(text[h.end():]), dtype=np.float64, comments=None,
+                              ndmin=2)
+        except (ValueError, Warning):
+            return None
+    if data.shape != (frames, width) or not np.all(np.abs(data) <= _MAX_ABS):
+        return None  # NaN fails the comparison too
+    return fps, data
+
+
+def _frame_count(path: Path, line: int, token: str) -> int:
+    digits = token.lstrip("0")
+    if not (token.isascii() and token.isdigit() and 0 < len(digits) <= 8
+            and int(digits) <= MAX_FRAMES):
+        raise FormatError(path, line, f"expected a frame count from 1 to {MAX_FRAMES}, "
+                          f"found {token[:40]!r}")
+    return int(digits)
+
+
+def _width(path: Path, motion_line: int, joints: list[_Joint]) -> int:
+    """Channel values per frame."""
+    width = sum(len(j.channels) for j in joints)
+    if width == 0:
+        raise FormatError(path, motion_line, "expected channels on at least one joint, "
+                          "found none")
+    return width
+
+
 def _offset_is_added(motion: Motion, shift: np.ndarray) -> bool:
     """Whether adding the root's replaced OFFSET ``shift`` (3,) m, Y up, puts the body's lowest
     joint nearer the floor (height 0) over up to 64 frames than leaving it out does."""
     if abs(shift[1]) < 1e-6:
         return False
-    idx = np.unique(np.linspace(0, motion.num_frames - 1, 64).astype(int))
-    sub = Motion(motion.skeleton, motion.rotations[idx], motion.root[idx], motion.fps)
-    lowest = float(np.median(sub.positions()[..., 1].min(axis=1)))
+    lowest = float(np.median(spread_frames(motion, 64).positions()[..., 1].min(axis=1)))
     return abs(lowest + shift[1]) < abs(lowest)
 
 
@@ -266,7 +365,8 @@ def frame_rate(path: Path, line: int, token: str) -> float:
 
 def _parse_motion(path: Path, lines: list[str], at: int, joints: list[_Joint]
                   ) -> tuple[float, np.ndarray]:
-    """Frames per second and the channel values (T, C) of the MOTION block at line ``at``."""
+    """Frames per second and the channel values (T, C) of the MOTION block at line ``at``,
+    line by line (the reference reading, which names the line at fault)."""
     # (line number, text) of the non-blank lines after MOTION
     body = [(i + 1, ln) for i, ln in enumerate(lines[at + 1:], start=at + 1) if ln.strip()]
 
@@ -280,15 +380,10 @@ def _parse_motion(path: Path, lines: list[str], at: int, joints: list[_Joint]
         return m.group(1), lineno
 
     frames_s, frames_line = header(0, "Frames")
-    if not (frames_s.isascii() and frames_s.isdigit()) or int(frames_s) < 1:
-        raise FormatError(path, frames_line, f"expected a frame count of at least 1, "
-                          f"found {frames_s!r}")
-    frames = int(frames_s)
+    frames = _frame_count(path, frames_line, frames_s)
     ft_s, ft_line = header(1, "Frame Time")
     fps = frame_rate(path, ft_line, ft_s)
-    width = sum(len(j.channels) for j in joints)
-    if width == 0:
-        raise FormatError(path, at + 1, "expected channels on at least one joint, found none")
+    width = _width(path, at + 1, joints)
     rows = body[2:]
     if len(rows) < frames:
         last = rows[-1][0] if rows else ft_line
@@ -337,26 +432,38 @@ def _is_float(s: str) -> bool:
 def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float,
                   scale: float | None, fold_static_root: bool) -> tuple[Motion, float]:
     """The Motion of channel values ``data`` (T, C), and the metres per file unit used."""
-    t = data.shape[0]
-    n = len(joints)
-    local_pos = np.empty((t, n, 3))
-    local_rot = np.empty((t, n, 4))
+    t, n = data.shape[0], len(joints)
+    # Column indices of every position channel and of each Euler order's rotation channels, so
+    # that each is one array operation over all frames and joints (one scipy call per order).
+    pos_joint, pos_axis, pos_col = [], [], []
+    by_order: dict[str, tuple[list[int], list[list[int]]]] = {}
     col = 0
     for k, j in enumerate(joints):
-        local_pos[:, k] = j.offset
-        rot = [(i, c[0]) for i, c in enumerate(j.channels) if c.endswith("rotation")]
+        rot_cols, order = [], ""
         for i, c in enumerate(j.channels):
             if c.endswith("position"):
-                local_pos[:, k, "XYZ".index(c[0])] = data[:, col + i]
-        if rot:
-            order = "".join(a for _, a in rot)
-            local_rot[:, k] = from_euler(data[:, [col + i for i, _ in rot]], order)
-        else:
-            local_rot[:, k] = IDENTITY
+                pos_joint.append(k)
+                pos_axis.append("XYZ".index(c[0]))
+                pos_col.append(col + i)
+            else:
+                rot_cols.append(col + i)
+                order += c[0]
+        if order:
+            ks, cols = by_order.setdefault(order, ([], []))
+            ks.append(k)
+            cols.append(rot_cols)
         col += len(j.channels)
+    local_pos = np.repeat(np.array([j.offset for j in joints])[None], t, axis=0)  # (T, J, 3)
+    local_pos[:, pos_joint, pos_axis] = data[:, pos_col]
+    local_rot = np.empty((t, n, 4))
+    local_rot[:] = IDENTITY
+    for order, (ks, cols) in by_order.items():
+        local_rot[:, ks] = from_euler(data[:, cols], order)  # (T, K, len(order)) angles
 
     names = [j.name for j in joints]
     parents = np.array([j.parent for j in joints])
+    translating = sorted(set(pos_joint))
+    moving = dict(zip(translating, _moving(local_pos[:, translating])))
     first = 0
     while fold_static_root and first + 1 < n:
         # Fold the root into its single child when that child has position channels and
@@ -369,14 +476,14 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
             break
         static_root = (np.ptp(local_pos[:, first], axis=0).max() == 0.0
                        and np.ptp(local_rot[:, first], axis=0).max() == 0.0)
-        if not (static_root or _moves(local_pos[:, child])):
+        if not (static_root or moving[child]):
             break
         local_pos[:, child] = local_pos[:, first] + qrot(local_rot[:, first],
                                                          local_pos[:, child])
         local_rot[:, child] = qmul(local_rot[:, first], local_rot[:, child])
         first = child
-    for k in range(first + 1, n):
-        if _moves(local_pos[:, k]):
+    for k in translating:
+        if k > first and moving[k]:
             raise FormatError(path, joints[k].line, f"joint {names[k]!r} has moving position "
                               "channels below the root's chain of single children; expected "
                               "constant ones there (a Motion translates its root only)")
@@ -384,24 +491,38 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
     offsets = local_pos[0, first:].copy()
     offsets[0] = 0.0
     sk_parents = np.where(parents[first:] >= 0, parents[first:] - first, -1)
+    parts = cached_body_map(tuple(names[first:]))
     if scale is None:
-        scale = _guess_scale(names[first:], sk_parents, offsets)
+        scale = _guess_scale(names[first:], sk_parents, offsets, parts)
     end_sites = {k - first: j.end_site * scale for k, j in enumerate(joints)
                  if j.end_site is not None and k >= first}
-    skeleton = Skeleton(names[first:], sk_parents, offsets * scale, end_sites)
-    motion = Motion(skeleton, local_rot[:, first:], local_pos[:, first] * scale, fps, path.stem)
+    try:
+        skeleton = Skeleton(names[first:], sk_parents, offsets * scale, end_sites, dict(parts))
+        motion = Motion(skeleton, local_rot[:, first:], local_pos[:, first] * scale, fps,
+                        path.stem)
+    except ValueError as e:  # each value was checked finite and below 1e9: not expected
+        raise FormatError(path, None, f"{e}; expected plausible values") from None
     return motion, scale
 
 
-def _moves(pos: np.ndarray) -> bool:
-    """Whether per-frame positions (T, 3) vary by more than float noise."""
-    size = max(1.0, float(np.abs(pos).max()))
-    return bool(np.ptp(pos, axis=0).max() > 1e-6 * size)
+def _moving(pos: np.ndarray) -> np.ndarray:
+    """Whether each joint's per-frame positions (T, K, 3) vary by more than float noise: (K,)."""
+    high, low = pos.max(axis=0), pos.min(axis=0)  # (K, 3)
+    size = np.maximum(1.0, np.maximum(high, -low).max(axis=-1, initial=0.0))
+    return (high - low).max(axis=-1, initial=0.0) > 1e-6 * size
 
 
-def _guess_scale(names: list[str], parents: np.ndarray, offsets: np.ndarray) -> float:
-    """Metres per file unit, from the leg length when the body map finds hip and ankle."""
-    parts = resolve_body_map(names, strict=False)
+@functools.lru_cache(maxsize=64)
+def cached_body_map(names: tuple[str, ...]) -> dict[str, str]:
+    """The body map of joint ``names`` (memoised: a folder's clips share one rig); callers
+    copy it before handing it on."""
+    return resolve_body_map(list(names), strict=False)
+
+
+def _guess_scale(names: list[str], parents: np.ndarray, offsets: np.ndarray,
+                 parts: dict[str, str]) -> float:
+    """Metres per file unit, from the leg length when the body map ``parts`` has hip and
+    ankle."""
     for side in ("right", "left"):
         if f"{side}_hip" not in parts or f"{side}_ankle" not in parts:
             continue
@@ -429,8 +550,10 @@ def write_bvh(motion: Motion, path: str | Path, unit: str = "cm", order: str = "
 
     The root gets 6 channels (position, then rotation), every other joint 3 rotation channels,
     in the intrinsic Euler ``order`` (a permutation of ``XYZ``); lengths are in ``unit``
-    (``m, cm, mm, in, cmu``), angles in degrees with 6 decimals, lengths with enough decimals
-    for 1e-8 m. Refuses to replace an existing file unless ``overwrite``. Returns the path.
+    (``m, cm, mm, in, cmu``; Blender's importer takes the file's numbers as metres, so import
+    a centimetre file with scale 0.01), angles in degrees with 6 decimals, lengths with enough
+    decimals for 1e-8 m. Leaf joints get a non-zero End Site (:func:`end_site`). Refuses to
+    replace an existing file unless ``overwrite``. Returns the path.
     """
     return write_bvh_pieces([motion], motion.num_frames, path, unit, order, overwrite)
 
@@ -466,6 +589,34 @@ def write_bvh_pieces(pieces: Iterable[Motion], frames: int, path: str | Path, un
     return path
 
 
+# End Site lengths where a rig has none, as fractions of stature (Winter, Biomechanics and
+# Motor Control of Human Movement, 4th ed., Fig. 4.1: head top above the skull base about
+# 0.13 H, hand 0.108 H, toe tip beyond the ball of the foot about 0.04 H); the stature from
+# the hip-to-ankle length, about 0.49 H there.
+_END_SITE_STATURE = {"head": 0.13, "left_wrist": 0.108, "right_wrist": 0.108,
+                     "left_toe": 0.04, "right_toe": 0.04}
+
+
+def end_site(sk: Skeleton, j: int) -> np.ndarray:
+    """The End Site offset (3,) in metres written for leaf joint ``j``: the rig's own, or where
+    it has none (or one of zero length, which Blender drops with a warning) one along the
+    joint's bone: of the body part's length (head top, hand, toes; see above) when the body map
+    and the leg allow, else half the bone's length, at least 1 cm."""
+    site = np.asarray(sk.end_sites.get(j, np.zeros(3)), dtype=np.float64)
+    if np.linalg.norm(site) > 1e-6:
+        return site
+    bone = float(np.linalg.norm(sk.offsets[j]))
+    direction = sk.offsets[j] / bone if bone > 1e-9 else np.array([0.0, 1.0, 0.0])
+    length = max(0.5 * bone, 0.01)
+    part = next((p for p, name in (sk.body_map or {}).items() if name == sk.names[j]), None)
+    if part in _END_SITE_STATURE:
+        try:
+            length = _END_SITE_STATURE[part] * sk.leg_length() / 0.49
+        except KeyError:  # no leg in the body map: keep the bone-based length
+            pass
+    return direction * length
+
+
 def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
     """The HIERARCHY section's lines of ``sk`` (lengths times ``k``, ``dec`` decimals)."""
     for name in sk.names:
@@ -490,9 +641,8 @@ def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
         for c in kids:
             emit(c, depth + 1)
         if not kids or j in sk.end_sites:
-            site = np.asarray(sk.end_sites.get(j, np.zeros(3))) * k
-            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET {vec(site)}",
-                        f"{pad}\t}}"])
+            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{",
+                        f"{pad}\t\tOFFSET {vec(end_site(sk, j) * k)}", f"{pad}\t}}"])
         out.append(f"{pad}}}")
 
     emit(0, 0)

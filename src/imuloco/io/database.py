@@ -29,7 +29,7 @@ from tqdm.auto import tqdm
 
 from imuloco.core.motion import Motion, MotionDatabase
 from imuloco.errors import FormatError
-from imuloco.io.bvh import read_bvh
+from imuloco.io.cache import read_motion_cached
 
 TRIALS_FILE = "trials.csv"
 # A trial description (lower case) -> content: the first pattern found wins.
@@ -147,6 +147,9 @@ def load_database(
         names: see :func:`spread`), for quick runs.
     up, skip_frames : as for :func:`imuloco.io.bvh.read_bvh` (the vertical axis, ``"auto"``
         by default; leading frames to drop, such as a prepended T-pose).
+
+    Parsed clips are cached by file content (:mod:`imuloco.io.cache`): a second load of the
+    same folder reads ``.npz`` entries instead of parsing text.
     """
     folder = Path(folder)
     if not folder.is_dir():
@@ -165,7 +168,7 @@ def load_database(
             continue
         chosen.append((f, lab))
     chosen = [chosen[i] for i in spread(len(chosen), limit)]
-    clips = [drop_leading_pose(read_bvh(f, up=up, skip_frames=skip_frames))
+    clips = [drop_leading_pose(read_motion_cached(f, up=up, skip_frames=skip_frames))
              for f, _ in tqdm(chosen, desc=f"loading {folder.name}", disable=not progress,
                               unit="clip")]
     return MotionDatabase(clips, [lab for _, lab in chosen])

@@ -4,7 +4,7 @@ imuloco's motions are Y up (see ``docs/glossary.md``). Some exporters (3ds Max, 
 default axes, MotionBuilder in Z-up scenes) write Z up. What matters is the world frame the
 animation ends up in, not the rig's rest pose: the Character Creator rig of ``cmu-iclone`` has
 Z-up rest offsets but a root rotated by -90 degrees about X in every frame, so its animated body
-is Y up already. Detection therefore looks at the animated body: over up to 64 frames spread
+is Y up already. Detection therefore looks at the animated body: over up to 16 frames spread
 over the clip, the median of the vector from the ankles (else knees) up to the head (else neck,
 chest); the axis, Y or Z, along which it points up the most is up. A rig whose head and legs the
 body map cannot find (see :mod:`imuloco.core.bodymap`) is taken as Y up: pass ``up="z"``.
@@ -19,12 +19,13 @@ import numpy as np
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
+from imuloco.ops.kinematics import joint_positions
 from imuloco.ops.rotations import qinv, qmul, qrot
 
 UP_AXES = ("auto", "y", "z")
 # Z up -> Y up: the rotation by -90 degrees about X, (x, y, z) -> (x, z, -y); quaternion x,y,z,w.
 Z_TO_Y = np.array([-np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)])
-_DETECT_FRAMES = 64
+_DETECT_FRAMES = 16
 
 
 def check_up(up: str) -> str:
@@ -32,6 +33,12 @@ def check_up(up: str) -> str:
     if not isinstance(up, str) or up.lower() not in UP_AXES:
         raise ValueError(f"up must be one of {list(UP_AXES)}, got {up!r}")
     return up.lower()
+
+
+def spread_frames(motion: Motion, n: int) -> Motion:
+    """At most ``n`` frames of ``motion``, evenly spread over it (for cheap checks)."""
+    idx = np.unique(np.linspace(0, motion.num_frames - 1, n).astype(int))
+    return Motion(motion.skeleton, motion.rotations[idx], motion.root[idx], motion.fps)
 
 
 def detect_up(motion: Motion) -> str:
@@ -42,9 +49,9 @@ def detect_up(motion: Motion) -> str:
                    if f"left_{p}" in parts and f"right_{p}" in parts), None)
     if top is None or bottom is None:
         return "y"
-    idx = np.unique(np.linspace(0, motion.num_frames - 1, _DETECT_FRAMES).astype(int))
-    sub = Motion(motion.skeleton, motion.rotations[idx], motion.root[idx], motion.fps)
-    pos = sub.part_positions([top] + bottom)  # (T, 3, 3)
+    sub, sk = spread_frames(motion, _DETECT_FRAMES), motion.skeleton
+    pos = joint_positions(sub.rotations, sub.root, sk.offsets, sk.parents,
+                          [sk.part(p) for p in [top] + bottom])  # (T, 3, 3)
     up = np.median(pos[:, 0] - pos[:, 1:].mean(axis=1), axis=0)  # (3,) x, y, z
     return "z" if up[2] > up[1] else "y"
 

@@ -39,6 +39,32 @@ def fk(
     return from_matrix(glob), pos
 
 
+def joint_positions(rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray,
+                    parents: np.ndarray, joints: list[int]) -> np.ndarray:
+    """World positions of a few ``joints`` only, from the chains that lead to them: cheaper
+    than :func:`fk` when they are few (the readers' up-axis check).
+
+    rotations : (..., J, 4); root : (..., 3); offsets : (J, 3); parents : (J,) -> (..., K, 3).
+    """
+    needed: set[int] = set()
+    for j in joints:
+        while j >= 0 and j not in needed:
+            needed.add(j)
+            j = int(parents[j])
+    order = sorted(needed)  # parents before children
+    local = to_matrix(np.asarray(rotations, dtype=np.float64)[..., order, :])
+    glob: dict[int, np.ndarray] = {}
+    pos: dict[int, np.ndarray] = {}
+    for i, j in enumerate(order):
+        p = int(parents[j])
+        if p < 0:
+            glob[j], pos[j] = local[..., i, :, :], np.asarray(root, dtype=np.float64)
+        else:
+            glob[j] = glob[p] @ local[..., i, :, :]
+            pos[j] = pos[p] + glob[p] @ offsets[j]
+    return np.stack([pos[j] for j in joints], axis=-2)
+
+
 def point_on_segment(
     global_rotations: np.ndarray, positions: np.ndarray, joint: int, offset: np.ndarray
 ) -> np.ndarray:

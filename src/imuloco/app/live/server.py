@@ -15,7 +15,21 @@ One asyncio ``websockets`` server (the ``[live]`` extra) on one port serves
 
 One phone streams at a time; each phone connection starts a fresh
 :class:`~imuloco.app.live.session.LiveSession`. :meth:`LiveServer.replay` streams a recorded log at
-real time through the same path instead of a phone.
+real time through the same path instead of a phone. The model runs in one worker thread, one
+message at a time: the event loop keeps serving viewers while it works, and a phone is not
+read further until its last message is done (back-pressure through TCP).
+
+Access. Every address the server prints carries a per-session token (``?token=...``). Off
+loopback the token is required for pages and websockets; on loopback it is checked when given.
+A browser's ``Origin`` must be the server's own (the address the browser used) or one given in
+``allow_origins``; on loopback the ``Host`` must be a loopback name (a page on another site that
+re-resolves its name to 127.0.0.1, "DNS rebinding", is refused). The standard library-level
+check (``serve(origins=...)``) takes a fixed list, while the server's own origin is whatever
+address the phone used, hence the check here.
+
+Limits (:class:`Limits`): bytes and rows per message, messages per second, phone seconds per
+second, viewers; exceeding one closes that connection with a websocket close code and reason
+and logs one line. A viewer too slow to read gets no poses until it catches up.
 
 Browsers expose motion sensors to secure pages only: ``http://localhost`` is one, but a phone
 reaching a laptop over the network needs HTTPS (``certfile``/``keyfile``, a self-signed
@@ -27,18 +41,25 @@ from __future__ import annotations
 import asyncio
 import functools
 import http
+import ipaddress
 import json
 import logging
+import secrets
 import ssl as ssl_module
 import time
+from collections.abc import Iterable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
+from websockets.protocol import State
 
-from imuloco.app.live.session import LiveSession, frames_to_json
+from imuloco.app.live.session import MAX_GAP_S, LiveSession, TokenBucket, frames_to_json
 from imuloco.viz.html import inline_stickfigure
 
 log = logging.getLogger(__name__)
@@ -46,13 +67,36 @@ log = logging.getLogger(__name__)
 HERE = Path(__file__).parent
 PAGES = {"/": "live.html", "/live": "live.html", "/phone": "phone.html"}
 STATUS_EVERY_S = 0.5  # phone seconds between status messages
-MAX_GAP_S = 1.0  # a longer pause in the samples restarts the walker
+LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
+YIELD_EVERY = 32  # messages broadcast between two returns to the event loop
 
 
 @functools.cache
 def _page(name: str) -> str:
     """The page ``name`` as served: read once, the stick-figure script inlined."""
     return inline_stickfigure((HERE / name).read_text("utf-8"))
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What one connection may do. Exceeding a limit closes the connection (code 1009 for a
+    message too big, 1008 for a rate, 1013 for too many connections) with the reason."""
+
+    max_bytes: int = 256 * 1024  # one message (a phone sends ~75 bytes per row)
+    max_rows: int = 1000  # sample rows in one message (10 s at 100 Hz)
+    messages_per_s: float = 250.0  # per phone, after a burst of as many
+    stream_speed: float = 2.0  # phone seconds per wall-clock second, after a burst of ...
+    stream_burst_s: float = 30.0  # ... this many (a phone's backlog after a network stall)
+    max_viewers: int = 200
+    viewer_buffer: int = 256 * 1024  # bytes queued to a viewer before poses skip it
+
+
+class LimitExceeded(Exception):
+    """A connection broke a :class:`Limits` rule: close it with ``code`` and ``reason``."""
+
+    def __init__(self, code: int, reason: str) -> None:
+        super().__init__(reason)
+        self.code, self.reason = code, reason
 
 
 def skeleton_message(method) -> dict:
@@ -70,11 +114,15 @@ def skeleton_message(method) -> dict:
             "placements": list(method.placements_)}
 
 
-def parse_rows(message: str | bytes, width: int) -> np.ndarray:
-    """The sample rows (N, width) of a phone message; ValueError naming what is wrong."""
+def parse_rows(message: str | bytes, width: int, max_rows: int | None = None) -> np.ndarray:
+    """The sample rows (N, width) of a phone message; ValueError naming what is wrong,
+    :class:`LimitExceeded` for more than ``max_rows`` rows."""
     try:
         data = json.loads(message)
-        rows = np.asarray(data["rows"], dtype=np.float64)
+        rows = data["rows"]
+        if max_rows is not None and isinstance(rows, list) and len(rows) > max_rows:
+            raise LimitExceeded(1009, f"{len(rows)} rows in one message; at most {max_rows}")
+        rows = np.asarray(rows, dtype=np.float64)
     except (ValueError, KeyError, TypeError) as e:
         raise ValueError(f"expected JSON {{\"rows\": [[t, acc x,y,z, gyro x,y,z], ...]}}: {e}"
                          ) from None
@@ -86,6 +134,44 @@ def parse_rows(message: str | bytes, width: int) -> np.ndarray:
     return rows
 
 
+def is_loopback(host: str) -> bool:
+    """Whether binding ``host`` only listens on this machine."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _host_name(host_header: str) -> str:
+    """``name`` of a Host header ``name[:port]`` or ``[v6]:port``, lower case."""
+    h = host_header.strip().lower()
+    if h.startswith("["):
+        return h[1:h.find("]")] if "]" in h else h
+    return h.rsplit(":", 1)[0] if h.count(":") == 1 else h
+
+
+def _peer(ws: ServerConnection) -> str:
+    addr = ws.remote_address
+    return f"{addr[0]}:{addr[1]}" if addr else "?"
+
+
+def _why_closed(ws: ServerConnection) -> str:
+    """How the connection ended, as websockets words it (close codes sent and received)."""
+    return str(ws.protocol.close_exc) if ws.protocol.state is State.CLOSED else "closing"
+
+
+@dataclass
+class _Batch:
+    """What the worker made of some rows: frames reconstructed, and the messages for viewers
+    as (type, JSON text) in order; the status line for viewers and the phone when due."""
+
+    frames: int
+    messages: list[tuple[str, str]]
+    status: str | None
+
+
 class LiveServer:
     """Routes phones, viewers and replays to :class:`LiveSession`\\ s.
 
@@ -94,88 +180,236 @@ class LiveServer:
     method : a fitted online method (see :class:`LiveSession`).
     calibrate_s : seconds of samples used to calibrate the phone on the leg (0: none).
     note : where the model came from, shown to viewers.
+    token : the session's access token (default: a fresh random one, see the module docstring).
+    allow_origins : browser origins (``https://host:port``) allowed besides the server's own.
+    limits : what one connection may do.
+    require_token : whether a request without the token is refused (default: when
+        :meth:`start` binds an address off loopback).
     """
 
-    def __init__(self, method, calibrate_s: float = 5.0, note: str = "") -> None:
+    def __init__(self, method, calibrate_s: float = 5.0, note: str = "", token: str | None = None,
+                 allow_origins: Iterable[str] = (), limits: Limits = Limits(),
+                 require_token: bool | None = None) -> None:
         probe = LiveSession(method, calibrate_s)  # fails early on an offline method
         self.method = method
         self.calibrate_s = calibrate_s
         self.note = note
+        self.token = token or secrets.token_urlsafe(16)
+        self.allow_origins = {o.rstrip("/").lower() for o in allow_origins}
+        self.limits = limits
+        self._require = require_token
+        self.require_token = True if require_token is None else require_token
+        self.loopback = False
+        self.scheme = "http"
         self.viewers: set[ServerConnection] = set()
+        self.skipped: dict[ServerConnection, int] = {}  # poses a slow viewer missed
         self.phone: ServerConnection | None = None
         self.session: LiveSession | None = None
         self.server: Server | None = None
         self.status = "waiting for a phone"
         self.replaying = False
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix="imuloco-live-model")
         delay_ms = probe.stream.delay_ms(method.fps_)
         if delay_ms:  # a model with look-ahead shows each pose that much after the step
             note = "; ".join(filter(None, [note, f"poses {delay_ms:.0f} ms late (look-ahead)"]))
-        self._hello = dict(skeleton_message(method), note=note)
+        self._hello = json.dumps(dict(skeleton_message(method), note=note))
         self._last_status_t = -np.inf
+
+    # ---- access -------------------------------------------------------------------------------
+    def refusal(self, request: Request) -> str | None:
+        """Why this request may not be served (token, Host, Origin), or None."""
+        query = parse_qs(urlsplit(request.path).query)
+        token = query.get("token", [None])[0]
+        host = request.headers.get("Host", "")
+        if self.loopback and _host_name(host) not in LOOPBACK_NAMES:
+            return (f"Host {host!r} is not a loopback name: open the address `imuloco live` "
+                    "printed")
+        if token is None and self.require_token:
+            return ("this server needs its token: open the address `imuloco live` printed "
+                    "(it ends in ?token=...)")
+        if token is not None and not secrets.compare_digest(token.encode(), self.token.encode()):
+            return "wrong token: open the address `imuloco live` printed"
+        origin = request.headers.get("Origin")
+        if origin is not None:  # browsers send it; a page elsewhere must not reach in
+            own = f"{self.scheme}://{host}".lower()
+            if origin.rstrip("/").lower() not in self.allow_origins | {own}:
+                return (f"Origin {origin!r} is not allowed (only {own}; start `imuloco live` "
+                        "with --allow-origin to add one)")
+        return None
+
+    def urls(self, host: str) -> dict[str, str]:
+        """The viewer's and the phone's address on ``host``, with the token."""
+        base = f"{self.scheme}://{host}:{self.port}"
+        return {name: f"{base}/{name}?token={self.token}" for name in ("live", "phone")}
 
     # ---- HTTP and websocket routing -----------------------------------------------------------
     def process_request(self, connection: ServerConnection, request: Request) -> Response | None:
-        """Serve the pages over plain HTTP; let websocket upgrades through."""
+        """Refuse what :meth:`refusal` names; serve the pages over plain HTTP; let websocket
+        upgrades through."""
+        why = self.refusal(request)
+        if why is not None:
+            log.warning("refused %s %s: %s", _peer(connection), urlsplit(request.path).path, why)
+            return connection.respond(http.HTTPStatus.FORBIDDEN, why + "\n")
         if request.headers.get("Upgrade", "").lower() == "websocket":
             return None
-        page = PAGES.get(request.path.split("?", 1)[0])
+        page = PAGES.get(urlsplit(request.path).path)
         if page is None:
             return connection.respond(http.HTTPStatus.NOT_FOUND, "not found\n")
         response = connection.respond(http.HTTPStatus.OK, _page(page))
         del response.headers["Content-Type"]
         response.headers["Content-Type"] = "text/html; charset=utf-8"
         response.headers["Cache-Control"] = "no-store"
+        response.headers["Referrer-Policy"] = "no-referrer"  # the token stays in this tab
         return response
 
     async def handler(self, ws: ServerConnection) -> None:
-        path = ws.request.path.split("?", 1)[0]
+        path = urlsplit(ws.request.path).path
         if path == "/ws/view":
             await self._viewer(ws)
         elif path == "/ws/phone":
             await self._phone(ws)
         else:
-            await ws.close(1008, f"unknown path {path}: use /ws/phone or /ws/view")
+            await self._close(ws, "client", 1008, f"unknown path {path}: use /ws/phone or /ws/view")
+
+    async def _close(self, ws: ServerConnection, who: str, code: int, reason: str) -> None:
+        """Close with code and reason, logging one line."""
+        log.warning("closing %s %s: %s", who, _peer(ws), reason)
+        await ws.close(code, reason)
 
     async def _viewer(self, ws: ServerConnection) -> None:
-        self.viewers.add(ws)
-        try:
-            await ws.send(json.dumps(self._hello))
-            await ws.send(json.dumps({"type": "status", "text": self.status}))
-            await ws.wait_closed()
-        finally:
-            self.viewers.discard(ws)
-
-    async def _phone(self, ws: ServerConnection) -> None:
-        if self.phone is not None or self.replaying:
-            await ws.close(1013, "another phone is streaming" if self.phone is not None
-                           else "the server is replaying a recording")
+        if len(self.viewers) >= self.limits.max_viewers:
+            await self._close(ws, "viewer", 1013,
+                              f"too many viewers (at most {self.limits.max_viewers})")
             return
-        self.phone = ws
-        self.start_session()
-        width = 1 + 6 * len(self.method.placements_)
+        self.viewers.add(ws)
+        self.skipped[ws] = 0
         try:
-            async for message in ws:
-                try:
-                    rows = parse_rows(message, width)
-                except ValueError as e:
-                    await ws.send(json.dumps({"type": "error", "text": str(e)}))
-                    continue
-                self.feed(rows)
+            await ws.send(self._hello)
+            await ws.send(json.dumps({"type": "status", "text": self.status}))
+            async for _ in ws:
+                await self._close(ws, "viewer", 1008, "viewers only listen on /ws/view")
         except ConnectionClosed:
             pass
         finally:
+            self.viewers.discard(ws)
+            skipped = self.skipped.pop(ws, 0)
+            late = f"; {skipped} poses skipped while it was slow" if skipped else ""
+            if ws.protocol.close_rcvd is not None and ws.protocol.close_rcvd.code in (1000, 1001):
+                log.info("viewer %s left%s", _peer(ws), late)
+            else:  # dropped: one line, whatever was being sent to it
+                log.warning("viewer %s dropped: %s%s", _peer(ws), _why_closed(ws), late)
+
+    async def _phone(self, ws: ServerConnection) -> None:
+        if self.phone is not None or self.replaying:
+            await self._close(ws, "phone", 1013, "another phone is streaming"
+                              if self.phone is not None else "the server is replaying a recording")
+            return
+        self.phone = ws
+        self.start_session()
+        lim = self.limits
+        messages = TokenBucket(lim.messages_per_s, lim.messages_per_s)
+        stream = TokenBucket(lim.stream_speed, lim.stream_burst_s)
+        refused = False
+        try:
+            async for message in ws:
+                if not messages.take(time.monotonic()):
+                    raise LimitExceeded(1008, f"more than {lim.messages_per_s:g} messages/s")
+                try:
+                    batch = await self._in_worker(self._message, message, stream)
+                except ValueError as e:
+                    await ws.send(json.dumps({"type": "error", "text": str(e)}))
+                    continue
+                await self._publish(batch)
+        except LimitExceeded as e:
+            refused = True
+            await self._close(ws, "phone", e.code, e.reason)
+        except ConnectionClosed:
+            pass
+        finally:
+            if not refused:
+                log.info("phone %s disconnected: %s", _peer(ws), _why_closed(ws))
             self.phone = None
             self.set_status("phone disconnected; waiting for a phone")
 
-    # ---- the session --------------------------------------------------------------------------
+    # ---- the session (process runs in the worker thread) ----------------------------------
+    async def _in_worker(self, fn, *args):
+        return await asyncio.get_running_loop().run_in_executor(self._worker, fn, *args)
+
+    def _message(self, message: str | bytes, stream: TokenBucket) -> _Batch:
+        """Parse and process one phone message within the limits (worker thread)."""
+        width = 1 + 6 * len(self.method.placements_)
+        rows = parse_rows(message, width, self.limits.max_rows)
+        last = self.session.last_t
+        dt = np.diff(rows[:, 0], prepend=rows[0, 0] if last is None else last)
+        seconds = float(dt[(dt > 0) & (dt <= MAX_GAP_S)].sum())  # a dropout costs nothing
+        if not stream.take(time.monotonic(), seconds):
+            raise LimitExceeded(1008, f"samples span more than {self.limits.stream_speed:g} s "
+                                      "per second: stream in real time")
+        return self.process(rows)
+
+    def process(self, rows: np.ndarray) -> _Batch:
+        """Push sample rows (N, 1 + 6 S) into the session (no I/O: the worker runs this)."""
+        n = len(self.method.placements_)
+        s = self.session
+        out, frames, dropouts = [], 0, s.dropouts
+        for row in rows:
+            chans = row[1:].reshape(n, 6)
+            got = s.push(float(row[0]), chans[:, :3], chans[:, 3:])
+            if got and got[0].index == 0 and s.calibration is not None:
+                c = s.calibration
+                out.append(("calibrated", json.dumps({
+                    "type": "calibrated", "rotations": c.rotations.tolist(), "samples": c.samples,
+                    "seconds": round(c.seconds, 3), "details": c.details})))
+            out += [("pose", json.dumps(m, separators=(",", ":"))) for m in frames_to_json(got)]
+            frames += len(got)
+        if s.dropouts > dropouts:
+            log.info("%d dropout(s) over %g s without samples: the model restarted, the walker "
+                     "carries on", s.dropouts - dropouts, MAX_GAP_S)
+        return _Batch(frames, out, s.describe() if self._status_due() else None)
+
+    def feed(self, rows: np.ndarray) -> int:
+        """:meth:`process` the rows here and broadcast at once; returns the frame count."""
+        batch = self.process(rows)
+        for kind, text in batch.messages:
+            self._send(kind, text)
+        self._status(batch)
+        return batch.frames
+
+    async def _publish(self, batch: _Batch) -> None:
+        """Broadcast a batch, returning to the event loop every few messages."""
+        for i, (kind, text) in enumerate(batch.messages):
+            self._send(kind, text)
+            if i % YIELD_EVERY == YIELD_EVERY - 1:
+                await asyncio.sleep(0)
+        self._status(batch)
+
+    def _send(self, kind: str, text: str, to: Iterable[ServerConnection] | None = None) -> None:
+        """Broadcast to viewers whose connection is still up (a connection lost but not yet
+        noticed would log an asyncio warning per message); poses skip slow viewers."""
+        targets = []
+        for ws in self.viewers if to is None else to:
+            if ws.transport.is_closing():
+                continue
+            if kind == "pose" and ws.transport.get_write_buffer_size() > self.limits.viewer_buffer:
+                self.skipped[ws] = self.skipped.get(ws, 0) + 1
+                continue
+            targets.append(ws)
+        broadcast(targets, text)
+
+    def _status(self, batch: _Batch) -> None:
+        if batch.status is not None:
+            self.set_status(batch.status)
+        else:
+            self.status = self.session.describe()
+
     def publish(self, message: dict) -> None:
-        broadcast(self.viewers, json.dumps(message, separators=(",", ":")))
+        self._send(message.get("type", ""), json.dumps(message, separators=(",", ":")))
 
     def set_status(self, text: str) -> None:
         """Tell the viewers and the phone."""
         self.status = text
         to = self.viewers | ({self.phone} if self.phone is not None else set())
-        broadcast(to, json.dumps({"type": "status", "text": text}))
+        self._send("status", json.dumps({"type": "status", "text": text}), to)
 
     def _status_due(self) -> bool:
         t = self.session.last_t if self.session and self.session.last_t is not None else 0.0
@@ -190,35 +424,6 @@ class LiveServer:
         self._last_status_t = -np.inf
         self.publish({"type": "reset"})
         self.set_status(self.session.describe())
-
-    def feed(self, rows: np.ndarray) -> int:
-        """Push sample rows (N, 1 + 6 S) into the session and broadcast the frames; returns
-        how many frames came out. After a pause longer than ``MAX_GAP_S`` (the phone's page
-        went to the background) the walker restarts, keeping the phone's calibration."""
-        n = len(self.method.placements_)
-        out = 0
-        for row in rows:
-            s = self.session
-            if s.last_t is not None and row[0] - s.last_t > MAX_GAP_S:
-                log.info("no samples for %.1f s: restarting the walker", row[0] - s.last_t)
-                self.start_session(s.calibration)
-                s = self.session
-            chans = row[1:].reshape(n, 6)
-            frames = s.push(float(row[0]), chans[:, :3], chans[:, 3:])
-            if frames and frames[0].index == 0 and s.calibration is not None:
-                c = s.calibration
-                self.publish({"type": "calibrated", "rotations": c.rotations.tolist(),
-                              "samples": c.samples, "seconds": round(c.seconds, 3),
-                              "details": c.details})
-            for msg in frames_to_json(frames):
-                self.publish(msg)
-            out += len(frames)
-        text = self.session.describe()
-        if self._status_due():
-            self.set_status(text)
-        else:
-            self.status = text
-        return out
 
     async def replay(self, path: str | Path, placement: str = "right_ankle", fmt: str = "auto",
                      speed: float = 1.0, loop: bool = False) -> None:
@@ -247,7 +452,7 @@ class LiveServer:
                     await asyncio.sleep(delay)
                 now = (time.perf_counter() - start) * speed + rows[0, 0]
                 j = max(i + 1, int(np.searchsorted(rows[:, 0], now, side="right")))
-                self.feed(rows[i:j])
+                await self._publish(await self._in_worker(self.process, rows[i:j]))
                 i = j
             self.set_status(f"replay of {name} finished")
             if not loop:
@@ -257,8 +462,11 @@ class LiveServer:
     async def start(self, host: str = "127.0.0.1", port: int = 8765,
                     ssl: ssl_module.SSLContext | None = None) -> Server:
         """Start listening (``port=0`` picks a free port, see :attr:`port`)."""
+        self.loopback = is_loopback(host)
+        self.require_token = not self.loopback if self._require is None else self._require
+        self.scheme = "https" if ssl else "http"
         self.server = await serve(self.handler, host, port, process_request=self.process_request,
-                                  ssl=ssl, compression=None, max_size=2**20)
+                                  ssl=ssl, compression=None, max_size=self.limits.max_bytes)
         return self.server
 
     @property
@@ -269,6 +477,7 @@ class LiveServer:
         if self.server is not None:
             self.server.close()
             await self.server.wait_closed()
+        self._worker.shutdown(wait=True)
 
 
 def ssl_context(certfile: str | Path, keyfile: str | Path | None = None) -> ssl_module.SSLContext:
@@ -276,6 +485,13 @@ def ssl_context(certfile: str | Path, keyfile: str | Path | None = None) -> ssl_
     ctx = ssl_module.SSLContext(ssl_module.PROTOCOL_TLS_SERVER)
     ctx.load_cert_chain(certfile, keyfile)
     return ctx
+
+
+def configure_logging() -> None:
+    """One line per event on stderr: the server's own at INFO, websockets' own per-connection
+    chatter off (a dropped viewer is one line of ours)."""
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", datefmt="%H:%M:%S")
+    logging.getLogger("websockets").setLevel(logging.WARNING)
 
 
 async def run(server: LiveServer, host: str, port: int, ssl: ssl_module.SSLContext | None = None,

@@ -1,0 +1,173 @@
+"""Speed of loading motion folders (``imuloco bench --load DIR ...``).
+
+For each folder, every ``*.bvh`` is read five ways, each over the whole folder:
+
+- ``numpy``: the reference, a plain numpy text parse of the same files (``numpy.loadtxt`` of
+  each MOTION block, nothing else);
+- ``old``: the reader of an earlier commit (``--against REV``), loaded from git with the
+  rotation functions of that commit, on today's Motion and Skeleton;
+- ``reader``: today's :func:`imuloco.io.bvh.read_bvh` with no cache;
+- ``cold``: loading through the clip cache (:mod:`imuloco.io.cache`) into an empty cache
+  folder (parse, hash and write each entry);
+- ``warm``: the same again, every clip from the cache.
+
+Files are read once beforehand so that every way finds them in the page cache. Frames per
+second count the frames of the clips a way read (the old reader refuses some real rigs: the
+table says how many). Times are wall
+clock and this process's CPU time (``*_cpu``; on a shared machine other processes inflate wall
+times), with the 1-minute load average when measured.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+import types
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from imuloco.errors import FormatError
+from imuloco.io.atomic import atomic_write
+from imuloco.io.bvh import read_bvh
+
+WAYS = ("numpy", "old", "reader", "cold", "warm")
+_MOTION = re.compile(r"^\s*MOTION\s*$", re.MULTILINE)
+
+
+def numpy_parse(path: Path) -> int:
+    """The reference: ``numpy.loadtxt`` of the MOTION block (after its two header lines);
+    returns the frame count."""
+    text = path.read_text(encoding="latin-1")
+    block = text[_MOTION.search(text).end():].lstrip().split("\n", 2)[2]
+    return len(np.loadtxt(io.StringIO(block), comments=None, ndmin=2))
+
+
+def _module_at(rev: str, relpath: str, name: str) -> types.ModuleType:
+    """The module ``relpath`` of the repository at commit ``rev`` (for the comparison only)."""
+    root = Path(__file__).resolve().parents[3]
+    try:
+        src = subprocess.run(["git", "-C", str(root), "show", f"{rev}:{relpath}"],
+                             capture_output=True, text=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError) as e:
+        raise ValueError(f"--against {rev}: cannot read {relpath} from git in {root} "
+                         f"(a source checkout is needed): {e}") from None
+    module = types.ModuleType(name)
+    sys.modules[name] = module  # dataclasses look their module up there
+    exec(compile(src, f"{rev}:{relpath}", "exec"), module.__dict__)  # noqa: S102 (own code)
+    return module
+
+
+def old_reader(rev: str) -> Callable[[Path], Any]:
+    """``read_bvh`` of commit ``rev``, with that commit's rotation functions."""
+    rotations = _module_at(rev, "src/imuloco/ops/rotations.py", "imuloco_old_rotations")
+    bvh = _module_at(rev, "src/imuloco/io/bvh.py", "imuloco_old_bvh")
+    for name in ("from_euler", "to_euler", "qmul", "qrot", "IDENTITY"):
+        if name in bvh.__dict__ and hasattr(rotations, name):
+            setattr(bvh, name, getattr(rotations, name))
+    return bvh.read_bvh
+
+
+def _timed(files: list[Path], read: Callable[[Path], Any], desc: str, progress: bool
+           ) -> tuple[float, float, list[int]]:
+    """Wall and CPU seconds of reading ``files``, and the indices of the files refused with a
+    FormatError (the old reader refuses some real rigs)."""
+    refused = []
+    wall, cpu = time.perf_counter(), time.process_time()
+    for i, f in enumerate(tqdm(files, desc=desc, disable=not progress, unit="clip",
+                               leave=False)):
+        try:
+            read(f)
+        except FormatError:
+            refused.append(i)
+    return time.perf_counter() - wall, time.process_time() - cpu, refused
+
+
+def load_benchmark(folders: Sequence[str | Path], out: str | Path | None = None,
+                   against: str | None = None, progress: bool = True) -> list[dict[str, Any]]:
+    """Time loading each folder (and all together) the ways of :data:`WAYS`; write
+    ``load.json`` and ``load.md`` to ``out``. ``against``: the commit of the ``old`` reader
+    (skipped when None)."""
+    from imuloco.io.cache import read_motion_cached
+
+    old = old_reader(against) if against else None
+    records = []
+    for folder in map(Path, folders):
+        files = sorted(folder.glob("*.bvh"))
+        if not files:
+            raise FileNotFoundError(f"no .bvh files in {folder}")
+        counts = [numpy_parse(f) for f in files]  # and into the page cache for every way
+        frames = sum(counts)
+        rec: dict[str, Any] = {"folder": folder.name, "clips": len(files), "frames": frames,
+                               "mbytes": round(sum(f.stat().st_size for f in files) / 1e6, 1)}
+        with tempfile.TemporaryDirectory(prefix="imuloco-load-") as tmp:
+            saved = os.environ.get("IMULOCO_CACHE")
+            os.environ["IMULOCO_CACHE"] = tmp
+            try:
+                ways: dict[str, Callable[[Path], Any]] = {
+                    "numpy": numpy_parse, "reader": read_bvh,
+                    "cold": read_motion_cached, "warm": read_motion_cached}
+                if old is not None:
+                    ways = {"numpy": numpy_parse, "old": old} | ways
+                for way, read in ways.items():
+                    wall, cpu, refused = _timed(files, read, f"{folder.name} {way}", progress)
+                    rec[f"{way}_s"], rec[f"{way}_cpu_s"] = round(wall, 3), round(cpu, 3)
+                    rec[f"{way}_frames"] = frames - sum(counts[i] for i in refused)
+                    rec[f"{way}_fps"] = round(rec[f"{way}_frames"] / wall)
+                    rec[f"{way}_refused"] = len(refused)
+            finally:
+                if saved is None:
+                    del os.environ["IMULOCO_CACHE"]
+                else:
+                    os.environ["IMULOCO_CACHE"] = saved
+        rec["load_avg"] = round(os.getloadavg()[0], 2)
+        records.append(rec)
+    records.append(_total(records))
+    if out is not None:
+        out = Path(out)
+        with atomic_write(out / "load.json", "w") as f:
+            json.dump({"against": against, "records": records}, f, indent=2)
+        with atomic_write(out / "load.md", "w") as f:
+            f.write(table(records, against) + "\n")
+    return records
+
+
+def _total(records: list[dict[str, Any]]) -> dict[str, Any]:
+    tot: dict[str, Any] = {"folder": "all"}
+    for key in records[0]:
+        if key.endswith(("_s", "clips", "frames", "mbytes", "_refused")):
+            tot[key] = round(sum(r[key] for r in records), 3)
+    for way in WAYS:
+        if f"{way}_s" in tot:
+            tot[f"{way}_fps"] = round(tot[f"{way}_frames"] / tot[f"{way}_s"])
+    tot["load_avg"] = records[-1]["load_avg"]
+    return tot
+
+
+def table(records: list[dict[str, Any]], against: str | None = None) -> str:
+    """Markdown: per folder, seconds (and frames/s) of each way, and the ratios that matter."""
+    ways = [w for w in WAYS if f"{w}_s" in records[0]]
+    head = ["folder", "clips", "frames"] + [
+        f"{'old (' + against[:7] + ')' if w == 'old' and against else w} s (frames/s)"
+        for w in ways]
+    head += ["reader speed / numpy's", "warm / cold speed"] + (
+        ["reader speed / old's", "old refused"] if "old" in ways else [])
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in records:
+        row = [r["folder"], str(r["clips"]), f"{r['frames']:,}"]
+        row += [f"{r[w + '_s']:.1f} ({r[w + '_fps']:,})" for w in ways]
+        row += [f"{r['reader_fps'] / r['numpy_fps']:.2f}x",
+                f"{r['warm_fps'] / r['cold_fps']:.0f}x"]
+        if "old" in ways:
+            row += [f"{r['reader_fps'] / r['old_fps']:.1f}x", f"{r['old_refused']} clips"]
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)
