@@ -126,23 +126,45 @@ def _csv(value: str | None) -> list[str]:
     return [v.strip() for v in (value or "").split(",") if v.strip()]
 
 
+def _folders(values: tuple[str, ...]) -> list[Path] | None:
+    """Folders given as a repeatable and/or comma separated option; each must exist."""
+    folders = [Path(v) for item in values for v in _csv(item)]
+    for f in folders:
+        if not f.is_dir():
+            raise click.BadParameter(f"folder {f} does not exist", param_hint="--data")
+    return folders or None
+
+
+DATA_HELP = ("Folder(s) of clips, repeatable or comma separated; several become one set on "
+             "the first one's skeleton and frame rate (others retargeted) [default: the "
+             "bundled sample].")
+
+
 @cli.command()
 @click.option("--method", "method_names", default=None,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
                    "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm] [required "
                    "but with --batch, which defaults to the shipped model].")
-@click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
-              default="random-clips", show_default=True)
+@click.option("--split", "split_name",
+              type=click.Choice(["random-clips", "heldout-styles", "heldout-contents",
+                                 "cross-dataset"]),
+              default="random-clips", show_default=True,
+              help="Protocol (imuloco.evaluate.protocols); cross-dataset takes --train/--test.")
 @click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
               show_default=True)
 @click.option("--placement", default="right_ankle", show_default=True,
               help="Sensor placement preset(s), comma separated.")
-@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
-              default=None, help="Folder of clips [default: the bundled sample].")
+@click.option("--data", "data_items", multiple=True, help=DATA_HELP)
+@click.option("--train", "train_items", multiple=True,
+              help="cross-dataset: training folder(s), repeatable or comma separated.")
+@click.option("--test", "test_items", multiple=True, help="cross-dataset: the test folder.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
               help="Folder for results.json and results.md.")
-@click.option("--limit", type=int, default=None, help="Read at most N clips (quick runs).")
+@click.option("--limit", type=int, default=None,
+              help="Read at most N clips per folder (quick runs).")
 @click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seeds", "n_seeds", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Train each method with N seeds (seed, seed+1, ...): mean and spread.")
 @click.option("--speed", is_flag=True,
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
@@ -168,8 +190,9 @@ def _csv(value: str | None) -> list[str]:
               help="With --load: also time the BVH reader of this git commit.")
 @_reading_options
 def bench(method_names: str | None, split_name: str, noise: str, placement: str,
-          data: Path | None, out: Path, limit: int | None, seed: int, speed: bool,
-          db_frames: str | None, fuzz: int | None, readers: str | None,
+          data_items: tuple[str, ...], train_items: tuple[str, ...],
+          test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
+          speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None,
           batch_walkers: int | None, load_dirs: tuple[Path, ...], against: str | None,
           real_dir: Path | None, baseline: bool, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
@@ -208,18 +231,20 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
         raise click.UsageError("Missing option '--method' (or pass --fuzz N, --batch N, "
                                "--load DIR or --real DIR).")
     names = _csv(method_names)
+    data = _folders(data_items)
     if speed:
         from imuloco.evaluate.speed import speed_benchmark
 
         frames = [int(v) for v in _csv(db_frames)] or None
-        speed_benchmark(names, out, data, frames)
+        speed_benchmark(names, out, data[0] if data else None, frames)
         return
     from imuloco.evaluate.bench import run_bench
     from imuloco.evaluate.report import COLUMNS, table
 
     try:
         records = run_bench(names, split_name, noise, _csv(placement), data, out, limit, seed,
-                            progress=True, up=up, skip_frames=skip_frames)
+                            progress=True, seeds=n_seeds, train=_folders(train_items),
+                            test=_folders(test_items), up=up, skip_frames=skip_frames)
     except KeyError as e:
         raise click.UsageError(str(e.args[0])) from None
     click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
@@ -264,8 +289,7 @@ def _param(items: tuple[str, ...]) -> dict:
 
 @cli.command()
 @click.option("--method", "method_name", required=True, help="Method name (`imuloco methods`).")
-@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
-              default=None, help="Folder of clips [default: the bundled sample].")
+@click.option("--data", "data_items", multiple=True, help=DATA_HELP)
 @click.option("--placement", default="right_ankle", show_default=True,
               help="Sensor placement preset(s), comma separated.")
 @click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
@@ -280,7 +304,7 @@ def _param(items: tuple[str, ...]) -> dict:
               help="Model file to write (.npz).")
 @click.option("--force", is_flag=True, help="Overwrite the output file.")
 @_reading_options
-def train(method_name: str, data: Path | None, placement: str, noise: str,
+def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: str,
           split_name: str | None, params: tuple[str, ...], limit: int | None, seed: int,
           output: Path, force: bool, up: str, skip_frames: int) -> None:
     """Fit a method on motion clips with simulated sensors and save the model.
@@ -289,8 +313,8 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
     epoch beside it as OUTPUT.history.json and, with matplotlib, OUTPUT.curves.png.
     """
 
+    from imuloco.evaluate.bench import data_label, load_data
     from imuloco.evaluate.protocols import split
-    from imuloco.io.database import load_database, load_sample, spread
     from imuloco.methods import get_method
 
     if output.exists() and not force:
@@ -301,10 +325,8 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
         raise click.UsageError(str(e.args[0])) from None
     except TypeError as e:
         raise click.UsageError(f"--param: {e}") from None
-    db = (load_sample() if data is None
-          else load_database(data, limit=limit, up=up, skip_frames=skip_frames))
-    if data is None and limit is not None:
-        db = db.subset(spread(len(db), limit))
+    data = _folders(data_items)
+    db = load_data(data, limit, progress=True, up=up, skip_frames=skip_frames)
     if split_name is not None:
         db = split(db, split_name)[0]
     placements = _csv(placement)
@@ -315,7 +337,7 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
             raise
         raise click.BadParameter(f"{e} (rejected by {method_name})", param_hint="--param"
                                  ) from None
-    method.protocol_.update(data="bundled sample" if data is None else Path(data).name,
+    method.protocol_.update(data="bundled sample" if data is None else data_label(data),
                             split=split_name or "all")
     seconds = method.protocol_["train_seconds"]
     method.save(output, overwrite=force)
@@ -408,7 +430,7 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
               type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
               help="Sensor log format.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="BVH file to write (on the model's training skeleton).")
+              help="BVH file to write (on the model's training skeleton, or --skeleton's).")
 @click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also render a stick-figure video (.mp4 or .gif).")
 @click.option("--video-seconds", type=float, default=None,
@@ -417,6 +439,10 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
               default=None, help="Also write the interactive HTML viewer.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Also write the report (gait, checks) as JSON.")
+@click.option("--skeleton", "skeleton", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
+                   "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
 @click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
               help="Phone of a Sensor Logger export [default: from its Metadata.csv, else "
@@ -430,8 +456,9 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
-                report_path: Path | None, no_calibrate: bool, platform: str | None,
-                piece_seconds: float | None, height: float | None, force: bool,
+                report_path: Path | None, skeleton: Path | None, no_calibrate: bool,
+                platform: str | None, piece_seconds: float | None, height: float | None,
+                force: bool,
                 units: str) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
@@ -446,13 +473,12 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     _refuse_existing([output, video, html_path, report_path], force)
     for out in (output, video, html_path, report_path):
         if out is not None:
-            check_output(out, force=True, inputs=recording)  # never onto an input
+            check_output(out, force=True, inputs=[*recording, *([skeleton] if skeleton else [])])
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
-        if height is not None:
-            raise click.UsageError("--piece-seconds does not scale to --height yet: drop one")
-        if video or html_path:
-            raise click.UsageError("--piece-seconds writes the BVH only: drop --video/--html")
+        if video or html_path or skeleton or height is not None:
+            raise click.UsageError("--piece-seconds writes the BVH on the model's skeleton "
+                                   "only: drop --video/--html/--skeleton/--height")
         from imuloco.app.chunked import reconstruct_to_bvh
 
         report = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
@@ -470,7 +496,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                           placement=placement, fmt=fmt,
                                           calibrate=not no_calibrate, progress=True,
-                                          platform=platform, height=height)
+                                          platform=platform, skeleton=skeleton, height=height)
     except (FormatError, KeyError, ValueError) as e:
         raise click.ClickException(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {report['model']}", err=True)
@@ -500,19 +526,23 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 @click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
                                                        path_type=Path), default=None,
               help="Model file from `imuloco train`.")
+@click.option("--skeleton", "skeleton", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
+                   "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 @_units_option
-def demo(out_dir: Path, method_name: str | None, model_path: Path | None, force: bool,
-         units: str) -> None:
+def demo(out_dir: Path, method_name: str | None, model_path: Path | None,
+         skeleton: Path | None, force: bool, units: str) -> None:
     """Simulate a phone on the right ankle of a bundled walk, reconstruct it and write the
     BVH, a side-by-side video (MP4, GIF), the HTML viewer, plots and a report."""
     from imuloco.app.pipeline import demo as run_demo
 
     try:
         report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
-                          progress=True, unit=units)
-    except FileExistsError as e:
-        raise click.UsageError(str(e)) from None
+                          progress=True, unit=units, skeleton=skeleton)
+    except (FileExistsError, KeyError) as e:
+        raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     m = report["metrics"]
     click.echo(f"model: {report['model']}")
     g, gt = report["gait"], report["gait_ground_truth"]
@@ -587,6 +617,10 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
 @click.option("--format", "fmt", default="auto", show_default=True,
               type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
               help="Sensor log format.")
+@click.option("--skeleton", "skeleton", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
+                   "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
 @click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
               help="Phone of Sensor Logger exports [default: from their Metadata.csv, else "
@@ -597,8 +631,9 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
 @_units_option
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path,
           jobs: int | None, scheduler: str | None, model_path: Path | None,
-          method_name: str | None, placement: str, fmt: str, no_calibrate: bool,
-          platform: str | None, height: float | None, force: bool, units: str) -> None:
+          method_name: str | None, placement: str, fmt: str, skeleton: Path | None,
+          no_calibrate: bool, platform: str | None, height: float | None, force: bool,
+          units: str) -> None:
     """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
     recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
     finished recordings)."""
@@ -611,7 +646,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
         summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
                             calibrate=not no_calibrate, force=force, progress=True,
                             scheduler=scheduler, platform=platform, unit=units,
-                            height_m=height)
+                            skeleton=skeleton, height_m=height)
     except (KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {summary['model']}", err=True)
