@@ -169,7 +169,8 @@ def read_pyshoe(path: str | Path) -> Iterator[RealTrial]:
     path = Path(path)
     d = _loadmat(path)
     imu = _field(d, "imu_data", path)
-    t = _field(d, "timestamps_all", path).ravel()
+    # the SensorConnectData files name it ``timestamps`` and have no full Vicon path ``gt``
+    t = _field(d, "timestamps_all" if "timestamps_all" in d else "timestamps", path).ravel()
     if imu.ndim != 2 or imu.shape[1] != 6 or len(t) != len(imu):
         raise FormatError(path, None, f"imu_data must be (N, 6) with N timestamps, got "
                           f"{imu.shape} and {t.shape}")
@@ -180,7 +181,7 @@ def read_pyshoe(path: str | Path) -> Iterator[RealTrial]:
     rec = Recording(t, imu[:, None, :3], imu[:, None, 3:], ["right_foot"])
     ref = GaitReference(
         stride_ends=t[idx], stride_points=gcp, path_times=t,
-        path=_field(d, "gt", path).reshape(-1, 2),
+        path=_field(d, "gt", path).reshape(-1, 2) if "gt" in d else None,
         published_path=(_field(d, "pyshoeTrajectory", path).reshape(-1, 2)
                         if "pyshoeTrajectory" in d else None),
         bouts=[Bout(float(t[idx[0]]), float(t[idx[-1]]),
