@@ -30,6 +30,12 @@ def cli() -> None:
     """Full-body locomotion reconstruction from one body-worn inertial sensor."""
 
 
+_height_option = click.option(
+    "--height", type=click.FloatRange(0.5, 2.6), default=None, metavar="METRES",
+    help="The wearer's body height: the skeleton and every length and speed in their "
+         "proportions [default: the training skeleton's].")
+
+
 def _reading_options(f):
     """``--up`` and ``--skip-frames``: how motion files are read (``read_bvh``'s options)."""
     f = click.option("--skip-frames", type=click.IntRange(min=0), default=0, show_default=True,
@@ -120,23 +126,45 @@ def _csv(value: str | None) -> list[str]:
     return [v.strip() for v in (value or "").split(",") if v.strip()]
 
 
+def _folders(values: tuple[str, ...]) -> list[Path] | None:
+    """Folders given as a repeatable and/or comma separated option; each must exist."""
+    folders = [Path(v) for item in values for v in _csv(item)]
+    for f in folders:
+        if not f.is_dir():
+            raise click.BadParameter(f"folder {f} does not exist", param_hint="--data")
+    return folders or None
+
+
+DATA_HELP = ("Folder(s) of clips, repeatable or comma separated; several become one set on "
+             "the first one's skeleton and frame rate (others retargeted) [default: the "
+             "bundled sample].")
+
+
 @cli.command()
 @click.option("--method", "method_names", default=None,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
                    "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm] [required "
                    "but with --batch, which defaults to the shipped model].")
-@click.option("--split", "split_name", type=click.Choice(["random-clips", "heldout-styles"]),
-              default="random-clips", show_default=True)
+@click.option("--split", "split_name",
+              type=click.Choice(["random-clips", "heldout-styles", "heldout-contents",
+                                 "cross-dataset"]),
+              default="random-clips", show_default=True,
+              help="Protocol (imuloco.evaluate.protocols); cross-dataset takes --train/--test.")
 @click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
               show_default=True)
 @click.option("--placement", default="right_ankle", show_default=True,
               help="Sensor placement preset(s), comma separated.")
-@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
-              default=None, help="Folder of clips [default: the bundled sample].")
+@click.option("--data", "data_items", multiple=True, help=DATA_HELP)
+@click.option("--train", "train_items", multiple=True,
+              help="cross-dataset: training folder(s), repeatable or comma separated.")
+@click.option("--test", "test_items", multiple=True, help="cross-dataset: the test folder.")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
               help="Folder for results.json and results.md.")
-@click.option("--limit", type=int, default=None, help="Read at most N clips (quick runs).")
+@click.option("--limit", type=int, default=None,
+              help="Read at most N clips per folder (quick runs).")
 @click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seeds", "n_seeds", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Train each method with N seeds (seed, seed+1, ...): mean and spread.")
 @click.option("--speed", is_flag=True,
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
@@ -146,6 +174,11 @@ def _csv(value: str | None) -> list[str]:
                    "fuzz) and write fuzz.md and fuzz.json.")
 @click.option("--readers", default=None,
               help="With --fuzz: readers, comma separated [default: all].")
+@click.option("--real", "real_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=None, help="Instead: the real-data gait protocol on this folder (real "
+                                 "IMUs with references, imuloco.evaluate.real).")
+@click.option("--baseline", is_flag=True,
+              help="With --real: also measure a right-ankle reconstruction's gait.")
 @click.option("--batch", "batch_walkers", type=click.IntRange(1), default=None, metavar="N",
               help="Instead: the batch benchmark (imuloco.evaluate.batchbench) on N simulated "
                    "walkers of 60 s; writes batch_bench.md and batch_bench.json.")
@@ -157,10 +190,11 @@ def _csv(value: str | None) -> list[str]:
               help="With --load: also time the BVH reader of this git commit.")
 @_reading_options
 def bench(method_names: str | None, split_name: str, noise: str, placement: str,
-          data: Path | None, out: Path, limit: int | None, seed: int, speed: bool,
-          db_frames: str | None, fuzz: int | None, readers: str | None,
+          data_items: tuple[str, ...], train_items: tuple[str, ...],
+          test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
+          speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None,
           batch_walkers: int | None, load_dirs: tuple[Path, ...], against: str | None,
-          up: str, skip_frames: int) -> None:
+          real_dir: Path | None, baseline: bool, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
     if fuzz is not None:
         from imuloco.evaluate.fuzz import READERS, write_fuzz
@@ -171,6 +205,13 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
             raise click.BadParameter(f"unknown reader(s) {unknown}; expected {list(READERS)}",
                                      param_hint="--readers")
         click.echo(write_fuzz(fuzz, out, chosen, seed=seed, progress=True))
+        return
+    if real_dir is not None:
+        from imuloco.evaluate.real import run_real, summarize, table
+
+        rows = run_real(real_dir, out, limit, baseline, progress=True)
+        click.echo(table(summarize(rows)))
+        click.echo(f"wrote {out / 'real.json'}, real.csv and README.md")
         return
     if batch_walkers is not None:
         from imuloco.evaluate.batchbench import batch_benchmark, markdown
@@ -187,21 +228,23 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
         click.echo(f"wrote {out / 'load.json'} and {out / 'load.md'}")
         return
     if not method_names:
-        raise click.UsageError("Missing option '--method' (or pass --fuzz N, --batch N or "
-                               "--load DIR).")
+        raise click.UsageError("Missing option '--method' (or pass --fuzz N, --batch N, "
+                               "--load DIR or --real DIR).")
     names = _csv(method_names)
+    data = _folders(data_items)
     if speed:
         from imuloco.evaluate.speed import speed_benchmark
 
         frames = [int(v) for v in _csv(db_frames)] or None
-        speed_benchmark(names, out, data, frames)
+        speed_benchmark(names, out, data[0] if data else None, frames)
         return
     from imuloco.evaluate.bench import run_bench
     from imuloco.evaluate.report import COLUMNS, table
 
     try:
         records = run_bench(names, split_name, noise, _csv(placement), data, out, limit, seed,
-                            progress=True, up=up, skip_frames=skip_frames)
+                            progress=True, seeds=n_seeds, train=_folders(train_items),
+                            test=_folders(test_items), up=up, skip_frames=skip_frames)
     except KeyError as e:
         raise click.UsageError(str(e.args[0])) from None
     click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
@@ -246,8 +289,7 @@ def _param(items: tuple[str, ...]) -> dict:
 
 @cli.command()
 @click.option("--method", "method_name", required=True, help="Method name (`imuloco methods`).")
-@click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
-              default=None, help="Folder of clips [default: the bundled sample].")
+@click.option("--data", "data_items", multiple=True, help=DATA_HELP)
 @click.option("--placement", default="right_ankle", show_default=True,
               help="Sensor placement preset(s), comma separated.")
 @click.option("--noise", type=click.Choice(["clean", "phone", "imu"]), default="phone",
@@ -262,7 +304,7 @@ def _param(items: tuple[str, ...]) -> dict:
               help="Model file to write (.npz).")
 @click.option("--force", is_flag=True, help="Overwrite the output file.")
 @_reading_options
-def train(method_name: str, data: Path | None, placement: str, noise: str,
+def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: str,
           split_name: str | None, params: tuple[str, ...], limit: int | None, seed: int,
           output: Path, force: bool, up: str, skip_frames: int) -> None:
     """Fit a method on motion clips with simulated sensors and save the model.
@@ -271,8 +313,8 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
     epoch beside it as OUTPUT.history.json and, with matplotlib, OUTPUT.curves.png.
     """
 
+    from imuloco.evaluate.bench import data_label, load_data
     from imuloco.evaluate.protocols import split
-    from imuloco.io.database import load_database, load_sample, spread
     from imuloco.methods import get_method
 
     if output.exists() and not force:
@@ -283,10 +325,8 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
         raise click.UsageError(str(e.args[0])) from None
     except TypeError as e:
         raise click.UsageError(f"--param: {e}") from None
-    db = (load_sample() if data is None
-          else load_database(data, limit=limit, up=up, skip_frames=skip_frames))
-    if data is None and limit is not None:
-        db = db.subset(spread(len(db), limit))
+    data = _folders(data_items)
+    db = load_data(data, limit, progress=True, up=up, skip_frames=skip_frames)
     if split_name is not None:
         db = split(db, split_name)[0]
     placements = _csv(placement)
@@ -297,7 +337,7 @@ def train(method_name: str, data: Path | None, placement: str, noise: str,
             raise
         raise click.BadParameter(f"{e} (rejected by {method_name})", param_hint="--param"
                                  ) from None
-    method.protocol_.update(data="bundled sample" if data is None else Path(data).name,
+    method.protocol_.update(data="bundled sample" if data is None else data_label(data),
                             split=split_name or "all")
     seconds = method.protocol_["train_seconds"]
     method.save(output, overwrite=force)
@@ -390,7 +430,7 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
               type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
               help="Sensor log format.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="BVH file to write (on the model's training skeleton).")
+              help="BVH file to write (on the model's training skeleton, or --skeleton's).")
 @click.option("--video", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also render a stick-figure video (.mp4 or .gif).")
 @click.option("--video-seconds", type=float, default=None,
@@ -399,6 +439,10 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
               default=None, help="Also write the interactive HTML viewer.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path),
               default=None, help="Also write the report (gait, checks) as JSON.")
+@click.option("--skeleton", "skeleton", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
+                   "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
 @click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
               help="Phone of a Sensor Logger export [default: from its Metadata.csv, else "
@@ -406,13 +450,16 @@ def _refuse_existing(paths: list[Path | None], force: bool) -> None:
 @click.option("--piece-seconds", type=click.FloatRange(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html).")
+@_height_option
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 @_units_option
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
-                report_path: Path | None, no_calibrate: bool, platform: str | None,
-                piece_seconds: float | None, force: bool, units: str) -> None:
+                report_path: Path | None, skeleton: Path | None, no_calibrate: bool,
+                platform: str | None, piece_seconds: float | None, height: float | None,
+                force: bool,
+                units: str) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -426,11 +473,12 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     _refuse_existing([output, video, html_path, report_path], force)
     for out in (output, video, html_path, report_path):
         if out is not None:
-            check_output(out, force=True, inputs=recording)  # never onto an input
+            check_output(out, force=True, inputs=[*recording, *([skeleton] if skeleton else [])])
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
-        if video or html_path:
-            raise click.UsageError("--piece-seconds writes the BVH only: drop --video/--html")
+        if video or html_path or skeleton or height is not None:
+            raise click.UsageError("--piece-seconds writes the BVH on the model's skeleton "
+                                   "only: drop --video/--html/--skeleton/--height")
         from imuloco.app.chunked import reconstruct_to_bvh
 
         report = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
@@ -448,7 +496,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                           placement=placement, fmt=fmt,
                                           calibrate=not no_calibrate, progress=True,
-                                          platform=platform)
+                                          platform=platform, skeleton=skeleton, height=height)
     except (FormatError, KeyError, ValueError) as e:
         raise click.ClickException(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {report['model']}", err=True)
@@ -478,19 +526,23 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 @click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False,
                                                        path_type=Path), default=None,
               help="Model file from `imuloco train`.")
+@click.option("--skeleton", "skeleton", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
+                   "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--force", is_flag=True, help="Replace existing output files.")
 @_units_option
-def demo(out_dir: Path, method_name: str | None, model_path: Path | None, force: bool,
-         units: str) -> None:
+def demo(out_dir: Path, method_name: str | None, model_path: Path | None,
+         skeleton: Path | None, force: bool, units: str) -> None:
     """Simulate a phone on the right ankle of a bundled walk, reconstruct it and write the
     BVH, a side-by-side video (MP4, GIF), the HTML viewer, plots and a report."""
     from imuloco.app.pipeline import demo as run_demo
 
     try:
         report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
-                          progress=True, unit=units)
-    except FileExistsError as e:
-        raise click.UsageError(str(e)) from None
+                          progress=True, unit=units, skeleton=skeleton)
+    except (FileExistsError, KeyError) as e:
+        raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     m = report["metrics"]
     click.echo(f"model: {report['model']}")
     g, gt = report["gait"], report["gait_ground_truth"]
@@ -565,17 +617,23 @@ def render(motion_file: Path, gt_file: Path | None, outputs: tuple[Path, ...],
 @click.option("--format", "fmt", default="auto", show_default=True,
               type=click.Choice(["auto", "generic", "realworld", "phyphox", "sensorlogger"]),
               help="Sensor log format.")
+@click.option("--skeleton", "skeleton", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path), default=None,
+              help="A BVH of your rig: the motion is retargeted onto it (its joint names, "
+                   "offsets and rest pose) [default: the model's training skeleton].")
 @click.option("--no-calibrate", is_flag=True, help="Skip the phone-on-leg calibration.")
 @click.option("--platform", type=click.Choice(["ios", "android"]), default=None,
               help="Phone of Sensor Logger exports [default: from their Metadata.csv, else "
                    "guessed with a warning].")
+@_height_option
 @click.option("--force", is_flag=True,
               help="Redo recordings whose outputs are complete (a re-run skips them).")
 @_units_option
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path,
           jobs: int | None, scheduler: str | None, model_path: Path | None,
-          method_name: str | None, placement: str, fmt: str, no_calibrate: bool,
-          platform: str | None, force: bool, units: str) -> None:
+          method_name: str | None, placement: str, fmt: str, skeleton: Path | None,
+          no_calibrate: bool, platform: str | None, height: float | None, force: bool,
+          units: str) -> None:
     """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
     recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
     finished recordings)."""
@@ -587,7 +645,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     try:
         summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
                             calibrate=not no_calibrate, force=force, progress=True,
-                            scheduler=scheduler, platform=platform, unit=units)
+                            scheduler=scheduler, platform=platform, unit=units,
+                            skeleton=skeleton, height_m=height)
     except (KeyError, ValueError) as e:
         raise click.UsageError(str(e.args[0] if isinstance(e, KeyError) else e)) from None
     click.echo(f"model: {summary['model']}", err=True)

@@ -116,14 +116,13 @@ def worker_model(sha256: str, data: bytes):
 def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
                     platform: str | None = None, height_m: float | None = None,
-                    unit: str = "cm") -> dict[str, Any]:
+                    unit: str = "cm", skeleton: str | None = None) -> dict[str, Any]:
     """Reconstruct one recording (a path read here), write ``NAME.bvh`` (lengths in ``unit``)
     then ``NAME.json``.
 
     Returns ``{"row": ..., "strides": [...]}`` (see :func:`walker_rows`); errors are caught and
     reported in the row."""
     from imuloco.app.pipeline import reconstruct_file
-    from imuloco.evaluate.strides import stride_rows
     from imuloco.io.bvh import write_bvh
 
     t0 = time.perf_counter()
@@ -131,8 +130,8 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
         fitted = worker_model(model_sha256, model)
         motion, report = reconstruct_file(recording, placement=placement, fmt=fmt,
                                           calibrate=calibrate, fitted=fitted,
-                                          platform=platform)
-        report["strides"] = stride_rows(motion)
+                                          platform=platform, skeleton=skeleton,
+                                          height=height_m)
         report["seconds"] = round(time.perf_counter() - t0, 3)
         report["batch"] = {"recording": recording, "model_sha256": model_sha256,
                            "placement": placement, "height_m": height_m, "unit": unit}
@@ -266,7 +265,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
               placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
               force: bool = False, progress: bool = False, fitted=None, scheduler=None,
               platform: str | None = None, height_m: float | None = None, retries: int = 2,
-              unit: str = "cm") -> dict[str, Any]:
+              unit: str = "cm", skeleton: str | Path | None = None) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
     Parameters
@@ -275,7 +274,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     out_dir : folder for the outputs (created).
     jobs : workers of the local cluster (``None`` or ``-1``: one per CPU).
     model, method, placement : the model, as :func:`imuloco.app.pipeline.choose_method` picks it.
-    fmt, calibrate, platform : see :func:`imuloco.app.pipeline.reconstruct_file`.
+    fmt, calibrate, platform : see :func:`imuloco.app.pipeline.reconstruct_file`; the
+        report's ``strides`` are the estimator's for the placement (a foot sensor's own).
     force : redo recordings whose outputs are complete, replace another job's outputs.
     progress : a progress bar (tqdm) on stderr.
     fitted : an already fitted method (skips the choice).
@@ -284,6 +284,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     height_m : the walkers' height in metres, recorded in the tables (``None``: not given).
     retries : Dask retries of a task that raises outside the reconstruction.
     unit : length unit of the BVH files (``cm`` or ``m``; see :func:`imuloco.io.bvh.write_bvh`).
+    skeleton : a motion file of the user's rig: every BVH comes out on it (checked before
+        starting; see :func:`imuloco.app.pipeline.onto_rig`).
 
     Returns
     -------
@@ -303,6 +305,10 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     names = output_names(paths)
     recs = [os.path.normpath(p.absolute()) for p in paths]
     out = Path(out_dir).absolute()
+    if skeleton is not None:
+        from imuloco.app.pipeline import load_rig
+
+        load_rig(skeleton)  # refuse a rig that cannot be mapped before any work
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     if fitted is None:
@@ -342,6 +348,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                 fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
                                     placement=placement, fmt=fmt, calibrate=calibrate,
                                     platform=platform, height_m=height_m, unit=unit,
+                                    skeleton=None if skeleton is None else str(skeleton),
                                     key=f"imuloco-batch-{job}-{n}", retries=retries,
                                     pure=False)
                 futures.append(fut)
