@@ -93,10 +93,15 @@ placement_option = click.option("--placement", default="right_ankle", show_defau
                                 help="Sensor placement preset(s), comma separated.")
 noise_option = click.option("--noise", type=click.Choice(NOISES), default="phone",
                             show_default=True, help="Noise preset of the simulated sensors.")
+DATA_HELP = ("Folder(s) of clips, repeatable or comma separated; several become one set on "
+             "the first one's skeleton and frame rate (others retargeted) [default: the "
+             "bundled sample].")
+
+
 data_options = _options(
-    click.option("--data", type=click.Path(exists=True, file_okay=False, path_type=Path),
-                 default=None, help="Folder of clips [default: the bundled sample]."),
-    click.option("--limit", type=int, default=None, help="Read at most N clips (quick runs)."),
+    click.option("--data", "data_items", multiple=True, help=DATA_HELP),
+    click.option("--limit", type=int, default=None,
+                 help="Read at most N clips per folder (quick runs)."),
     click.option("--seed", type=int, default=0, show_default=True),
 )
 # the model a reconstruction uses (reconstruct, batch, demo, live): imuloco.app.pipeline
@@ -119,6 +124,14 @@ platform_option = click.option(
     "--platform", type=click.Choice(["ios", "android"]), default=None,
     help="Phone of a Sensor Logger export [default: from its Metadata.csv, else guessed with "
          "a warning].")
+height_option = click.option(
+    "--height", type=click.FloatRange(0.5, 2.6), default=None, metavar="METRES",
+    help="The wearer's body height: the skeleton and every length and speed in their "
+         "proportions [default: the training skeleton's].")
+skeleton_option = click.option(
+    "--skeleton", "skeleton", type=_existing_file(), default=None,
+    help="A BVH of your rig: the motion is retargeted onto it (its joint names, offsets and "
+         "rest pose) [default: the model's training skeleton].")
 calibrate_option = click.option("--no-calibrate", is_flag=True,
                                 help="Skip the phone-on-leg calibration.")
 # how motion files are read (info, phases, bench, train): read_bvh's options
@@ -217,18 +230,34 @@ def _csv(value: str | None) -> list[str]:
     return [v.strip() for v in (value or "").split(",") if v.strip()]
 
 
+def _folders(values: tuple[str, ...]) -> list[Path] | None:
+    """Folders given as a repeatable and/or comma separated option; each must exist."""
+    folders = [Path(v) for item in values for v in _csv(item)]
+    for f in folders:
+        if not f.is_dir():
+            raise click.BadParameter(f"folder {f} does not exist", param_hint="--data")
+    return folders or None
+
+
 @cli.command()
 @click.option("--method", "method_names", default=None,
               help="Method name(s), comma separated (see `imuloco methods`); a variant as "
                    "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm] [required "
                    "but with --batch, which defaults to the shipped model].")
-@click.option("--split", "split_name", type=click.Choice(SPLITS), default="random-clips",
-              show_default=True)
+@click.option("--split", "split_name",
+              type=click.Choice([*SPLITS, "heldout-contents", "cross-dataset"]),
+              default="random-clips", show_default=True,
+              help="Protocol (imuloco.evaluate.protocols); cross-dataset takes --train/--test.")
 @noise_option
 @placement_option
 @data_options
+@click.option("--train", "train_items", multiple=True,
+              help="cross-dataset: training folder(s), repeatable or comma separated.")
+@click.option("--test", "test_items", multiple=True, help="cross-dataset: the test folder.")
 @click.option("--out", type=_folder(), required=True,
               help="Folder for results.json and results.md.")
+@click.option("--seeds", "n_seeds", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Train each method with N seeds (seed, seed+1, ...): mean and spread.")
 @click.option("--speed", is_flag=True,
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
@@ -238,6 +267,11 @@ def _csv(value: str | None) -> list[str]:
                    "fuzz) and write fuzz.md and fuzz.json.")
 @click.option("--readers", default=None,
               help="With --fuzz: readers, comma separated [default: all].")
+@click.option("--real", "real_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=None, help="Instead: the real-data gait protocol on this folder (real "
+                                 "IMUs with references, imuloco.evaluate.real).")
+@click.option("--baseline", is_flag=True,
+              help="With --real: also measure a right-ankle reconstruction's gait.")
 @click.option("--batch", "batch_walkers", type=click.IntRange(1), default=None, metavar="N",
               help="Instead: the batch benchmark (imuloco.evaluate.batchbench) on N simulated "
                    "walkers of 60 s; writes batch_bench.md and batch_bench.json.")
@@ -249,10 +283,11 @@ def _csv(value: str | None) -> list[str]:
               help="With --load: also time the BVH reader of this git commit.")
 @_reading_options
 def bench(method_names: str | None, split_name: str, noise: str, placement: str,
-          data: Path | None, limit: int | None, seed: int, out: Path, speed: bool,
-          db_frames: str | None, fuzz: int | None, readers: str | None,
+          data_items: tuple[str, ...], train_items: tuple[str, ...],
+          test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
+          speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None,
           batch_walkers: int | None, load_dirs: tuple[Path, ...], against: str | None,
-          up: str, skip_frames: int) -> None:
+          real_dir: Path | None, baseline: bool, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
     if fuzz is not None:
         from imuloco.evaluate.fuzz import READERS, write_fuzz
@@ -263,6 +298,13 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
             raise click.BadParameter(f"unknown reader(s) {unknown}; expected {list(READERS)}",
                                      param_hint="--readers")
         click.echo(write_fuzz(fuzz, out, chosen, seed=seed, progress=True))
+        return
+    if real_dir is not None:
+        from imuloco.evaluate.real import run_real, summarize, table
+
+        rows = run_real(real_dir, out, limit, baseline, progress=True)
+        click.echo(table(summarize(rows)))
+        click.echo(f"wrote {out / 'real.json'}, real.csv and README.md")
         return
     if batch_walkers is not None:
         from imuloco.evaluate.batchbench import batch_benchmark, markdown
@@ -279,20 +321,22 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
         click.echo(f"wrote {out / 'load.json'} and {out / 'load.md'}")
         return
     if not method_names:
-        raise click.UsageError("Missing option '--method' (or pass --fuzz N, --batch N or "
-                               "--load DIR).")
+        raise click.UsageError("Missing option '--method' (or pass --fuzz N, --batch N, "
+                               "--load DIR or --real DIR).")
     names = _csv(method_names)
+    data = _folders(data_items)
     if speed:
         from imuloco.evaluate.speed import speed_benchmark
 
         frames = [int(v) for v in _csv(db_frames)] or None
-        speed_benchmark(names, out, data, frames)
+        speed_benchmark(names, out, data[0] if data else None, frames)
         return
     from imuloco.evaluate.bench import run_bench
     from imuloco.evaluate.report import COLUMNS, table
 
-    records = run_bench(names, split_name, noise, _csv(placement), data, out, limit, seed,
-                        progress=True, up=up, skip_frames=skip_frames)
+    records = run_bench(names, split_name, noise, _csv(placement), _folders(data_items), out,
+                        limit, seed, progress=True, seeds=n_seeds, train=_folders(train_items),
+                        test=_folders(test_items), up=up, skip_frames=skip_frames)
     click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
     click.echo(f"wrote {out / 'results.json'} and {out / 'results.md'}")
 
@@ -328,9 +372,9 @@ def evaluate(ground_truth: Path, reconstructed: Path, as_json: bool) -> None:
 @click.option("-o", "--output", type=_file(), required=True, help="Model file to write (.npz).")
 @force_option
 @_reading_options
-def train(method_name: str, data: Path | None, limit: int | None, seed: int, placement: str,
-          noise: str, split_name: str | None, params: tuple[str, ...], output: Path,
-          force: bool, up: str, skip_frames: int) -> None:
+def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: str,
+          split_name: str | None, params: tuple[str, ...], limit: int | None, seed: int,
+          output: Path, force: bool, up: str, skip_frames: int) -> None:
     """Fit a method on motion clips with simulated sensors and save the model.
 
     Writes OUTPUT, and for methods that keep a training history (``learned``) its losses per
@@ -338,9 +382,9 @@ def train(method_name: str, data: Path | None, limit: int | None, seed: int, pla
     """
 
     from imuloco.errors import UnknownNameError
+    from imuloco.evaluate.bench import data_label, load_data
     from imuloco.evaluate.protocols import split
     from imuloco.io.atomic import check_output
-    from imuloco.io.database import load_database, load_sample, spread
     from imuloco.methods import method_class
     from imuloco.methods.registry import parse_params
 
@@ -350,10 +394,8 @@ def train(method_name: str, data: Path | None, limit: int | None, seed: int, pla
         method.set_params(**parse_params(params, "--param"))
     except UnknownNameError as e:
         raise click.BadParameter(str(e), param_hint="--param") from None
-    db = (load_sample() if data is None
-          else load_database(data, limit=limit, up=up, skip_frames=skip_frames))
-    if data is None and limit is not None:
-        db = db.subset(spread(len(db), limit))
+    data = _folders(data_items)
+    db = load_data(data, limit, progress=True, up=up, skip_frames=skip_frames)
     if split_name is not None:
         db = split(db, split_name)[0]
     placements = _csv(placement)
@@ -364,7 +406,7 @@ def train(method_name: str, data: Path | None, limit: int | None, seed: int, pla
             raise
         raise click.BadParameter(f"{e} (rejected by {method_name})", param_hint="--param"
                                  ) from None
-    method.protocol_.update(data="bundled sample" if data is None else Path(data).name,
+    method.protocol_.update(data="bundled sample" if data is None else data_label(data),
                             split=split_name or "all")
     seconds = method.protocol_["train_seconds"]
     method.save(output, overwrite=True)  # checked before training
@@ -437,7 +479,7 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @model_options
 @log_options
 @click.option("-o", "--output", type=_file(), required=True,
-              help="BVH file to write (on the model's training skeleton).")
+              help="BVH file to write (on the model's training skeleton, or --skeleton's).")
 @click.option("--video", type=_file(), default=None,
               help="Also render a stick-figure video (.mp4 or .gif).")
 @click.option("--video-seconds", type=float, default=None,
@@ -446,18 +488,22 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
               help="Also write the interactive HTML viewer.")
 @click.option("--report", "report_path", type=_file(), default=None,
               help="Also write the report (gait, checks) as JSON.")
+@skeleton_option
 @calibrate_option
 @platform_option
 @click.option("--piece-seconds", type=click.FloatRange(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html).")
+@height_option
 @force_option
 @_units_option
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
-                report_path: Path | None, no_calibrate: bool, platform: str | None,
-                piece_seconds: float | None, force: bool, units: str) -> None:
+                report_path: Path | None, skeleton: Path | None, no_calibrate: bool,
+                platform: str | None, piece_seconds: float | None, height: float | None,
+                force: bool,
+                units: str) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -468,11 +514,13 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     from imuloco.io.bvh import write_bvh
 
     check_outputs([output, video, html_path, report_path], force,
-                  inputs=[*recording, *([model_path] if model_path else [])])
+                  inputs=[*recording, *([model_path] if model_path else []),
+                          *([skeleton] if skeleton else [])])
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
-        if video or html_path:
-            raise click.UsageError("--piece-seconds writes the BVH only: drop --video/--html")
+        if video or html_path or skeleton or height is not None:
+            raise click.UsageError("--piece-seconds writes the BVH on the model's skeleton "
+                                   "only: drop --video/--html/--skeleton/--height")
         from imuloco.app.chunked import reconstruct_to_bvh
 
         pieces = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
@@ -488,7 +536,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         return
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
-                                      progress=True, platform=platform)
+                                      progress=True, platform=platform, skeleton=skeleton,
+                                      height=height)
     click.echo(f"model: {report.model}", err=True)
     write_bvh(motion, output, unit=units, overwrite=True)  # checked above
     written = [output]
@@ -513,16 +562,17 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 @click.option("--out", "out_dir", type=_folder(), default=Path("imuloco-demo"),
               show_default=True, help="Folder for the outputs.")
 @model_options
+@skeleton_option
 @force_option
 @_units_option
-def demo(out_dir: Path, model_path: Path | None, method_name: str | None, force: bool,
-         units: str) -> None:
+def demo(out_dir: Path, model_path: Path | None, method_name: str | None,
+         skeleton: Path | None, force: bool, units: str) -> None:
     """Simulate a phone on the right ankle of a bundled walk, reconstruct it and write the
     BVH, a side-by-side video (MP4, GIF), the HTML viewer, plots and a report."""
     from imuloco.app.pipeline import demo as run_demo
 
     report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
-                      progress=True, unit=units)
+                      progress=True, unit=units, skeleton=skeleton)
     m = report["metrics"]
     click.echo(f"model: {report['model']}")
     g, gt = report["gait"], report["gait_ground_truth"]
@@ -599,13 +649,16 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
 @log_options
 @calibrate_option
 @platform_option
+@skeleton_option
+@height_option
 @click.option("--force", is_flag=True,
               help="Redo recordings whose outputs are complete (a re-run skips them).")
 @_units_option
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path,
           jobs: int | None, scheduler: str | None, model_path: Path | None,
-          method_name: str | None, placement: str, fmt: str, no_calibrate: bool,
-          platform: str | None, force: bool, units: str) -> None:
+          method_name: str | None, placement: str, fmt: str, skeleton: Path | None,
+          no_calibrate: bool, platform: str | None, height: float | None, force: bool,
+          units: str) -> None:
     """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
     recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
     finished recordings)."""
@@ -616,7 +669,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
         raise click.UsageError("no recordings: give files or --glob PATTERN")
     summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
                         calibrate=not no_calibrate, force=force, progress=True,
-                        scheduler=scheduler, platform=platform, unit=units)
+                        scheduler=scheduler, platform=platform, unit=units,
+                        skeleton=skeleton, height_m=height)
     click.echo(f"model: {summary['model']}", err=True)
     click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
     for r in summary["recordings"]:

@@ -116,23 +116,23 @@ def worker_model(sha256: str, data: bytes):
 def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
                     platform: str | None = None, height_m: float | None = None,
-                    unit: str = "cm") -> dict[str, Any]:
+                    unit: str = "cm", skeleton: str | None = None) -> dict[str, Any]:
     """Reconstruct one recording (a path read here), write ``NAME.bvh`` (lengths in ``unit``)
     then ``NAME.json``.
 
     Returns ``{"row": ..., "strides": [...]}`` (see :func:`walker_rows`); errors are caught and
     reported in the row."""
     from imuloco.app.pipeline import reconstruct_file
-    from imuloco.evaluate.strides import stride_rows
     from imuloco.io.bvh import write_bvh
 
     t0 = time.perf_counter()
     try:
         fitted = worker_model(model_sha256, model)
         motion, recon = reconstruct_file(recording, placement=placement, fmt=fmt,
-                                         calibrate=calibrate, fitted=fitted, platform=platform)
+                                         calibrate=calibrate, fitted=fitted,
+                                         platform=platform, skeleton=skeleton,
+                                         height=height_m)
         report = recon.to_json()
-        report["strides"] = stride_rows(motion)
         report["seconds"] = round(time.perf_counter() - t0, 3)
         report["batch"] = {"recording": recording, "model_sha256": model_sha256,
                            "placement": placement, "height_m": height_m, "unit": unit}
@@ -185,15 +185,27 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
     return report if same else False
 
 
-def write_tables(out: Path, rows: list[dict], strides: list[dict],
-                 inputs: Sequence[Path] = ()) -> list[Path]:
-    """Write ``summary.csv``, ``walkers.parquet`` and ``strides.parquet`` atomically."""
+def _schema(fields: Sequence[str]):
+    import pyarrow as pa
+
+    return pa.schema([(f, pa.string() if f in _STRINGS else
+                          pa.int64() if f in _INTEGERS else pa.float64()) for f in fields])
+
+
+def stride_table(strides: list[dict]):
+    """Stride rows as a pyarrow Table: columnar, so a study's millions of strides fit in memory
+    (about 100 bytes a stride, against about 1 kB as dicts)."""
+    import pyarrow as pa
+
+    return pa.Table.from_pylist(strides, schema=_schema(("walker", *STRIDE_FIELDS)))
+
+
+def write_tables(out: Path, rows: list[dict], strides: list, inputs: Sequence[Path] = ()
+                 ) -> list[Path]:
+    """Write ``summary.csv``, ``walkers.parquet`` and ``strides.parquet`` (from the walkers'
+    :func:`stride_table`, in order) atomically."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-
-    def schema(fields: Sequence[str]) -> pa.Schema:
-        return pa.schema([(f, pa.string() if f in _STRINGS else
-                              pa.int64() if f in _INTEGERS else pa.float64()) for f in fields])
 
     def whole(v: Any) -> Any:
         return None if v is None else int(v)
@@ -205,10 +217,11 @@ def write_tables(out: Path, rows: list[dict], strides: list[dict],
         writer.writeheader()
         writer.writerows(rows)
     walkers = [{**r, **{k: whole(r.get(k)) for k in _INTEGERS}} for r in rows]
-    for path, fields, table in ((paths[1], WALKER_FIELDS, walkers),
-                                (paths[2], ("walker", *STRIDE_FIELDS), strides)):
+    tables = (pa.Table.from_pylist(walkers, schema=_schema(WALKER_FIELDS)),
+              pa.concat_tables([stride_table([]), *strides]))
+    for path, table in zip(paths[1:], tables):
         with atomic_write(path, "wb") as f:
-            pq.write_table(pa.Table.from_pylist(table, schema=schema(fields)), f)
+            pq.write_table(table, f)
     return paths
 
 
@@ -253,7 +266,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
               placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
               force: bool = False, progress: bool = False, fitted=None, scheduler=None,
               platform: str | None = None, height_m: float | None = None, retries: int = 2,
-              unit: str = "cm") -> dict[str, Any]:
+              unit: str = "cm", skeleton: str | Path | None = None) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
     Parameters
@@ -262,7 +275,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     out_dir : folder for the outputs (created).
     jobs : workers of the local cluster (``None`` or ``-1``: one per CPU).
     model, method, placement : the model, as :func:`imuloco.app.pipeline.choose_method` picks it.
-    fmt, calibrate, platform : see :func:`imuloco.app.pipeline.reconstruct_file`.
+    fmt, calibrate, platform : see :func:`imuloco.app.pipeline.reconstruct_file`; the
+        report's ``strides`` are the estimator's for the placement (a foot sensor's own).
     force : redo recordings whose outputs are complete, replace another job's outputs.
     progress : a progress bar (tqdm) on stderr.
     fitted : an already fitted method (skips the choice).
@@ -271,14 +285,16 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     height_m : the walkers' height in metres, recorded in the tables (``None``: not given).
     retries : Dask retries of a task that raises outside the reconstruction.
     unit : length unit of the BVH files (``cm`` or ``m``; see :func:`imuloco.io.bvh.write_bvh`).
+    skeleton : a motion file of the user's rig: every BVH comes out on it (checked before
+        starting; see :func:`imuloco.app.pipeline.onto_rig`).
 
     Returns
     -------
     The summary (also written to ``summary.json``): ``model``, ``method``, ``model_sha256``,
     ``jobs`` (workers), ``scheduler``, ``model_seconds`` (choosing the model), ``seconds``
-    (reconstructing, from the cluster ready to the last result), ``done``, ``skipped`` (complete from an earlier run), ``ok`` (done +
-    skipped), ``failed``, ``frames`` (reconstructed), ``strides`` and ``recordings`` (rows in
-    input order).
+    (reconstructing, from the cluster ready to the last result), ``done``, ``skipped``
+    (complete from an earlier run), ``ok`` (done + skipped), ``failed``, ``frames``
+    (reconstructed), ``strides`` and ``recordings`` (rows in input order).
     """
     from tqdm.auto import tqdm
 
@@ -290,6 +306,10 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     names = output_names(paths)
     recs = [os.path.normpath(p.absolute()) for p in paths]
     out = Path(out_dir).absolute()
+    if skeleton is not None:
+        from imuloco.app.pipeline import load_rig
+
+        load_rig(skeleton)  # refuse a rig that cannot be mapped before any work
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     if fitted is None:
@@ -309,10 +329,11 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                                 "--force "
                                 "(force=True) to replace them or choose another --out")
     rows: dict[str, dict] = {}
-    strides: dict[str, list[dict]] = {}
+    strides: dict[str, Any] = {}  # pyarrow Tables
     for n, rep in reports.items():
         if rep and not force:
-            rows[n], strides[n] = walker_rows(n, rep)
+            rows[n], table = walker_rows(n, rep)
+            strides[n] = stride_table(table)
     skipped = len(rows)
     todo = [(n, r) for n, r in zip(names, recs) if n not in rows]
     with dask_client(scheduler, jobs) as client:
@@ -328,8 +349,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                 fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
                                     placement=placement, fmt=fmt, calibrate=calibrate,
                                     platform=platform, height_m=height_m, unit=unit,
-                                    key=f"imuloco-batch-{job}-{n}",
-                                    retries=retries, pure=False)
+                                    skeleton=None if skeleton is None else str(skeleton),
+                                    key=f"imuloco-batch-{job}-{n}", retries=retries,
+                                    pure=False)
                 futures.append(fut)
                 jobs_of[fut.key] = (n, r)
         bar = tqdm(total=len(names), initial=skipped, desc="batch", unit="rec",
@@ -338,9 +360,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
             n, r = jobs_of[fut.key]
             if fut.status == "finished":
                 res = fut.result()
-                rows[n], strides[n] = res["row"], res["strides"]
+                rows[n], strides[n] = res["row"], stride_table(res["strides"])
             else:  # lost more often than Dask allows, or raised more than ``retries`` times
-                rows[n], strides[n] = error_row(n, r, fut.exception(), 0.0), []
+                rows[n], strides[n] = error_row(n, r, fut.exception(), 0.0), stride_table([])
             fut.release()
             bar.set_postfix_str(f"{n}: {rows[n]['status']}")
             bar.update()
@@ -349,7 +371,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     ordered = [{k: rows[n].get(k) for k in WALKER_FIELDS} | {"method": fitted.name,
                                                                "model": note}
                for n in names]
-    all_strides = [s for n in names for s in strides[n]]
+    all_strides = [strides[n] for n in names]
     write_tables(out, ordered, all_strides, inputs=paths)
     failed = sum(r["status"] != "ok" for r in ordered)
     summary = {"model": note, "method": fitted.name, "model_sha256": sha, "jobs": workers,
@@ -357,7 +379,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                "model_seconds": round(model_seconds, 2), "seconds": round(seconds, 2),
                "done": len(names) - skipped - failed, "skipped": skipped,
                "ok": len(names) - failed, "failed": failed,
-               "frames": sum(r["frames"] or 0 for r in ordered), "strides": len(all_strides),
+               "frames": sum(r["frames"] or 0 for r in ordered),
+               "strides": sum(t.num_rows for t in all_strides),
                "recordings": [{k: r[k] for k in COLUMNS} for r in ordered]}
     with atomic_write(check_output(out / "summary.json", force=True, inputs=paths), "w") as f:
         f.write(json.dumps(summary, indent=2) + "\n")

@@ -144,9 +144,11 @@ class ReconstructionReport:
     model : where the model came from (:class:`ModelChoice`).
     placement : the placement read.
     motion : frames, fps and duration of the reconstruction.
-    gait, plausibility : :func:`imuloco.evaluate.gait.gait_parameters` and
-        :func:`~imuloco.evaluate.gait.plausibility`, as JSON.
+    height_m : the wearer's height given (``None``: the model skeleton's proportions).
+    gait, gait_source, gait_note, strides : :func:`imuloco.evaluate.sensorgait.gait_report`.
+    plausibility : :func:`imuloco.evaluate.gait.plausibility`, as JSON.
     signal_cadence_spm : the cadence of the raw signal (Welch), steps per minute.
+    skeleton : the user's rig the motion was retargeted onto (``None``: the model's).
     seconds : wall time of the whole reconstruction.
     """
 
@@ -156,9 +158,14 @@ class ReconstructionReport:
     model: ModelChoice
     placement: str
     motion: dict[str, Any]
+    height_m: float | None
     gait: dict[str, Any]
+    gait_source: str
+    gait_note: str | None
+    strides: list[dict[str, Any]]
     signal_cadence_spm: float | None
     plausibility: dict[str, Any]
+    skeleton: dict[str, Any] | None = None
     seconds: float = 0.0
 
     @property
@@ -173,8 +180,12 @@ class ReconstructionReport:
             out["calibration"] = self.calibration
         out.update(feet_pinned_by=self.feet_pinned_by, method=self.method,
                    model=self.model.description, placement=self.placement, motion=self.motion,
-                   gait=self.gait, signal_cadence_spm=self.signal_cadence_spm,
-                   plausibility=self.plausibility, seconds=self.seconds)
+                   height_m=self.height_m, gait=self.gait, gait_source=self.gait_source,
+                   gait_note=self.gait_note, strides=self.strides,
+                   signal_cadence_spm=self.signal_cadence_spm, plausibility=self.plausibility)
+        if self.skeleton is not None:
+            out["skeleton"] = self.skeleton
+        out["seconds"] = self.seconds
         return out
 
     def __getitem__(self, key: str) -> Any:
@@ -223,11 +234,35 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
     return motion, info
 
 
+def load_rig(path: str | Path):
+    """The user's rig (:class:`imuloco.core.retarget.Rig`) from a motion file (BVH, ASF/AMC):
+    its joint names, offsets and the poses of its frames (one T-pose frame will do). A rig
+    whose joints do not map every canonical body part is refused, naming the parts."""
+    from imuloco.core.retarget import Rig
+    from imuloco.io.motionfile import read_motion
+
+    return Rig.measure([read_motion(path)], where=str(path))
+
+
+def onto_rig(motion: Motion, rig) -> Motion:
+    """``motion`` retargeted onto ``rig`` (:func:`imuloco.core.retarget.retarget`: global
+    rotations per body part, root path scaled by leg length, feet on the floor), then its
+    root moved so that feet in contact in ``motion`` do not slide on the rig either
+    (:func:`imuloco.methods.postprocess.pin_feet`): other proportions add no skating."""
+    from imuloco.core.retarget import retarget
+    from imuloco.methods.postprocess import pin_feet
+    from imuloco.phases import foot_contacts
+
+    c = foot_contacts(motion)
+    return pin_feet(retarget(motion, rig), np.stack([c["left_foot"], c["right_foot"]], axis=1))
+
+
 def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=None,
                      method: str | None = None, placement: str = "right_ankle",
                      fmt: str = "auto", calibrate: bool = True, pin: bool | None = None,
                      progress: bool = False, fitted: Method | ModelChoice | None = None,
-                     platform: str | None = None) -> tuple[Motion, ReconstructionReport]:
+                     platform: str | None = None, skeleton: str | Path | None = None,
+                     height: float | None = None) -> tuple[Motion, ReconstructionReport]:
     """Import a phone's sensor log and reconstruct the wearer's motion.
 
     Parameters
@@ -242,17 +277,23 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     fitted : an already fitted method or chosen model (skips :func:`choose_model`).
     platform : Sensor Logger exports: ``"ios"`` or ``"android"`` (default: from the export's
         metadata, else guessed with a warning).
+    skeleton : a motion file of the user's rig: the motion comes out on it (:func:`onto_rig`;
+        gait is measured before, on the model's skeleton).
+    height : the wearer's body height in metres: the skeleton, and so every length and speed,
+        is scaled to it (:func:`imuloco.evaluate.gait.to_height`) before gait is measured.
 
     Returns
     -------
-    The Motion (on the model's training skeleton, at its frame rate) and the
-    :class:`ReconstructionReport`: the import, the calibration, the model, gait parameters,
-    plausibility checks and the cadence of the raw signal (``report.to_json()`` for JSON).
+    The Motion (on the model's training skeleton or ``skeleton``'s rig, at the model's frame
+    rate) and the :class:`ReconstructionReport`: the import, the calibration, the model, gait
+    parameters from the best estimator for the placement
+    (:func:`imuloco.evaluate.sensorgait.gait_report`) with per-stride rows, plausibility checks
+    and the cadence of the raw signal (``report.to_json()`` for JSON).
     """
     from tqdm.auto import tqdm
 
-    from imuloco.evaluate.gait import gait_parameters, plausibility, signal_cadence, to_json
-    from imuloco.phases import gait_phases
+    from imuloco.evaluate.gait import plausibility, signal_cadence, to_height, to_json
+    from imuloco.evaluate.sensorgait import gait_report
     from imuloco.sensors.reallog import read_log
 
     steps = ["import", "model", "reconstruct", "gait"]
@@ -272,12 +313,13 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar.update()
     bar.set_postfix_str(f"{fitted.name} on {rec.times[-1]:.0f} s")
     motion, info = reconstruct_recording(rec, fitted, calibrate, pin)
+    if height is not None:
+        motion = to_height(motion, height)
     name = Path(recording_path if isinstance(recording_path, (str, Path))
                 else recording_path[0]).stem
     motion.name = name
     bar.update()
     bar.set_postfix_str("gait")
-    phases = gait_phases(motion)
     k = rec.placements.index(fitted.placements_[0])
     report = ReconstructionReport(
         recording={
@@ -293,10 +335,16 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         model=choice, placement=placement,
         motion={"frames": motion.num_frames, "fps": motion.fps,
                 "duration_s": round(motion.duration, 3)},
-        gait=to_json(gait_parameters(motion, phases)),
+        height_m=height,
+        **gait_report(motion, rec, placement, height),
         signal_cadence_spm=to_json({"v": signal_cadence(rec, k)})["v"],
         plausibility=to_json(plausibility(motion)),
     )
+    if skeleton is not None:
+        bar.set_postfix_str(f"retargeting onto {Path(skeleton).name}")
+        motion = onto_rig(motion, load_rig(skeleton))
+        motion.name = name
+        report.skeleton = {"file": str(skeleton), "joints": motion.skeleton.num_joints}
     bar.update()
     bar.close()
     report.seconds = round(time.perf_counter() - t0, 2)
@@ -336,7 +384,7 @@ def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequ
 
 def demo(out_dir: str | Path, method: str | None = None, model: str | Path | None = None,
          clip: str = DEMO_CLIP, overwrite: bool = False, progress: bool = False,
-         unit: str = "cm") -> dict[str, Any]:
+         unit: str = "cm", skeleton: str | Path | None = None) -> dict[str, Any]:
     """The README's first command: a bundled clip, a simulated phone, a reconstruction.
 
     Takes ``clip`` from the bundled sample, simulates a phone on the right ankle with phone
@@ -347,6 +395,8 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     (``signals.png``, ``phases.png``, ``errors.png``) and ``report.md`` / ``report.json`` with
     the metrics (:func:`imuloco.evaluate.metrics.evaluate`) and gait parameters of both.
     ``unit`` is the BVH's length unit (``cm`` or ``m``).
+    With ``skeleton`` (a motion file of the user's rig) ``reconstruction.bvh`` is on that rig
+    (:func:`onto_rig`); the video, viewer and metrics stay on the model's skeleton.
 
     Returns
     -------
@@ -397,7 +447,8 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     n = min(gt.num_frames, motion.num_frames)
     gt_cut, rec_cut = gt.slice(0, n), motion.slice(0, n)
     rec_cut.name = "reconstruction"
-    write_bvh(rec_cut, paths["reconstruction.bvh"], unit=unit, overwrite=overwrite)
+    write_bvh(rec_cut if skeleton is None else onto_rig(rec_cut, load_rig(skeleton)),
+              paths["reconstruction.bvh"], unit=unit, overwrite=overwrite)
     bar.update()
 
     bar.set_postfix_str("rendering")

@@ -3,13 +3,16 @@
 Sensors, contacts and metrics refer to body parts (``"right_ankle"``), never to a dataset's
 joint names. A body map is a ``dict`` from part to joint name. Built-in candidate names cover
 the Bandai-Namco skeleton of the shared data, the CMU skeleton (ASF/AMC bone names and the common
-BVH conversions of it) and common BVH naming (Mixamo and similar). A user gives their own map by
+BVH conversions of it), Character Creator / iClone / ActorCore (``CC_Base_*``; their twist, share,
+finger and face bones stay unmapped) and common BVH naming (Mixamo and similar). A user gives their own map by
 passing ``overrides`` to :func:`resolve_body_map` or a ``body_map`` to :class:`Skeleton`.
 """
 
 from __future__ import annotations
 
 import re
+
+from imuloco.errors import ImulocoError
 
 BodyMap = dict[str, str]
 
@@ -24,31 +27,35 @@ LOWER_PARTS = tuple(f"{s}_{p}" for s in SIDES for p in ("hip", "knee", "ankle", 
 # Candidate joint names per part, most specific first. "{S}" is the side's letter (L/R),
 # "{Side}" the side's word (Left/Right), "{s}" the lower-case letter (l/r).
 _CENTRE_CANDIDATES: dict[str, tuple[str, ...]] = {
-    "pelvis": ("Hips", "root", "Pelvis", "Hip"),
+    "pelvis": ("Hips", "root", "CC_Base_Hip", "Pelvis", "Hip"),
     # CMU: the ASF joint "upperback" (where the lowerback bone ends) is the one the CMU BVH
     # conversions call "Spine"; "lowerback" sits on the root.
-    "spine": ("Spine", "upperback", "lowerback", "LowerBack", "Spine1"),
-    "chest": ("Chest", "thorax", "Spine2", "Spine1", "upperback", "UpperChest"),
-    "neck": ("Neck", "lowerneck", "Neck1", "upperneck"),
-    "head": ("Head",),
+    # Character Creator: Hip > Waist > Spine01 > Spine02 > NeckTwist01 > NeckTwist02 > Head;
+    # Spine01 and Spine02 sit where Bandai-Namco's Spine and Chest do.
+    "spine": ("Spine", "upperback", "lowerback", "LowerBack", "Spine1", "CC_Base_Spine01"),
+    "chest": ("Chest", "thorax", "Spine2", "Spine1", "upperback", "UpperChest",
+              "CC_Base_Spine02"),
+    "neck": ("Neck", "lowerneck", "Neck1", "upperneck", "CC_Base_NeckTwist01"),
+    "head": ("Head", "CC_Base_Head"),
 }
 _LIMB_CANDIDATES: dict[str, tuple[str, ...]] = {
     "hip": ("UpperLeg_{S}", "{Side}UpLeg", "{s}femur", "{Side}Hip", "{Side}UpperLeg", "{Side}Thigh",
-            "{S}_Hip"),
+            "{S}_Hip", "CC_Base_{S}_Thigh"),
     "knee": ("LowerLeg_{S}", "{Side}Leg", "{s}tibia", "{Side}Knee", "{Side}LowerLeg", "{Side}Shin",
-             "{S}_Knee"),
-    "ankle": ("Foot_{S}", "{Side}Foot", "{s}foot", "{Side}Ankle", "{S}_Ankle"),
+             "{S}_Knee", "CC_Base_{S}_Calf"),
+    "ankle": ("Foot_{S}", "{Side}Foot", "{s}foot", "{Side}Ankle", "{S}_Ankle", "CC_Base_{S}_Foot"),
     "toe": ("Toes_{S}", "{Side}ToeBase", "{s}toes", "{Side}Toe", "{Side}Toes", "{Side}Toe_End",
-            "{S}_Foot"),
+            "{S}_Foot", "CC_Base_{S}_ToeBase"),
     "shoulder": ("UpperArm_{S}", "{Side}Arm", "{s}humerus", "{Side}UpperArm", "{Side}Shoulder",
-                 "{S}_Shoulder"),
+                 "{S}_Shoulder", "CC_Base_{S}_Upperarm"),
     "elbow": ("LowerArm_{S}", "{Side}ForeArm", "{s}radius", "{Side}Elbow", "{Side}LowerArm",
-              "{S}_Elbow"),
-    "wrist": ("Hand_{S}", "{Side}Hand", "{s}wrist", "{Side}Wrist", "{s}hand", "{S}_Wrist"),
+              "{S}_Elbow", "CC_Base_{S}_Forearm"),
+    "wrist": ("Hand_{S}", "{Side}Hand", "{s}wrist", "{Side}Wrist", "{s}hand", "{S}_Wrist",
+              "CC_Base_{S}_Hand"),
 }
 
 
-class BodyMapError(KeyError):
+class BodyMapError(ImulocoError, KeyError):
     """A skeleton's joint names could not be mapped to every canonical body part."""
 
     def __str__(self) -> str:  # KeyError quotes its message; we want it plain

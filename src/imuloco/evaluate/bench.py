@@ -13,8 +13,20 @@ Protocol details fixed here (see also :mod:`imuloco.evaluate.protocols`):
 - Aggregation: per motion type and ``all``, each metric is the frame-weighted mean of its
   per-clip values (for per-frame metrics this is the mean over all test frames; for ``dpv``,
   a per-clip sum by definition, clips count by their length). ``foot_skate`` ignores clips
-  without ground-truth contact.
-- Cost: ``train_s`` is the wall time of ``fit`` (signal synthesis included);
+  without ground-truth contact. ``heldout-contents`` pools the test clips of all its folds
+  (each clip is tested once, by the model trained without its content), so its rows per
+  motion type are the left-out contents.
+- Seeds: with ``seeds`` N > 1 each method is trained N times (seeds ``seed .. seed+N-1``,
+  for the training signals and for a method's own ``seed`` hyperparameter unless the spec
+  sets it) on the same test signals; each metric is the mean over the runs, ``<metric>_std`` their
+  standard deviation (ddof 1; None for one run), ``mpjpe_cm_per_seed`` the runs' values.
+- ``cross-dataset``: the training folders become one set on the first one's skeleton
+  (:func:`imuloco.io.database.load_databases`); test clips stay on their own skeleton,
+  resampled to the training frame rate, their sensors simulated there, and are compared on
+  canonical body parts (:func:`imuloco.evaluate.metrics.evaluate_parts`).
+- Cost: ``train_s`` is the wall time of ``fit`` (signal synthesis included: one bench run
+  simulates each training clip once, :func:`imuloco.methods.training.cached_signals`, and
+  adds the time that saved back);
   ``offline_fps`` is test frames over the wall time of ``reconstruct_signals`` (simulation and
   metrics excluded); online latency is the wall time of each ``stream().step`` over the first
   test clip (at most :data:`LATENCY_FRAMES` frames), median and 99th percentile;
@@ -27,6 +39,7 @@ Everything but the timings is deterministic: the same arguments give the same nu
 
 from __future__ import annotations
 
+import inspect
 import json
 import tempfile
 import time
@@ -39,23 +52,48 @@ from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
 from imuloco.core.motion import MotionDatabase
+from imuloco.errors import UnknownNameError
 from imuloco.evaluate import metrics
-from imuloco.evaluate.protocols import MOTION_TYPES, PROTOCOL_VERSION, split
-from imuloco.methods.training import TEST_SEED_OFFSET, Example, synthesize
+from imuloco.evaluate.protocols import MOTION_TYPES, PROTOCOL_VERSION, folds
+from imuloco.methods.training import (
+    TEST_SEED_OFFSET,
+    Example,
+    cached_signals,
+    saved_seconds,
+    synthesize,
+)
 
 LATENCY_FRAMES = 300
 
 
-def load_data(data: str | Path | None, limit: int | None = None, progress: bool = False,
+DataArg = str | Path | Sequence[str | Path] | None
+
+
+def data_folders(data: DataArg) -> list[Path]:
+    """Folders of a ``data`` argument: one path or several."""
+    if data is None:
+        return []
+    return [Path(data)] if isinstance(data, (str, Path)) else [Path(d) for d in data]
+
+
+def load_data(data: DataArg, limit: int | None = None, progress: bool = False,
               up: str = "auto", skip_frames: int = 0) -> MotionDatabase:
-    """The clips of folder ``data``, or the bundled sample when ``data`` is None (``up`` and
-    ``skip_frames`` as for :func:`imuloco.io.bvh.read_bvh`)."""
-    from imuloco.io.database import load_database, load_sample, spread
+    """The clips of folder(s) ``data`` as one database on the first folder's skeleton
+    (:func:`imuloco.io.database.load_databases`; ``limit`` per folder), or the bundled
+    sample when ``data`` is None (``up`` and ``skip_frames`` as for
+    :func:`imuloco.io.bvh.read_bvh`)."""
+    from imuloco.io.database import load_databases, load_sample, spread
 
     if data is None:
         db = load_sample(progress=progress)
         return db.subset(spread(len(db), limit))
-    return load_database(data, limit=limit, progress=progress, up=up, skip_frames=skip_frames)
+    return load_databases(data_folders(data), limit=limit, progress=progress, up=up,
+                          skip_frames=skip_frames)
+
+
+def data_label(data: DataArg) -> str:
+    """How records name their data: folder names joined by ``+``, or ``sample``."""
+    return "+".join(f.name for f in data_folders(data)) or "sample"
 
 
 def _aggregate(clips: list[dict[str, Any]]) -> dict[str, Any]:
@@ -105,26 +143,37 @@ def evaluate_method(
     Returns a dict with ``clips`` (per-clip metric dicts with ``name``, ``motion_type``,
     ``n_frames``), ``cost`` (train_s, offline_fps, latencies, the stream's look-ahead delay,
     model_bytes), ``per_joint`` (mean heading-frame error per joint, cm, shape (J,)) and
-    ``curves`` (per-frame RMSE, cm, of each test clip by name).
+    ``curves`` (per-frame RMSE, cm, of each test clip by name). Test clips on another
+    skeleton than the training one are measured on body parts
+    (:func:`imuloco.evaluate.metrics.evaluate_parts`) and leave ``per_joint`` and ``curves``
+    out (None / {}).
     """
-    from imuloco.methods import get_method
+    from imuloco.methods import get_method, method_class
 
-    method = get_method(name, **(params or {}))
-    t0 = time.perf_counter()
+    params = dict(params or {})
+    if "seed" in inspect.signature(method_class(name).__init__).parameters:
+        params.setdefault("seed", seed)  # a method's own seed (initial weights) follows too
+    method = get_method(name, **params)
+    t0, saved = time.perf_counter(), saved_seconds()
     method.fit(train, placements, noise, seed, progress=progress)
-    train_s = time.perf_counter() - t0
+    train_s = time.perf_counter() - t0 + (saved_seconds() - saved)  # as if nothing cached
     clips, rec_s, joint_sum, frames, curves = [], 0.0, 0.0, 0, {}
+    cross = False
     for ex in tqdm(test, desc=f"{name}: reconstructing", disable=not progress, unit="clip"):
         gt = ex.motion
         t0 = time.perf_counter()
         rec = method.reconstruct_signals(ex.signals)
         rec_s += time.perf_counter() - t0
-        rec = metrics.align_heading(rec, gt, 0)
-        values = metrics.evaluate(gt, rec)
-        err = metrics.joint_errors(gt, rec) * metrics.CM
-        joint_sum = joint_sum + err.sum(axis=0)
         frames += gt.num_frames
-        curves[ex.labels["name"]] = np.sqrt((err[:, 1:] ** 2).mean(axis=1))
+        if gt.skeleton.names != rec.skeleton.names:
+            cross = True
+            values = metrics.evaluate_parts(gt, rec)
+        else:
+            rec = metrics.align_heading(rec, gt, 0)
+            values = metrics.evaluate(gt, rec)
+            err = metrics.joint_errors(gt, rec) * metrics.CM
+            joint_sum = joint_sum + err.sum(axis=0)
+            curves[ex.labels["name"]] = np.sqrt((err[:, 1:] ** 2).mean(axis=1))
         clips.append({"name": ex.labels["name"], "motion_type": ex.labels.get("content"),
                       "n_frames": gt.num_frames, **values})
     p50, p99, delay = _latency(method, test[0].signals)
@@ -132,7 +181,8 @@ def evaluate_method(
             "online_latency_ms_p50": p50, "online_latency_ms_p99": p99,
             "online_delay_ms": delay,
             "model_bytes": _model_bytes(method)}
-    return {"clips": clips, "cost": cost, "per_joint": joint_sum / frames, "curves": curves}
+    return {"clips": clips, "cost": cost, "per_joint": None if cross else joint_sum / frames,
+            "curves": curves}
 
 
 def run_bench(
@@ -140,11 +190,14 @@ def run_bench(
     split_name: str = "random-clips",
     noise: str = "phone",
     placements: Sequence[str] = ("right_ankle",),
-    data: str | Path | None = None,
+    data: DataArg = None,
     out: str | Path | None = None,
     limit: int | None = None,
     seed: int = 0,
     progress: bool = False,
+    seeds: int = 1,
+    train: DataArg = None,
+    test: DataArg = None,
     up: str = "auto",
     skip_frames: int = 0,
 ) -> list[dict[str, Any]]:
@@ -155,44 +208,117 @@ def run_bench(
     methods : registry names, each optionally with hyperparameters as
         ``NAME[key=value;key=value]`` (see :func:`imuloco.methods.registry.parse_method_spec`); records keep the spec
         as their ``method``.
-    split_name : ``"random-clips"`` or ``"heldout-styles"``.
+    split_name : a protocol of :data:`imuloco.evaluate.protocols.SPLITS`.
     noise : sensor noise preset for training and test signals.
     placements : sensor placement presets.
-    data : folder of clips (None: the bundled sample).
+    data : folder(s) of clips (None: the bundled sample); not for ``cross-dataset``.
     out : folder for ``results.json``, ``per_clip.json`` and ``results.md`` (+ plots); None
         writes nothing.
-    limit : read at most this many clips (before the split), for quick runs.
-    seed : training seed; test recordings use ``seed + TEST_SEED_OFFSET``.
+    limit : read at most this many clips (per folder, before the split), for quick runs.
+    seed : first training seed; test recordings use ``seed + TEST_SEED_OFFSET``.
+    seeds : number of training seeds (see the module docstring).
+    train, test : the folders of ``cross-dataset`` (training: one or several; test: one).
     up, skip_frames : how motion files are read (see :func:`imuloco.io.bvh.read_bvh`).
     """
+    from imuloco.core.retarget import resampled
     from imuloco.methods import method_class
     from imuloco.methods.registry import parse_method_spec
 
     specs = {m: parse_method_spec(m) for m in methods}
     for name, _ in specs.values():  # fail before any work on an unknown or uninstalled method
         method_class(name)
+    if seeds < 1:
+        raise ValueError(f"seeds must be at least 1, got {seeds}")
     placements = list(placements)
-    db = load_data(data, limit, progress, up, skip_frames)
-    train, test_db = split(db, split_name)
-    test = synthesize(test_db, placements, noise, seed + TEST_SEED_OFFSET, progress=progress)
+    if split_name == "cross-dataset":
+        if not data_folders(train) or len(data_folders(test)) != 1:
+            raise UnknownNameError("cross-dataset needs training folder(s) and one test folder "
+                           "(--train DIR[,DIR] --test DIR)")
+        train_db = load_data(train, limit, progress, up, skip_frames)
+        fps = float(train_db.clips[0].fps)
+        test_db = load_data(test, limit, progress, up, skip_frames)
+        test_db = MotionDatabase([resampled(c, fps) for c in test_db.clips], test_db.labels)
+        protocol = [("all", train_db, test_db)]
+        label = f"{data_label(train)} -> {data_label(test)}"
+    else:
+        if train is not None or test is not None:
+            raise UnknownNameError("--train/--test are for --split cross-dataset; use --data")
+        protocol = folds(load_data(data, limit, progress, up, skip_frames), split_name)
+        label = data_label(data)
     header = {"split": split_name, "noise": noise, "placements": placements,
-              "protocol_version": PROTOCOL_VERSION, "seed": seed,
-              "data": "sample" if data is None else Path(data).name}
-    records, details = [], {}
-    for name in tqdm(methods, desc="methods", disable=not progress or len(methods) < 2):
-        with threadpool_limits(limits=1):
-            res = evaluate_method(specs[name][0], train, test, placements, noise, seed,
-                                  params=specs[name][1], progress=progress)
-        details[name] = res
-        types = [t for t in MOTION_TYPES if any(c["motion_type"] == t for c in res["clips"])]
-        types += sorted({c["motion_type"] for c in res["clips"]} - set(types) - {None})
+              "protocol_version": PROTOCOL_VERSION, "seed": seed, "data": label,
+              "seeds": list(range(seed, seed + seeds)), "folds": [f for f, _, _ in protocol]}
+    runs: dict[str, list[dict[str, Any]]] = {m: [] for m in methods}  # per seed
+    all_test: list[Example] = []
+    with cached_signals():
+        for fold, train_db, test_db in protocol:
+            all_test += _run_fold(fold, train_db, test_db, methods, specs, runs, placements,
+                                  noise, seed, seeds, progress)
+
+    records = []
+    for name in methods:
+        clips0 = runs[name][0]["clips"]
+        types = [t for t in MOTION_TYPES if any(c["motion_type"] == t for c in clips0)]
+        types += sorted({c["motion_type"] for c in clips0} - set(types) - {None})
         for mtype in [*types, "all"]:
-            sel = [c for c in res["clips"] if mtype == "all" or c["motion_type"] == mtype]
+            per_seed = [_aggregate([c for c in r["clips"]
+                                    if mtype == "all" or c["motion_type"] == mtype])
+                        for r in runs[name]]
+            costs = [c for r in runs[name] for c in r["costs"]]
             records.append({"method": name, **header, "motion_type": mtype,
-                            **_aggregate(sel), **res["cost"]})
+                            **_over_seeds(per_seed), **_mean_costs(costs)})
+    details = {m: {"clips": r[0]["clips"],
+                   "per_joint": (None if any(p is None for p in r[0]["per_joint"])
+                                 else np.mean(r[0]["per_joint"], axis=0)),
+                   "curves": r[0]["curves"]} for m, r in runs.items()}
     if out is not None:
-        write_results(records, details, test, Path(out))
+        write_results(records, details, all_test, Path(out))
     return records
+
+
+def _run_fold(fold: str, train_db: MotionDatabase, test_db: MotionDatabase,
+              methods: Sequence[str], specs: dict[str, tuple[str, dict[str, Any]]],
+              runs: dict[str, list[dict[str, Any]]], placements: list[str], noise: str,
+              seed: int, seeds: int, progress: bool) -> list[Example]:
+    """Fit every method with every seed on one fold; add their results to ``runs``."""
+    test_ex = synthesize(test_db, placements, noise, seed + TEST_SEED_OFFSET, progress=progress)
+    for name in tqdm(methods, desc=f"methods ({fold})", disable=not progress):
+        for k in range(seeds):
+            with threadpool_limits(limits=1):
+                res = evaluate_method(specs[name][0], train_db, test_ex, placements, noise,
+                                      seed + k, params=specs[name][1], progress=progress)
+            for c in res["clips"]:
+                c["fold"] = fold
+            if len(runs[name]) <= k:
+                runs[name].append({"clips": [], "costs": [], "per_joint": [], "curves": {}})
+            run = runs[name][k]
+            run["clips"] += res["clips"]
+            run["costs"].append(res["cost"])
+            run["per_joint"].append(res["per_joint"])
+            run["curves"].update(res["curves"])
+    return test_ex
+
+
+def _over_seeds(per_seed: list[dict[str, Any]]) -> dict[str, Any]:
+    """Mean of each metric over seeds, its spread (``<key>_std``, ddof 1) and the runs'
+    MPJPE; counts from the first run (the test clips are the same)."""
+    out = dict(per_seed[0])
+    for key in metrics.METRIC_KEYS:
+        v = [r[key] for r in per_seed if r[key] is not None]
+        out[key] = float(np.mean(v)) if v else None
+        out[f"{key}_std"] = float(np.std(v, ddof=1)) if len(v) > 1 else None
+    out["mpjpe_cm_per_seed"] = [r["mpjpe_cm"] for r in per_seed]
+    return out
+
+
+def _mean_costs(costs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Costs averaged over folds and seeds (None stays None)."""
+    out = {}
+    for key in costs[0]:
+        v = [c[key] for c in costs if c[key] is not None]
+        out[key] = None if not v else (int(np.mean(v)) if key == "model_bytes"
+                                       else float(np.mean(v)))
+    return out
 
 
 def write_results(records: list[dict[str, Any]], details: dict[str, dict[str, Any]],
@@ -208,8 +334,7 @@ def write_results(records: list[dict[str, Any]], details: dict[str, dict[str, An
     (out / "per_clip.json").write_text(json.dumps(per_clip, indent=1) + "\n")
     skeleton = test[0].motion.skeleton
     clip = test[0].labels["name"]
-    write_report(records, out,
-                 per_joint={m: d["per_joint"] for m, d in details.items()},
-                 joint_names=skeleton.names,
-                 curves={m: d["curves"][clip] for m, d in details.items()},
-                 curve_clip=clip, fps=test[0].motion.fps)
+    per_joint = {m: d["per_joint"] for m, d in details.items() if d["per_joint"] is not None}
+    curves = {m: d["curves"][clip] for m, d in details.items() if clip in d["curves"]}
+    write_report(records, out, per_joint=per_joint or None, joint_names=skeleton.names,
+                 curves=curves or None, curve_clip=clip, fps=test[0].motion.fps)

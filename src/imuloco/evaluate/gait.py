@@ -6,13 +6,15 @@ From the foot strikes and contacts that :func:`imuloco.phases.gait_phases` detec
 - ``cadence_rhythm_spm``: cadence from the stride frequency of the ankles' alternation
   (:func:`motion_cadence`), robust to spurious strikes in jittery reconstructions.
 - ``steps``: number of foot strikes (left + right).
-- ``step_length_m``: at each strike, the distance along the heading between the striking ankle
-  and the other ankle (the usual "heel to heel" step length, with the ankle joint for the heel);
-  the median over strikes.
-- ``stride_length_m``: horizontal distance the striking ankle travelled between two strikes of
-  the same foot; the median over strides.
 - ``speed_mps``: walking speed, the horizontal distance the pelvis travelled from the first to
   the last strike divided by that time (so standing at the start or end does not count).
+- ``step_length_m``: the distance covered per step, ``60 x speed / cadence``, and
+  ``stride_length_m`` twice that: consistent with speed and cadence by construction. (The
+  ankles' separation at a strike, ``ankle_step_length_m``, the "heel to heel" step length, is
+  shorter than the distance covered per step when running: the flight adds to it.)
+- ``ankle_stride_length_m``: the median horizontal distance the striking ankle travelled
+  between two strikes of the same foot (:func:`imuloco.evaluate.strides.stride_rows` has
+  each stride).
 - ``stance_pct`` / ``swing_pct``: per foot, the share of the frames between that foot's first
   and last strike (whole gait cycles) spent in contact / in the air; ``stance_swing_ratio`` is
   stance over swing (about 60/40 = 1.5 in normal walking, Perry and Burnfield 2010).
@@ -60,7 +62,8 @@ def gait_parameters(motion: Motion, phases: GaitPhases | None = None) -> dict[st
     Returns
     -------
     dict of floats (NaN where undefined): ``duration_s``, ``steps``, ``cadence_spm``,
-    ``cadence_rhythm_spm``, ``step_length_m``, ``stride_length_m``, ``speed_mps``, ``{left,right}_stance_pct``,
+    ``cadence_rhythm_spm``, ``step_length_m``, ``stride_length_m``, ``ankle_step_length_m``,
+    ``ankle_stride_length_m``, ``speed_mps``, ``{left,right}_stance_pct``,
     ``stance_pct``, ``swing_pct``, ``stance_swing_ratio``, ``double_support_pct``.
     """
     ph = gait_phases(motion) if phases is None else phases
@@ -93,13 +96,16 @@ def gait_parameters(motion: Motion, phases: GaitPhases | None = None) -> dict[st
     mean_stance = float(np.mean(known)) if known else math.nan
     swing = 1.0 - mean_stance
     ratio = mean_stance / swing if swing > 0 else math.nan
+    step = 60.0 * speed / ph.cadence_spm if ph.cadence_spm > 0 else math.nan
     return {
         "duration_s": float(motion.duration),
         "steps": float(len(all_strikes)),
         "cadence_spm": float(ph.cadence_spm),
         "cadence_rhythm_spm": motion_cadence(motion),
-        "step_length_m": _median(step_lengths),
-        "stride_length_m": _median(stride_lengths),
+        "step_length_m": step,
+        "stride_length_m": 2.0 * step,
+        "ankle_step_length_m": _median(step_lengths),
+        "ankle_stride_length_m": _median(stride_lengths),
         "speed_mps": speed,
         "left_stance_pct": 100.0 * stance["left"],
         "right_stance_pct": 100.0 * stance["right"],
@@ -108,6 +114,34 @@ def gait_parameters(motion: Motion, phases: GaitPhases | None = None) -> dict[st
         "stance_swing_ratio": ratio,
         "double_support_pct": 100.0 * double,
     }
+
+
+# Stature from the leg: hip joint (greater trochanter) at 0.530 and ankle at 0.039 of body
+# height, so hip to ankle is 0.491 of it (Winter 2009, Biomechanics and Motor Control of Human
+# Movement, Fig. 4.1, after Drillis and Contini 1966).
+LEG_TO_HEIGHT = 0.530 - 0.039
+
+
+def stature(skeleton) -> float:
+    """Body height (metres) of a skeleton, from its hip-to-ankle length (:data:`LEG_TO_HEIGHT`)."""
+    return skeleton.leg_length() / LEG_TO_HEIGHT
+
+
+def height_scale(skeleton, height_m: float) -> float:
+    """The factor that scales ``skeleton`` to a body ``height_m`` metres tall (ValueError
+    outside 0.5-2.6 m, which is not a standing human's height in metres)."""
+    if not (np.isfinite(height_m) and 0.5 <= height_m <= 2.6):
+        raise ValueError(f"height must be a body height in metres (0.5 to 2.6), got {height_m}")
+    return height_m / stature(skeleton)
+
+
+def to_height(motion: Motion, height_m: float) -> Motion:
+    """``motion`` on its skeleton scaled to a body of ``height_m`` metres (offsets and root path
+    times the ratio of heights; rotations unchanged), so every length and speed measured on it
+    is in that body's proportions."""
+    k = height_scale(motion.skeleton, height_m)
+    return Motion(motion.skeleton.scaled(k), motion.rotations, motion.root * k, motion.fps,
+                  motion.name)
 
 
 def to_json(values: dict[str, float], digits: int = 4) -> dict[str, float | None]:

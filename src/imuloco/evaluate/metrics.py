@@ -220,15 +220,21 @@ def foot_skate(gt: Motion, rec: Motion, contacts: dict[str, np.ndarray] | None =
     """
     check_pair(gt, rec)
     contacts = gt_contacts(gt) if contacts is None else contacts
-    pos = rec.positions()
+    return skate(rec.part_positions(list(FOOT_PARTS)), contacts, rec.fps)
+
+
+FOOT_PARTS = ("left_ankle", "left_toe", "right_ankle", "right_toe")
+
+
+def skate(feet: np.ndarray, contacts: dict[str, np.ndarray], fps: float) -> float:
+    """:func:`foot_skate` of foot positions (T, 4, 3) in :data:`FOOT_PARTS` order, metres."""
     speeds = []
-    for side in ("left", "right"):
-        for kind, part in (("heel", "ankle"), ("toe", "toe")):
-            c = np.asarray(contacts[f"{side}_{kind}"], dtype=bool)
-            both = c[:-1] & c[1:]
-            p = pos[:, rec.skeleton.part(f"{side}_{part}")][:, [0, 2]]
-            step = np.linalg.norm(np.diff(p, axis=0), axis=-1) * rec.fps
-            speeds.append(step[both])
+    for k, part in enumerate(FOOT_PARTS):
+        side, kind = part.split("_")
+        c = np.asarray(contacts[f"{side}_{'heel' if kind == 'ankle' else 'toe'}"], dtype=bool)
+        both = c[:-1] & c[1:]
+        step = np.linalg.norm(np.diff(feet[:, k][:, [0, 2]], axis=0), axis=-1) * fps
+        speeds.append(step[both])
     s = np.concatenate(speeds)
     return float(s.mean() * CM) if s.size else float("nan")
 
@@ -251,12 +257,17 @@ def root_speed_error(gt: Motion, rec: Motion, window_s: float = WINDOW_S) -> flo
     first to its last frame over its duration; steps' sway cancels). Our measure for the
     issue's "root trajectory speed error"; no paper defines one."""
     check_pair(gt, rec)
+    return speed_error(gt.root, rec.root, gt.fps, window_s)
+
+
+def speed_error(a: np.ndarray, b: np.ndarray, fps: float, window_s: float = WINDOW_S) -> float:
+    """:func:`root_speed_error` of two root paths (T, 3), metres."""
     errs = []
-    for s, e in time_windows(gt.num_frames, gt.fps, window_s):
+    for s, e in time_windows(len(a), fps, window_s):
         if e == s:
             continue
-        dur = (e - s) / gt.fps
-        v = [np.linalg.norm(m.root[e, [0, 2]] - m.root[s, [0, 2]]) / dur for m in (gt, rec)]
+        dur = (e - s) / fps
+        v = [np.linalg.norm(m[e, [0, 2]] - m[s, [0, 2]]) / dur for m in (a, b)]
         errs.append(abs(v[0] - v[1]))
     return float(np.mean(errs) * CM) if errs else 0.0
 
@@ -280,12 +291,17 @@ def path_error(gt: Motion, rec: Motion, window_s: float = WINDOW_S) -> float:
     frames; the mean over windows. It measures drift within ``window_s`` seconds, not the
     accumulated drift of a whole clip. Our measure for the issue; no paper defines one."""
     check_pair(gt, rec)
-    h_gt, h_rec = heading_of(gt), heading_of(rec)
+    return path_error_of(gt.root, heading_of(gt), rec.root, heading_of(rec), gt.fps, window_s)
+
+
+def path_error_of(a: np.ndarray, heading_a: np.ndarray, b: np.ndarray, heading_b: np.ndarray,
+                  fps: float, window_s: float = WINDOW_S) -> float:
+    """:func:`path_error` of root paths (T, 3), metres, with their headings (T,), radians."""
     errs = []
-    for s, e in time_windows(gt.num_frames, gt.fps, window_s):
-        q = about_y(np.asarray(h_gt[s] - h_rec[s]))
-        path = qrot(q, rec.root[s:e + 1] - rec.root[s]) + gt.root[s]
-        errs.append(np.linalg.norm((path - gt.root[s:e + 1])[:, [0, 2]], axis=-1).mean())
+    for s, e in time_windows(len(a), fps, window_s):
+        q = about_y(np.asarray(heading_a[s] - heading_b[s]))
+        path = qrot(q, b[s:e + 1] - b[s]) + a[s]
+        errs.append(np.linalg.norm((path - a[s:e + 1])[:, [0, 2]], axis=-1).mean())
     return float(np.mean(errs) * CM)
 
 
@@ -357,3 +373,56 @@ def evaluate_files(ground_truth: str | Path, reconstructed: str | Path,
                 f"evaluating the first {n}")
     rec = Motion(a, rec.rotations[:n], rec.root[:n], rec.fps, rec.name)
     return evaluate(gt.slice(0, n), rec), note
+
+
+def evaluate_parts(gt: Motion, rec: Motion) -> dict[str, float | None]:
+    """:func:`evaluate`'s metrics for a reconstruction on another skeleton than its ground
+    truth's (the ``cross-dataset`` protocol), on the canonical body parts only.
+
+    The reconstruction's part positions are scaled by the ratio of leg lengths (ground truth
+    over reconstruction) about its first pelvis position, then turned and moved so that at
+    frame 0 its pelvis stands over the ground truth's and faces its heading. Position errors
+    are in the heading frame at the pelvis (parts but the pelvis; upper and lower halves as
+    :data:`imuloco.core.bodymap.UPPER_PARTS` / ``LOWER_PARTS``), jitter is over the parts,
+    the root is the pelvis. ``angle_deg`` and ``dpv`` compare joint by joint and are None.
+    """
+    from imuloco.core.bodymap import LOWER_PARTS, PARTS, UPPER_PARTS
+
+    if gt.num_frames != rec.num_frames or abs(gt.fps - rec.fps) > 1e-6 * gt.fps:
+        raise ValueError(f"motions {gt.name!r} and {rec.name!r} differ in length or frame "
+                         f"rate: {gt.num_frames} frames at {gt.fps:g} fps vs "
+                         f"{rec.num_frames} at {rec.fps:g}")
+    parts = list(PARTS)
+    k = {p: i for i, p in enumerate(parts)}
+    pg = gt.part_positions(parts)
+    pr = rec.part_positions(parts)
+    start = pr[0, k["pelvis"]] * np.array([1.0, 0.0, 1.0])  # heights scale from the floor
+    pr = (pr - start) * (gt.skeleton.leg_length() / rec.skeleton.leg_length())
+    hg = heading_from_hips(pg[:, k["left_hip"]], pg[:, k["right_hip"]])
+    hr = heading_from_hips(pr[:, k["left_hip"]], pr[:, k["right_hip"]])
+    pr = qrot(about_y(np.asarray(hg[0] - hr[0])), pr)
+    pr[..., [0, 2]] += pg[0, k["pelvis"], [0, 2]]
+    hr = hr + (hg[0] - hr[0])
+    err = np.linalg.norm(to_heading_frame(pg, pg[:, k["pelvis"]], hg)
+                         - to_heading_frame(pr, pr[:, k["pelvis"]], hr), axis=-1)
+    body = [k[p] for p in parts if p != "pelvis"]
+    upper, lower = [k[p] for p in UPPER_PARTS], [k[p] for p in LOWER_PARTS]
+    contacts = gt_contacts(gt)
+    feet = [k[p] for p in FOOT_PARTS]
+
+    def rms(idx: list[int]) -> float:
+        return float(np.sqrt((err[:, idx] ** 2).mean(axis=1)).mean() * CM)
+
+    short = gt.num_frames < 4
+    return {
+        "mpjpe_cm": float(err[:, body].mean() * CM), "rmse_cm": rms(body),
+        "upper_cm": float(err[:, upper].mean() * CM), "lower_cm": float(err[:, lower].mean() * CM),
+        "upper_rmse_cm": rms(upper), "lower_rmse_cm": rms(lower),
+        "angle_deg": None, "dpv": None,
+        "jitter": 0.0 if short else float(jerk(pr, gt.fps).mean()),
+        "jitter_gt": 0.0 if short else float(jerk(pg, gt.fps).mean()),
+        "foot_skate_cm_s": skate(pr[:, feet], contacts, gt.fps),
+        "foot_skate_gt_cm_s": skate(pg[:, feet], contacts, gt.fps),
+        "root_speed_err_cm_s": speed_error(pg[:, k["pelvis"]], pr[:, k["pelvis"]], gt.fps),
+        "path_err_cm": path_error_of(pg[:, k["pelvis"]], hg, pr[:, k["pelvis"]], hr, gt.fps),
+    }

@@ -3,6 +3,15 @@
 - ``random-clips``: a clip is in the test set when the CRC32 of its file name falls in the
   lowest 20 % of the hash range (stable across machines and runs; about 20 % of clips).
 - ``heldout-styles``: clips of the styles ``exhausted`` and ``feminine`` form the test set.
+- ``heldout-contents``: one fold per content of :data:`HELDOUT_CONTENTS` present in the data
+  (meant for both Bandai-Namco sets together): its clips form the test set, every clip of
+  another content the training set. Motion the methods never saw.
+- ``cross-dataset``: train on some folders, test on another (other people, another rig); the
+  bench gets the two sets separately and compares canonical body parts
+  (:func:`imuloco.evaluate.metrics.evaluate_parts`).
+
+Version 2 added the last two; ``random-clips`` and ``heldout-styles`` split as in version 1,
+so their numbers compare across the two versions.
 
 Test recordings are simulated with seeds offset by
 :data:`imuloco.methods.training.TEST_SEED_OFFSET`, never shared with training.
@@ -15,9 +24,11 @@ import zlib
 from imuloco.core.motion import MotionDatabase
 from imuloco.errors import UnknownNameError
 
-PROTOCOL_VERSION = 1
-SPLITS = ("random-clips", "heldout-styles")
-MOTION_TYPES = ("walk", "walk-turn-left", "walk-turn-right", "run")
+PROTOCOL_VERSION = 2
+SPLITS = ("random-clips", "heldout-styles", "heldout-contents", "cross-dataset")
+HELDOUT_CONTENTS = ("walk", "walk-turn-left", "walk-turn-right", "run", "dash", "walk-back",
+                    "walk-left", "walk-right")
+MOTION_TYPES = HELDOUT_CONTENTS
 HELDOUT_STYLES = ("exhausted", "feminine")
 TEST_FRACTION = 0.2
 
@@ -27,14 +38,33 @@ def in_random_test(name: str) -> bool:
     return zlib.crc32(name.encode()) < TEST_FRACTION * 2**32
 
 
+def folds(db: MotionDatabase, name: str) -> list[tuple[str, MotionDatabase, MotionDatabase]]:
+    """``(fold, train, test)`` of protocol ``name``: one fold named ``"all"`` for a split,
+    one per left-out content for ``heldout-contents``."""
+    if name != "heldout-contents":
+        return [("all", *split(db, name))]
+    present = {lab.get("content") for lab in db.labels}
+    out = []
+    for content in [c for c in HELDOUT_CONTENTS if c in present]:
+        test = [lab.get("content") == content for lab in db.labels]
+        out.append((content, db.subset([i for i, t in enumerate(test) if not t]),
+                    db.subset([i for i, t in enumerate(test) if t])))
+    if len(out) < 2:
+        raise ValueError(f"heldout-contents needs clips of at least two of the contents "
+                         f"{list(HELDOUT_CONTENTS)}; the data has {sorted(present - {None})}")
+    return out
+
+
 def split(db: MotionDatabase, name: str) -> tuple[MotionDatabase, MotionDatabase]:
-    """Training and test databases of protocol ``name`` (one of :data:`SPLITS`)."""
+    """Training and test databases of split ``name`` (``random-clips`` or
+    ``heldout-styles``)."""
     if name == "random-clips":
         test = [in_random_test(lab["name"]) for lab in db.labels]
     elif name == "heldout-styles":
         test = [lab.get("style") in HELDOUT_STYLES for lab in db.labels]
     else:
-        raise UnknownNameError(f"unknown split {name!r}; splits: {list(SPLITS)}")
+        raise UnknownNameError(f"unknown split {name!r} here; splits: {list(SPLITS[:2])} "
+                               "(heldout-contents has folds, cross-dataset its own test data)")
     train_idx = [i for i, t in enumerate(test) if not t]
     test_idx = [i for i, t in enumerate(test) if t]
     if not train_idx or not test_idx:

@@ -58,7 +58,9 @@ def table(rows: Sequence[dict[str, Any]], columns: Sequence[tuple[str, str, str]
              "|" + "|".join(["---"] * len(first) + ["---:"] * len(columns)) + "|"]
     for r in rows:
         cells = [str(r.get(k, "")) for k, _ in first]
-        cells += [_fmt(r.get(k), f, k) for k, _, f in columns]
+        cells += [_fmt(r.get(k), f, k) + ("" if r.get(f"{k}_std") is None
+                                           else " ± " + _fmt(r[f"{k}_std"], f, k))
+                  for k, _, f in columns]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -72,7 +74,10 @@ def by_type_table(records: Sequence[dict[str, Any]], key: str = "mpjpe_cm") -> s
     sep = "|---|" + "|".join(["---:"] * len(types)) + "|"
     rows = [head, sep]
     for m in methods:
-        cells = [_fmt(lookup.get((m, t), {}).get(key), "{:.2f}") for t in types]
+        cells = [_fmt(lookup.get((m, t), {}).get(key), "{:.2f}")
+                 + ("" if lookup.get((m, t), {}).get(f"{key}_std") is None
+                    else " ± " + _fmt(lookup[(m, t)][f"{key}_std"], "{:.2f}"))
+                 for t in types]
         rows.append(f"| {m} | " + " | ".join(cells) + " |")
     return "\n".join(rows)
 
@@ -102,7 +107,9 @@ def write_report(
         "# Benchmark results", "",
         (f"Split `{first.get('split')}`, noise `{first.get('noise')}`, placements "
          f"`{', '.join(first.get('placements', []))}`, data `{first.get('data')}`, protocol "
-         f"version {first.get('protocol_version')}, seed {first.get('seed')}; "
+         f"version {first.get('protocol_version')}, training seed(s) "
+         f"{', '.join(map(str, first.get('seeds', [first.get('seed')])))} (± is the spread "
+         "over seeds); "
          f"{totals[0]['n_clips'] if totals else '?'} test clips, "
          f"{totals[0]['n_frames'] if totals else '?'} frames."), "",
         ("Errors are heading-frame joint positions relative to the pelvis (every joint but the "

@@ -8,9 +8,12 @@ were simulated with (:meth:`TrainingSet.synthesize`).
 
 from __future__ import annotations
 
+import time
 import zlib
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -22,6 +25,29 @@ from imuloco.sensors.resample import resample
 from imuloco.sensors.simulate import simulate
 
 TEST_SEED_OFFSET = 1_000_003  # test recordings never share a seed with training ones
+_cache: dict[tuple, tuple[Motion, np.ndarray, float]] | None = None
+_saved = [0.0]  # seconds of simulation the cache has saved so far
+
+
+@contextmanager
+def cached_signals() -> Iterator[None]:
+    """Within this context :func:`synthesize` simulates each clip once per placements, noise
+    and seed and reuses the signals (the bench fits several methods, folds and seeds on the
+    same clips). The same numbers as without it: a clip's signals depend on those only.
+    :func:`saved_seconds` tells timers how much simulation time the cache saved."""
+    global _cache
+    outer = _cache
+    _cache = {} if outer is None else outer
+    try:
+        yield
+    finally:
+        _cache = outer
+
+
+def saved_seconds() -> float:
+    """Simulation seconds :func:`cached_signals` has saved in this process so far (add the
+    difference over a fit to its time to get what it would have taken without the cache)."""
+    return _saved[0]
 
 
 def clip_seed(name: str, seed: int) -> int:
@@ -141,6 +167,16 @@ def synthesize(
     out = []
     for motion, labels in tqdm(list(db), desc="simulating sensors", disable=not progress,
                                unit="clip"):
-        rec = simulate(motion, placements, rate, noise, clip_seed(labels["name"], seed))
-        out.append(Example(motion, to_frames(rec, motion), labels))
+        key: tuple[Any, ...] = (id(motion), tuple(placements), noise,
+                                clip_seed(labels["name"], seed), rate)
+        if _cache is not None and key in _cache:
+            signals, seconds = _cache[key][1:]
+            _saved[0] += seconds
+        else:
+            t0 = time.perf_counter()
+            rec = simulate(motion, placements, rate, noise, clip_seed(labels["name"], seed))
+            signals = to_frames(rec, motion)
+            if _cache is not None:  # the motion kept alive keeps its id unique
+                _cache[key] = (motion, signals, time.perf_counter() - t0)
+        out.append(Example(motion, signals, labels))
     return out

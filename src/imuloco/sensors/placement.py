@@ -66,6 +66,13 @@ PRESETS: dict[str, Placement] = {p.name: p for p in [
     Placement("right_hand", "right_wrist", None, 0.0, (0.0, -0.07, 0.0)),
     Placement("left_hand", "left_wrist", None, 0.0, (0.0, -0.07, 0.0)),
     Placement("chest", "chest", None, 0.0, (0.0, 0.0, 0.12)),
+    # On the shoe over the instep, where foot-worn gait sensors sit: half way from the ankle
+    # joint to the toe joint, 4 cm above the bones. The foot's anatomical y runs back to the
+    # heel and z up off the instep (dorsal), so a flat foot reads +g on z.
+    Placement("right_foot", "right_ankle", "right_toe", 0.5, (0.0, 0.0, 0.04)),
+    Placement("left_foot", "left_ankle", "left_toe", 0.5, (0.0, 0.0, 0.04)),
+    # At L5, the back of the belt: behind the pelvis joint, y up the trunk.
+    Placement("lower_back", "pelvis", None, 0.0, (0.0, 0.0, -0.10)),
     Placement("head", "head", None, 0.0, (0.0, 0.08, 0.1)),
 ]}
 

@@ -1,0 +1,378 @@
+"""The real-data protocol (``imuloco bench --real DIR``): gait from real sensors against a
+reference measured otherwise.
+
+For every trial of every data set found under ``DIR`` (:mod:`imuloco.io.realimu`) and every
+sensor it has, the gait is measured once over the whole recording, as a user would, by the
+estimator for that placement (:mod:`imuloco.evaluate.sensorgait`; ``reconstruction``: the
+former path, a right-ankle reconstruction's gait, with ``--baseline``) and compared within the
+reference's windows:
+
+- ``steps_err_pct``: steps found against the reference's (a foot sensor: twice its foot's
+  contacts against twice the reference's contacts of that foot).
+- ``cadence_err_pct``: cadence from the contacts' span (steps/min), per bout.
+- ``ic_median_ms`` / ``ic_mean_ms``: absolute timing error of initial contacts matched one to
+  one to the reference's (nearest within :data:`IC_TOLERANCE_S`), with the missed and extra.
+- ``stride_err_m`` / ``stride_err_pct``: mean stride length per bout against the reference's.
+- ``speed_err_pct``: walking speed per bout.
+- pyshoe-vicon only: the foot's path against Vicon after aligning the start (the first
+  stride's end position and direction): error at each stride end (``path_mean_m``) and the
+  final error as % of the distance walked (``path_final_pct``); PyShoe's published path is
+  aligned and measured the same way (``pyshoe_published`` rows).
+
+Nothing here is fitted to these data: every threshold is the estimator's published default, a
+physical bound or the tolerance below.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from imuloco.evaluate.sensorgait import SensorGait, not_measured, sensor_gait
+from imuloco.io.realimu import RealTrial, find_datasets, read_trials
+
+log = logging.getLogger(__name__)
+
+# Matching tolerance of initial contacts, half of the shortest healthy step time (~0.5 s at
+# 120 steps/min): a contact is matched to at most one reference contact no further away.
+IC_TOLERANCE_S = 0.25
+# Literature anchors quoted beside the measurements (not measured here).
+ANCHORS = {
+    "greene2012_ic_ms": "33.9 ± 10.4 ms heel-strike timing error, shank gyroscope "
+                        "(Greene et al. 2012)",
+    "rampp2015_stride_cm": "6.26 cm mean absolute stride length error, foot IMU "
+                           "(Rampp et al. 2015)",
+}
+TARGETS = {  # issue 17's targets, by sensor kind
+    "foot": {"steps_err_pct": 2, "cadence_err_pct": 2, "ic_median_ms": 40,
+             "stride_err_pct": 5, "speed_err_pct": 5},
+    "lower_back": {"cadence_err_pct": 3, "stride_err_pct": 10, "speed_err_pct": 10},
+}
+
+
+def match_events(ref: np.ndarray, est: np.ndarray, tol: float = IC_TOLERANCE_S
+                 ) -> tuple[np.ndarray, int, int]:
+    """One-to-one matching of event times by increasing distance.
+
+    ref, est : ndarray (K,), (M,) seconds.
+
+    Returns
+    -------
+    (errors, missed, extra): ndarray of ``est - ref`` (s) of the matched pairs, the reference
+    events left unmatched and the estimated events left unmatched.
+    """
+    ref, est = np.sort(np.asarray(ref, float)), np.sort(np.asarray(est, float))
+    if not len(ref) or not len(est):
+        return np.zeros(0), len(ref), len(est)
+    d = np.abs(ref[:, None] - est[None, :])
+    pairs = np.argwhere(d <= tol)
+    order = np.argsort(d[pairs[:, 0], pairs[:, 1]], kind="stable")
+    used_r, used_e, errs = set(), set(), []
+    for i, j in pairs[order]:
+        if i not in used_r and j not in used_e:
+            used_r.add(i)
+            used_e.add(j)
+            errs.append(est[j] - ref[i])
+    return np.asarray(errs), len(ref) - len(used_r), len(est) - len(used_e)
+
+
+def _pct(est: float, ref: float) -> float:
+    return 100.0 * (est - ref) / ref if ref and np.isfinite(ref) else math.nan
+
+
+def _span_cadence(ic: np.ndarray, per_contact: int) -> float:
+    ic = np.sort(ic)
+    return (60.0 * per_contact * (len(ic) - 1) / (ic[-1] - ic[0])
+            if len(ic) >= 2 and ic[-1] > ic[0] else math.nan)
+
+
+def _mean(values: Sequence[float]) -> float:
+    v = np.asarray([x for x in values if x is not None and np.isfinite(x)], float)
+    return float(v.mean()) if v.size else math.nan
+
+
+def _align_path(est: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """``est`` (K, 2) moved so that its first point and first step's direction match ``ref``."""
+    a = np.arctan2(*(ref[1] - ref[0])[::-1]) - np.arctan2(*(est[1] - est[0])[::-1])
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    return (est - est[0]) @ rot.T + ref[0]
+
+
+def path_errors(est_times: np.ndarray, est_xy: np.ndarray, ref_times: np.ndarray,
+                ref_xy: np.ndarray) -> dict[str, float]:
+    """Path error at the reference's stride ends after aligning the start.
+
+    est_times, est_xy : ndarray (T,), (T, 2), the estimated floor path.
+    ref_times, ref_xy : ndarray (K,), (K, 2), the reference positions at the stride ends.
+    """
+    pts = np.stack([np.interp(ref_times, est_times, est_xy[:, i]) for i in range(2)], axis=1)
+    pts = _align_path(pts, ref_xy)
+    err = np.linalg.norm(pts - ref_xy, axis=1)
+    walked = float(np.linalg.norm(np.diff(ref_xy, axis=0), axis=1).sum())
+    return {"path_mean_m": float(err[1:].mean()), "path_final_m": float(err[-1]),
+            "path_final_pct": 100.0 * float(err[-1]) / walked if walked > 0 else math.nan,
+            "distance_m": walked}
+
+
+def _bout_rows(gait: SensorGait, trial: RealTrial, ref_ic: np.ndarray, per_contact: int
+               ) -> list[dict[str, float]]:
+    """Cadence, stride length and speed against each reference bout."""
+    out = []
+    for b in trial.reference.bouts:
+        w = gait.window(b.start - IC_TOLERANCE_S, b.end + IC_TOLERANCE_S).summary()
+        inside = ref_ic[(ref_ic >= b.start - 1e-9) & (ref_ic <= b.end + 1e-9)]
+        ref_cad = (b.cadence_spm if trial.dataset == "mobilise-d-lab"
+                   else _span_cadence(inside, per_contact))
+        ref_len = b.stride_length_m
+        ref_speed = b.speed_mps
+        if trial.dataset == "pyshoe-vicon":  # foot flat to foot flat, the contacts between
+            ref_len = b.distance_m / b.strides
+            ref_cad = 120.0 * b.strides / (b.end - b.start)
+            ref_speed = b.distance_m / (b.end - b.start)
+            inner = gait.initial_contacts[(gait.initial_contacts > b.start) &
+                                          (gait.initial_contacts <= b.end)]
+            w["cadence_spm"] = _span_cadence(inner, per_contact)
+            w["speed_mps"] = w["stride_length_m"] * w["cadence_spm"] / 120.0
+        out.append({"cadence_ref": ref_cad, "cadence_est": w["cadence_spm"],
+                    "stride_ref_m": ref_len, "stride_est_m": w["stride_length_m"],
+                    "speed_ref_mps": ref_speed, "speed_est_mps": w["speed_mps"]})
+    return out
+
+
+def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[str, Any]:
+    """One result row: the gait of one sensor of ``trial`` against its reference."""
+    ref = trial.reference
+    side = gait.placement.split("_")[0] if gait.placement.endswith("_foot") else None
+    row: dict[str, Any] = {"dataset": trial.dataset, "recording": trial.name,
+                           "sensor": gait.placement, "estimator": estimator,
+                           "measured": gait.measured, "reason": gait.reason or ""}
+    if not gait.measured:
+        return row
+    per_contact = gait.steps_per_contact
+    if trial.dataset == "pyshoe-vicon":
+        se = ref.stride_ends
+        start, end = se[0], se[-1]
+        # the contact that starts a stride precedes its foot-flat end: count the contacts
+        # between the first and the last foot flat
+        est_ic = gait.initial_contacts[(gait.initial_contacts > start) &
+                                       (gait.initial_contacts <= end)]
+        row["steps_ref"] = 2.0 * (len(se) - 1)
+        row["steps_est"] = float(per_contact * len(est_ic))
+    else:
+        # a one-foot estimator against that foot's contacts, others against all contacts
+        ref_ic = (ref.initial_contacts[side] if side and per_contact == 2 else
+                  np.sort(np.concatenate(list(ref.initial_contacts.values()))))
+        start = min(b.start for b in ref.bouts)
+        end = max(b.end for b in ref.bouts)
+        if trial.dataset == "ipol-gait":  # the whole trial, U-turn included
+            start, end = float(ref_ic.min()), float(ref_ic.max())
+        sel = (gait.initial_contacts >= start - IC_TOLERANCE_S) & (
+            gait.initial_contacts <= end + IC_TOLERANCE_S)
+        in_ref = ref_ic[(ref_ic >= start) & (ref_ic <= end)]
+        if trial.dataset == "mobilise-d-lab":  # contacts inside the reference bouts only
+            sel &= np.any([(gait.initial_contacts >= b.start - IC_TOLERANCE_S) &
+                           (gait.initial_contacts <= b.end + IC_TOLERANCE_S)
+                           for b in ref.bouts], axis=0)
+        errs, missed, extra = match_events(in_ref, gait.initial_contacts[sel])
+        row.update(steps_ref=float(per_contact * len(in_ref)),
+                   steps_est=float(per_contact * int(sel.sum())),
+                   ic_matched=len(errs), ic_missed=missed, ic_extra=extra,
+                   ic_median_ms=1e3 * float(np.median(np.abs(errs))) if len(errs) else math.nan,
+                   ic_mean_ms=1e3 * float(np.mean(np.abs(errs))) if len(errs) else math.nan,
+                   ic_bias_ms=1e3 * float(np.mean(errs)) if len(errs) else math.nan)
+    row["steps_err_pct"] = _pct(row["steps_est"], row["steps_ref"])
+    bouts = _bout_rows(gait, trial, ref_ic if trial.dataset != "pyshoe-vicon" else
+                       np.zeros(0), per_contact)
+    for key in ("cadence", "stride", "speed"):
+        unit = {"cadence": "", "stride": "_m", "speed": "_mps"}[key]
+        r = _mean([b[f"{key}_ref{unit}"] for b in bouts])
+        e = _mean([b[f"{key}_est{unit}"] for b in bouts])
+        row[f"{key}_ref"], row[f"{key}_est"] = r, e
+        row[f"{key}_err_pct"] = _mean([_pct(b[f"{key}_est{unit}"], b[f"{key}_ref{unit}"])
+                                      for b in bouts])
+    row["stride_err_m"] = _mean([b["stride_est_m"] - b["stride_ref_m"] for b in bouts])
+    if trial.dataset == "pyshoe-vicon" and gait.path is not None:
+        if ref.stride_points is not None and len(ref.stride_points) >= 2:
+            xy = gait.path[:, :2] * ([1.0, -1.0] if ref.path_z_down else [1.0, 1.0])
+            row.update(path_errors(gait.times, xy, ref.stride_ends, ref.stride_points))
+        # per-stride length errors against Vicon's stride lengths (matched by stride end)
+        row["stride_mae_m"] = _stride_mae(gait, ref.stride_ends, ref.stride_points)
+    return row
+
+
+def _stride_mae(gait: SensorGait, ends: np.ndarray, points: np.ndarray) -> float:
+    """Mean absolute error of the foot's stride lengths between the reference's stride ends
+    (the estimated path's rest positions there against Vicon's)."""
+    xy = np.stack([np.interp(ends, gait.times, gait.path[:, i]) for i in range(2)], axis=1)
+    est = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    ref = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    return float(np.mean(np.abs(est - ref)))
+
+
+def published_path_row(trial: RealTrial) -> dict[str, Any] | None:
+    """PyShoe's published ZUPT path of a pyshoe-vicon trial, measured as ours is."""
+    ref = trial.reference
+    if ref.published_path is None or ref.stride_points is None:
+        return None
+    row = {"dataset": trial.dataset, "recording": trial.name, "sensor": "right_foot",
+           "estimator": "pyshoe_published", "measured": True, "reason": ""}
+    row.update(path_errors(ref.path_times, ref.published_path, ref.stride_ends,
+                           ref.stride_points))
+    return row
+
+
+def reconstruction_gait(trial: RealTrial, placement: str, fitted) -> SensorGait:
+    """The former path: the sensor's signal reconstructed as a right-ankle phone, gait read
+    from the motion's strikes (:func:`imuloco.evaluate.gait.gait_parameters`)."""
+    from imuloco.app.pipeline import reconstruct_recording
+    from imuloco.core.recording import Recording
+    from imuloco.evaluate.strides import stride_rows
+    from imuloco.phases import gait_phases
+
+    rec = trial.recording.select([placement])
+    rec = Recording(rec.times, rec.acc, rec.gyro, list(fitted.placements_))
+    motion, _ = reconstruct_recording(rec, fitted)
+    ph = gait_phases(motion)
+    strikes = np.sort(np.concatenate([ph.steps["left"], ph.steps["right"]])) / motion.fps
+    ankle = motion.part_positions(["right_ankle"])[:, 0]
+    rows = [r for r in stride_rows(motion, ph) if r["foot"] == "right"]
+    t = np.arange(motion.num_frames) / motion.fps + rec.times[0]
+    return SensorGait(placement, f"reconstruction ({fitted.name}) strikes", strides=rows,
+                      initial_contacts=strikes + rec.times[0], steps_per_contact=1, times=t,
+                      path=ankle[:, [0, 2, 1]] * [1.0, -1.0, 1.0])  # z up: (x, -z, y)
+
+
+def run_real(folder: str | Path, out: str | Path | None = None, limit: int | None = None,
+             baseline: bool = False, progress: bool = False) -> list[dict[str, Any]]:
+    """Run the protocol on every data set under ``folder``; write ``real.json``,
+    ``real.csv`` and ``README.md`` into ``out`` when given.
+
+    limit : at most this many trials per data set.
+    baseline : also measure the former path (a right-ankle reconstruction's gait) on the
+        foot sensors.
+    """
+    from tqdm.auto import tqdm
+
+    rows: list[dict[str, Any]] = []
+    fitted = None
+    if baseline:
+        from imuloco.app.pipeline import choose_method
+
+        fitted, _ = choose_method(placement="right_ankle")
+    for layout, path in find_datasets(folder):
+        trials = list(read_trials(path, layout, limit))
+        for trial in tqdm(trials, desc=layout, unit="trial", disable=not progress):
+            for placement in trial.recording.placements:
+                try:
+                    gait = sensor_gait(trial.recording, placement,
+                                       height_m=trial.reference.height_m,
+                                       sensor_height_m=trial.reference.sensor_height_m)
+                except ValueError as e:  # e.g. a lower back without the walker's height
+                    gait = not_measured(placement, "", str(e))
+                rows.append(evaluate_gait(gait, trial, "imuloco"))
+                if baseline and placement.endswith("_foot"):
+                    try:
+                        base = reconstruction_gait(trial, placement, fitted)
+                        rows.append(evaluate_gait(base, trial, "reconstruction"))
+                    except ValueError as e:  # a motion the phase detector cannot read
+                        rows.append({"dataset": trial.dataset, "recording": trial.name,
+                                     "sensor": placement, "estimator": "reconstruction",
+                                     "measured": False, "reason": str(e)})
+            if layout == "pyshoe-vicon":
+                row = published_path_row(trial)
+                if row:
+                    rows.append(row)
+    if out is not None:
+        write_results(rows, out)
+    return rows
+
+
+SUMMARY_KEYS = ("steps_err_pct", "cadence_err_pct", "ic_median_ms", "stride_err_m",
+                "stride_err_pct", "speed_err_pct", "stride_mae_m", "path_final_pct")
+
+
+def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per data set, sensor and estimator: the mean absolute value of each error (the median
+    of the recordings' IC medians), the recordings measured, and the shares within target."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r["dataset"], r["sensor"], r["estimator"]), []).append(r)
+    out = []
+    for (ds, sensor, est), rs in groups.items():
+        ok = [r for r in rs if r.get("measured")]
+        s: dict[str, Any] = {"dataset": ds, "sensor": sensor, "estimator": est,
+                             "recordings": len(rs), "measured": len(ok)}
+        for k in SUMMARY_KEYS:
+            vals = np.asarray([abs(r[k]) for r in ok if k in r and r[k] is not None and
+                               np.isfinite(r[k])], float)
+            if vals.size:
+                s[k] = float(np.median(vals) if k == "ic_median_ms" else vals.mean())
+        kind = "foot" if sensor.endswith("_foot") else sensor
+        for k, lim in TARGETS.get(kind, {}).items():
+            vals = [abs(r[k]) for r in ok if k in r and np.isfinite(r[k])]
+            if vals:
+                s[f"{k}_within_target"] = float(np.mean(np.asarray(vals) <= lim))
+        out.append(s)
+    return out
+
+
+COLUMNS = [("dataset", "data set"), ("sensor", "sensor"), ("estimator", "estimator"),
+           ("measured", "n"), ("steps_err_pct", "steps %"), ("cadence_err_pct", "cadence %"),
+           ("ic_median_ms", "IC ms"), ("stride_err_m", "stride m"),
+           ("stride_err_pct", "stride %"), ("speed_err_pct", "speed %"),
+           ("stride_mae_m", "stride MAE m"), ("path_final_pct", "path end %")]
+
+
+def table(summary: list[dict[str, Any]]) -> str:
+    """Markdown table of :func:`summarize`'s rows (mean absolute errors)."""
+    head = "| " + " | ".join(c[1] for c in COLUMNS) + " |"
+    sep = "|" + "|".join("---" if i < 3 else "---:" for i in range(len(COLUMNS))) + "|"
+    lines = [head, sep]
+    for s in summary:
+        cells = []
+        for key, _ in COLUMNS:
+            v = s.get(key)
+            cells.append("–" if v is None else (f"{v:.3f}" if key in ("stride_err_m",
+                                                                      "stride_mae_m")
+                                                else f"{v:.1f}" if isinstance(v, float)
+                                                else str(v)))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_results(rows: list[dict[str, Any]], out: str | Path) -> None:
+    """``real.json`` (rows, summary, anchors), ``real.csv`` (rows) and ``README.md``."""
+    import csv
+    import io
+
+    from imuloco.evaluate.gait import to_json
+    from imuloco.io.atomic import atomic_write
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = summarize(rows)
+    clean = lambda r: {k: (v if isinstance(v, (str, bool)) else to_json({"v": v})["v"])
+                       for k, v in r.items()}
+    payload = {"summary": [clean(s) for s in summary], "rows": [clean(r) for r in rows],
+               "anchors": ANCHORS, "targets": TARGETS, "ic_tolerance_s": IC_TOLERANCE_S}
+    with atomic_write(out / "real.json", "w") as fh:
+        fh.write(json.dumps(payload, indent=1) + "\n")
+    keys = list(dict.fromkeys(k for r in rows for k in r))
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, keys)
+    writer.writeheader()
+    writer.writerows(clean(r) for r in rows)
+    with atomic_write(out / "real.csv", "w") as fh:
+        fh.write(buf.getvalue())
+    with atomic_write(out / "README.md", "w") as fh:
+        fh.write("# Gait from real sensors against real references\n\n"
+                 "`imuloco bench --real DIR` (mean absolute errors over the recordings; IC: "
+                 "median of the recordings' median absolute timing errors).\n\n"
+                 + table(summary) + "\n\nAnchors from the literature: "
+                 + "; ".join(ANCHORS.values()) + ".\n")

@@ -1,0 +1,398 @@
+"""Gait measured from one sensor's raw signal, by the method that suits where it is worn.
+
+- Foot (``right_foot``, ``left_foot``; on the shoe over the instep): a zero-velocity-update
+  Kalman filter with Rauch-Tung-Striebel smoothing (gaitmap's ``RtsKalman``, its published
+  defaults: ZUPT when the gyroscope's norm stays under 34 deg/s over 50 ms) gives the foot's
+  3-D path; each still period is a stance; consecutive stances bound one stride, whose length
+  is the horizontal distance between the foot's rest positions (Rampp et al. 2015). Initial
+  and terminal contacts come from gaitmap's ``HerzerEventDetection`` (Rampp's gyroscope
+  events refined with the forward acceleration) on strides segmented at the ends of those
+  stances. gaitmap's Barth DTW segmentation and Rampp event detection live in ``gaitmap_mad``
+  (AGPL-3.0), which this MIT package does not depend on; the ZUPT stances need no template.
+- Lower back (``lower_back``, L5): Mobilise-D's algorithms from ``mobgap`` (Iluz gait sequence
+  detection, Ionescu initial contacts, Zijlstra's inverted-pendulum step length with Mobilise-D's
+  published scaling factor). They need only the vertical acceleration, found from gravity.
+
+Every figure is derived from the same strides, so they agree by construction:
+``speed = stride length x cadence / 120`` and ``steps = 2 x strides`` for a foot sensor.
+A recording too short or without walking is :class:`SensorGait` with ``measured False`` and a
+``reason``, never zeros.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from imuloco.errors import MissingExtraError, UnknownNameError
+
+FOOT_PLACEMENTS = ("right_foot", "left_foot")
+LOWER_BACK = "lower_back"
+# L5 sits at about the greater trochanter's height, 0.530 x body height (Winter 2009,
+# Biomechanics and Motor Control of Human Movement, Fig. 4.1), when the sensor's height is
+# not measured.
+L5_HEIGHT_RATIO = 0.530
+ZUPT_WINDOW_S, ZUPT_GYRO_DPS = 0.05, 34.0  # gaitmap RtsKalman's default ZUPT detector
+MIN_STRIDES = 2
+# the shortest swing: ~0.3 s even in sprinting (about 40 % of a 0.7 s stride; Novacheck 1998,
+# The biomechanics of running, Gait & Posture 7); 0.2 s leaves a margin
+MIN_SWING_S = 0.2  # fewer and no stride length or cadence is defined
+
+
+@dataclass
+class SensorGait:
+    """Gait of one recording from one sensor.
+
+    Attributes
+    ----------
+    placement, method : where the sensor was and what measured the gait.
+    measured : False when no gait could be measured; ``reason`` says why.
+    strides : one dict per stride (:func:`stride_row`): ``foot``, ``start_s``, ``end_s`` (its
+        initial contacts), ``duration_s``, ``length_m``, ``speed_mps``, ``stance_s``,
+        ``swing_s`` (NaN when unknown), ``confidence`` (None).
+    initial_contacts : ndarray (K,), seconds, every initial contact found (of the worn foot
+        for a foot sensor, of both feet for the lower back).
+    steps_per_contact : steps the walker takes per initial contact found (2 for one foot).
+    times, path : ndarray (T,) and (T, 3), the sensor's path in metres, x and y on the floor,
+        z up (foot sensors), or None.
+    """
+
+    placement: str
+    method: str
+    measured: bool = True
+    reason: str = ""
+    strides: list[dict] = field(default_factory=list)
+    initial_contacts: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    steps_per_contact: int = 1
+    times: np.ndarray | None = None
+    path: np.ndarray | None = None
+
+    def window(self, start: float, end: float) -> SensorGait:
+        """The same gait restricted to strides and contacts within ``[start, end]`` s."""
+        ic = self.initial_contacts
+        return SensorGait(self.placement, self.method, self.measured, self.reason,
+                          [s for s in self.strides if s["start_s"] >= start and
+                           s["end_s"] <= end],
+                          ic[(ic >= start) & (ic <= end)], self.steps_per_contact,
+                          self.times, self.path)
+
+    def summary(self) -> dict[str, float]:
+        """``steps``, ``strides``, ``cadence_spm``, ``stride_length_m``, ``step_length_m``,
+        ``speed_mps``, ``stance_pct``, ``swing_pct`` (NaN where undefined). Cadence counts the
+        contacts over the time they span; speed is stride length x cadence / 120, so
+        ``speed = step_length x cadence / 60`` holds exactly."""
+        ic = np.sort(self.initial_contacts)
+        nan = math.nan
+        steps = float(len(ic) * self.steps_per_contact) if self.measured else nan
+        span = ic[-1] - ic[0] if len(ic) >= 2 else 0.0
+        cadence = 60.0 * self.steps_per_contact * (len(ic) - 1) / span if span > 0 else nan
+        lengths = np.array([s["length_m"] for s in self.strides], dtype=float)
+        lengths = lengths[np.isfinite(lengths)]
+        stride = float(np.mean(lengths)) if len(lengths) else nan
+        stance = np.array([s["stance_s"] / s["duration_s"] for s in self.strides], float)
+        stance = float(100 * np.nanmean(stance)) if np.isfinite(stance).any() else nan
+        return {"steps": steps, "strides": float(len(self.strides)),
+                "cadence_spm": cadence if self.measured else nan,
+                "stride_length_m": stride, "step_length_m": stride / 2.0,
+                "speed_mps": stride * cadence / 120.0,
+                "stance_pct": stance, "swing_pct": 100 - stance}
+
+    def to_json(self) -> dict:
+        """JSON-ready: placement, method, measured, reason, summary and per-stride rows."""
+        from imuloco.evaluate.gait import to_json
+
+        return {"placement": self.placement, "method": self.method,
+                "measured": self.measured, "reason": self.reason or None,
+                "summary": to_json(self.summary()),
+                "strides": [{k: (v if isinstance(v, str) or v is None else
+                                 to_json({"v": v})["v"]) for k, v in s.items()}
+                            for s in self.strides]}
+
+
+def stride_row(foot: str, start: float, end: float, length: float, stance: float) -> dict:
+    """A stride in the fields of :data:`imuloco.evaluate.strides.STRIDE_FIELDS` (times in
+    seconds, ``stance`` the share of the stride in contact, NaN when unknown)."""
+    dur = end - start
+    return {"foot": foot, "start_s": start, "end_s": end, "duration_s": dur,
+            "length_m": length, "speed_mps": length / dur, "stance_s": stance * dur,
+            "swing_s": (1 - stance) * dur, "confidence": None}
+
+
+def not_measured(placement: str, method: str, reason: str) -> SensorGait:
+    """A :class:`SensorGait` saying that no gait could be measured and why."""
+    return SensorGait(placement, method, measured=False, reason=reason)
+
+
+def _uniform(times: np.ndarray, x: np.ndarray) -> tuple[float, np.ndarray]:
+    """Rate (Hz) and ``x`` (T, C) resampled onto a uniform grid at the mean rate."""
+    from imuloco.ops.filters import resample_linear
+
+    rate = (len(times) - 1) / (times[-1] - times[0])
+    t = times[0] + np.arange(len(times)) / rate
+    return rate, resample_linear(times, x, t)
+
+
+def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Starts and stops (exclusive) of the True runs of a 1-D mask."""
+    from imuloco.phases.contacts import runs
+
+    starts, stops, vals = runs(mask)
+    return starts[vals], stops[vals]
+
+
+def _gaitmap():
+    try:
+        import gaitmap  # noqa: F401
+    except ImportError as e:
+        raise MissingExtraError("foot-sensor gait", f"gaitmap ({e})", "gait") from None
+
+
+FOOT_METHOD = ("gaitmap RtsKalman ZUPT trajectory, stances as strides, "
+               "HerzerEventDetection contacts")
+
+
+def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = "right",
+              placement: str | None = None) -> SensorGait:
+    """Gait from a foot-worn IMU (see the module docstring).
+
+    Parameters
+    ----------
+    times : ndarray, shape (T,), seconds.
+    acc, gyro : ndarray, shape (T, 3), m/s² (+9.81 up at rest) and rad/s, in any sensor axes.
+    foot : ``"right"`` or ``"left"``.
+    """
+    import pandas as pd
+
+    _gaitmap()
+    from gaitmap.event_detection import HerzerEventDetection
+    from gaitmap.preprocessing.sensor_alignment import align_dataset_to_gravity
+    from gaitmap.trajectory_reconstruction import RtsKalman
+    from gaitmap.utils.coordinate_conversion import (
+        convert_left_foot_to_fbf,
+        convert_right_foot_to_fbf,
+    )
+
+    placement = placement or f"{foot}_foot"
+    times = np.asarray(times, float)
+    if len(times) < 2 or times[-1] - times[0] < 2.0:
+        return not_measured(placement, FOOT_METHOD, "the recording is shorter than 2 s, "
+                            "less than one stride")
+    rate, x = _uniform(times, np.concatenate([acc, np.degrees(gyro)], axis=1))
+    cols = ["acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z"]
+    data = pd.DataFrame(x, columns=cols)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # gaitmap warns when few still windows are found
+        try:  # gaitmap's defaults find standing (0.7 s under 2.5 deg/s) ...
+            data = align_dataset_to_gravity(data, rate)
+        except ValueError:
+            try:  # ... else the foot-flat moments of the ZUPT detector (50 ms, 34 deg/s)
+                data = align_dataset_to_gravity(data, rate, window_length_s=ZUPT_WINDOW_S,
+                                                static_signal_th=ZUPT_GYRO_DPS)
+            except ValueError:
+                return not_measured(placement, FOOT_METHOD, "the foot is never still: no "
+                                    "stance, so no walking")
+        kalman = RtsKalman().estimate(data, sampling_rate_hz=rate)
+    pos = kalman.position_.to_numpy()[1:]  # gaitmap prepends the initial state
+    ori = kalman.orientation_.to_numpy()[1:]
+    still = np.zeros(len(data), bool)
+    for a, b in kalman.zupts_[["start", "end"]].to_numpy():
+        still[a:b] = True
+    # a motion shorter than any swing (MIN_SWING_S) between two still periods is a jolt
+    # within one stance, not a stride
+    from imuloco.phases.contacts import clean_mask
+
+    starts, stops = _runs(clean_mask(still, round(MIN_SWING_S * rate), 1))
+    t = times[0] + np.arange(len(data)) / rate
+    if len(starts) < MIN_STRIDES + 1:
+        return not_measured(placement, FOOT_METHOD, f"{len(starts)} stance(s) found: no "
+                            "walking (a foot sensor needs at least 3 stances for 2 strides)")
+    # the sensor's forward axis: stride displacements seen from the sensor at rest, gravity
+    # already along its z (a fixed mounting yaw, the median over strides)
+    from scipy.spatial.transform import Rotation
+
+    rest = (starts + stops) // 2
+    disp = np.diff(pos[rest], axis=0)
+    local = Rotation.from_quat(ori[rest[:-1]]).inv().apply(disp)
+    keep = np.linalg.norm(disp[:, :2], axis=1) > 0.2  # strides, not shuffles (0.2 m)
+    if not keep.any():
+        return not_measured(placement, FOOT_METHOD, "the foot never moved more than 0.2 m "
+                            "between two stances: no walking")
+    yaw = float(np.median(np.arctan2(local[keep, 1], local[keep, 0])))
+    turn = Rotation.from_euler("z", -yaw)
+    fsf = data.copy()
+    fsf[cols[:3]] = turn.apply(data[cols[:3]].to_numpy())
+    fsf[cols[3:]] = turn.apply(data[cols[3:]].to_numpy())
+    fbf = (convert_right_foot_to_fbf if foot == "right" else convert_left_foot_to_fbf)(fsf)
+    # segmented strides from the end of one stance (heel off, just before toe off) to the next
+    seg = pd.DataFrame({"s_id": np.arange(len(stops) - 1), "start": stops[:-1],
+                        "end": stops[1:]}).set_index("s_id")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ev = HerzerEventDetection(enforce_consistency=False, detect_only=("ic", "tc")).detect(
+            fbf, stride_list=seg, sampling_rate_hz=rate).annotated_original_event_list_
+    ic = ev["ic"].to_numpy(float)
+    tc = ev["tc"].to_numpy(float)
+    rows = []
+    # stride k: from its initial contact to the next one; its length is the distance between
+    # the foot's rest positions of the stances that follow those contacts
+    for k in range(len(ic) - 1):
+        if not (np.isfinite(ic[k]) and np.isfinite(ic[k + 1])):
+            continue
+        a, b = int(ic[k]), int(ic[k + 1])
+        length = float(np.linalg.norm(pos[rest[k + 2], :2] - pos[rest[k + 1], :2])) if (
+            k + 2 < len(rest)) else math.nan
+        stance = (tc[k + 1] - a) / (b - a) if np.isfinite(tc[k + 1]) else math.nan
+        if not (0 < stance < 1):
+            stance = math.nan
+        rows.append(stride_row(foot, float(t[a]), float(t[b]), length, stance))
+    ics = t[ic[np.isfinite(ic)].astype(int)]
+    if len(rows) < MIN_STRIDES:
+        return not_measured(placement, FOOT_METHOD, f"{len(rows)} stride(s) with both "
+                            "contacts found: no walking")
+    return SensorGait(placement, FOOT_METHOD, strides=rows, initial_contacts=ics,
+                      steps_per_contact=2, times=t, path=pos)
+
+
+BACK_METHOD = "mobgap GsdIluz, IcdIonescu, SlZijlstra (Mobilise-D)"
+
+
+def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
+                    sensor_height_m: float) -> SensorGait:
+    """Gait from a lower-back (L5) IMU with Mobilise-D's algorithms (see the module docstring).
+
+    Parameters
+    ----------
+    times : ndarray, shape (T,), seconds.
+    acc, gyro : ndarray, shape (T, 3), m/s² and rad/s, in any sensor axes.
+    sensor_height_m : the sensor's height above the floor (the pendulum's length), metres;
+        :data:`L5_HEIGHT_RATIO` x body height when not measured.
+    """
+    import pandas as pd
+
+    try:
+        from mobgap.gait_sequences import GsdIluz
+        from mobgap.initial_contacts import IcdIonescu
+        from mobgap.stride_length import SlZijlstra
+    except ImportError as e:
+        raise MissingExtraError("lower-back gait", f"mobgap ({e})", "gait") from None
+    times = np.asarray(times, float)
+    if len(times) < 2 or times[-1] - times[0] < 3.0:
+        return not_measured(LOWER_BACK, BACK_METHOD, "the recording is shorter than 3 s, "
+                            "too short for a walking bout")
+    rate, x = _uniform(times, np.concatenate([acc, np.degrees(gyro)], axis=1))
+    a, w = x[:, :3], x[:, 3:]
+    up = a.mean(axis=0)
+    up /= np.linalg.norm(up)
+    # horizontal axes: the principal direction of the horizontal acceleration is taken as
+    # anterior-posterior (walking shakes the trunk more fore-aft than sideways); only the
+    # gait sequence detector reads it, and it uses its variability, not its sign
+    h = a - np.outer(a @ up, up)
+    _, _, vt = np.linalg.svd(h - h.mean(axis=0), full_matrices=False)
+    pa = vt[0] - up * (vt[0] @ up)
+    pa /= np.linalg.norm(pa)
+    ml = np.cross(up, pa)
+    axes = np.stack([up, ml, pa])
+    frame = pd.DataFrame(np.concatenate([a @ axes.T, w @ axes.T], axis=1),
+                         columns=["acc_is", "acc_ml", "acc_pa", "gyr_is", "gyr_ml", "gyr_pa"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gsd = GsdIluz().detect(frame, sampling_rate_hz=rate).gs_list_
+    if gsd.empty:
+        return not_measured(LOWER_BACK, BACK_METHOD, "no walking bout found (Iluz gait "
+                            "sequence detection)")
+    t = times[0] + np.arange(len(frame)) / rate
+    ics_all, rows = [], []
+    for _, gs in gsd.iterrows():
+        part = frame.iloc[int(gs["start"]):int(gs["end"])].reset_index(drop=True)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            icd = IcdIonescu().detect(part, sampling_rate_hz=rate).ic_list_
+            if len(icd) < 3:
+                continue
+            sl = SlZijlstra(**SlZijlstra.PredefinedParameters.step_length_scaling_factor_ms_all
+                            ).calculate(part, initial_contacts=icd, sampling_rate_hz=rate,
+                                        sensor_height_m=sensor_height_m)
+        ic = icd["ic"].to_numpy(int)
+        steps = sl.raw_step_length_per_step_["step_length_m"].to_numpy(float)
+        ics_all.append(t[int(gs["start"]) + ic])
+        for k in range(len(ic) - 2):  # a stride spans two steps
+            length = float(steps[k] + steps[k + 1])
+            a0, b0 = int(gs["start"]) + ic[k], int(gs["start"]) + ic[k + 2]
+            rows.append(stride_row("either", float(t[a0]), float(t[b0]), length, math.nan))
+    if len(rows) < MIN_STRIDES:
+        return not_measured(LOWER_BACK, BACK_METHOD, "fewer than 2 strides found in the "
+                            "walking bouts")
+    return SensorGait(LOWER_BACK, BACK_METHOD, strides=rows,
+                      initial_contacts=np.concatenate(ics_all), steps_per_contact=1)
+
+
+def sensor_gait(rec, placement: str, height_m: float | None = None,
+                sensor_height_m: float | None = None) -> SensorGait:
+    """Gait of the sensor at ``placement`` of a Recording, by the method for that placement.
+
+    ``height_m`` (body height) gives the lower-back sensor's height when ``sensor_height_m``
+    is not given; a foot sensor needs neither. Raises KeyError for placements with no
+    sensor-level method (the reconstruction's gait serves them).
+    """
+    k = rec.placements.index(placement)
+    if placement in FOOT_PLACEMENTS:
+        return foot_gait(rec.times, rec.acc[:, k], rec.gyro[:, k], placement.split("_")[0],
+                         placement)
+    if placement == LOWER_BACK:
+        if sensor_height_m is None or not np.isfinite(sensor_height_m):
+            if height_m is None or not np.isfinite(height_m):
+                raise ValueError("lower-back gait needs the walker's height (--height) or the "
+                                 "sensor's height above the floor")
+            sensor_height_m = L5_HEIGHT_RATIO * height_m
+        return lower_back_gait(rec.times, rec.acc[:, k], rec.gyro[:, k], sensor_height_m)
+    raise UnknownNameError(f"no sensor-level gait method for placement {placement!r}; have "
+                   f"{[*FOOT_PLACEMENTS, LOWER_BACK]}")
+
+
+GAIT_KEYS = ("steps", "cadence_spm", "step_length_m", "stride_length_m", "speed_mps",
+             "stance_pct", "swing_pct")
+
+
+def gait_report(motion, rec, placement: str, height_m: float | None = None) -> dict:
+    """The gait a study reads for a recording, from the best estimator for its placement:
+    the sensor's own signal for a foot or the lower back (:func:`sensor_gait`), the
+    reconstructed motion otherwise (:func:`imuloco.evaluate.gait.gait_parameters`).
+
+    Returns
+    -------
+    dict: ``gait`` (JSON-ready parameters; NaN/None where nothing could be measured),
+    ``gait_source`` (what measured them), ``gait_note`` (why nothing was measured, or None)
+    and ``strides`` (one row per stride, :data:`imuloco.evaluate.strides.STRIDE_FIELDS`).
+    """
+    from imuloco.evaluate.gait import gait_parameters, stature, to_json
+    from imuloco.evaluate.strides import stride_rows
+    from imuloco.phases import gait_phases
+
+    phases = gait_phases(motion)
+    gait = gait_parameters(motion, phases)
+    strides = stride_rows(motion, phases)
+    source, note = "the reconstructed motion", None
+    if placement in (*FOOT_PLACEMENTS, LOWER_BACK):
+        if height_m is None:
+            height_m = stature(motion.skeleton)
+            if placement == LOWER_BACK:
+                note = (f"no --height given: the skeleton's stature {height_m:.2f} m sets "
+                        "the pendulum length")
+        sg = sensor_gait(rec, placement, height_m=height_m)
+        summary = sg.summary()
+        gait.update({k: summary[k] for k in GAIT_KEYS})
+        gait["double_support_pct"] = math.nan
+        strides, source = sg.strides, f"the {placement} sensor's signal: {sg.method}"
+        if not sg.measured:
+            note = f"no gait could be measured: {sg.reason}"
+    elif len(strides) < MIN_STRIDES:
+        note = ("no gait could be measured: fewer than 2 strides (strike to strike of one "
+                "foot) in the reconstruction")
+    if note and note.startswith("no gait"):
+        gait = {k: (v if k == "duration_s" else math.nan) for k, v in gait.items()}
+    return {"gait": to_json(gait), "gait_source": source, "gait_note": note,
+            "strides": [{k: (v if isinstance(v, str) or v is None else
+                             to_json({"v": v})["v"]) for k, v in r.items()} for r in strides]}

@@ -1,0 +1,144 @@
+"""Labels from trials.csv, a converter's leading pose, several folders as one training set,
+and the protocols that use them (heldout-contents, cross-dataset, --seeds)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from tests.test_retarget import other_rig
+
+from imuloco.cli import cli
+from imuloco.core.motion import Motion
+from imuloco.core.retarget import resampled
+from imuloco.errors import FormatError
+from imuloco.evaluate.bench import run_bench
+from imuloco.evaluate.metrics import METRIC_KEYS, evaluate_parts
+from imuloco.evaluate.protocols import folds
+from imuloco.io.bvh import write_bvh
+from imuloco.io.database import (
+    content_of,
+    drop_leading_pose,
+    load_database,
+    load_databases,
+    load_sample,
+)
+
+
+@pytest.fixture(scope="module")
+def sample():
+    return load_sample()
+
+
+@pytest.fixture(scope="module")
+def rig_folder(sample, tmp_path_factory):
+    """Four sample clips on a Mixamo-named rig at 60 fps with a trials.csv, the first with a
+    T-pose prepended (as the cmu-iclone converter does)."""
+    folder = tmp_path_factory.mktemp("other-lab")
+    rows = ["file,subject,trial,description"]
+    descriptions = ["walk", "run/jog", "slow walk", "basketball - backward dribble"]
+    for k, c in enumerate(sample.clips[::4]):
+        m = resampled(other_rig(c, 1.15), 60.0)
+        if k == 0:
+            tpose = np.tile([0.0, 0.0, 0.0, 1.0], (1, m.skeleton.num_joints, 1))
+            m = Motion(m.skeleton, np.concatenate([tpose, m.rotations]),
+                       np.concatenate([m.root[:1], m.root]), m.fps)
+        write_bvh(m, folder / f"{k:03d}_01.bvh")
+        rows.append(f'{k:03d}_01.bvh,{k + 2},1,"{descriptions[k]}"')
+    (folder / "trials.csv").write_text("\n".join(rows) + "\n")
+    return folder
+
+
+def test_descriptions_map_to_contents():
+    assert content_of("walk") == "walk" and content_of("slow walk") == "walk"
+    assert content_of("run/jog") == "run" and content_of("jump, balance") == "jump"
+    assert content_of("walk on uneven terrain") == "walk-uneven"
+    assert content_of("basketball - forward dribble, 90-degree left turns") == \
+        "dribble-turn-left"
+    assert content_of("basketball - sideways dribble") == "dribble-side"
+    assert content_of("juggling") is None
+
+
+def test_a_folder_with_trials_csv_is_labelled_and_loses_its_tpose(rig_folder):
+    db = load_database(rig_folder, progress=False)
+    assert [lab["content"] for lab in db.labels] == ["walk", "run", "walk", "dribble-back"]
+    assert [lab["subject"] for lab in db.labels] == ["2", "3", "4", "5"]
+    assert db.labels[2]["style"] == "slow" and db.labels[0]["dataset"] == rig_folder.name
+    from imuloco.io.bvh import read_bvh
+
+    first = read_bvh(rig_folder / "000_01.bvh")
+    assert db.clips[0].num_frames == first.num_frames - 1  # the T-pose is gone
+    assert drop_leading_pose(db.clips[0]).num_frames == db.clips[0].num_frames  # once only
+
+
+def test_trials_csv_without_its_columns_is_refused(tmp_path, sample):
+    write_bvh(sample.clips[0], tmp_path / "a.bvh")
+    (tmp_path / "trials.csv").write_text("name,what\na.bvh,walk\n")
+    with pytest.raises(FormatError, match=r"trials\.csv:1.*'file' and 'description'"):
+        load_database(tmp_path, progress=False)
+
+
+def test_several_folders_become_one_set_on_the_first_skeleton(rig_folder):
+    from imuloco.data import SAMPLE_DIR
+
+    db = load_databases([SAMPLE_DIR, rig_folder], progress=False)
+    assert len(db) == 20
+    first = db.clips[0].skeleton
+    assert all(c.skeleton.names == first.names for c in db.clips)
+    assert all(c.fps == 30.0 for c in db.clips)
+    assert {lab["dataset"] for lab in db.labels} == {"sample", rig_folder.name}
+    # a retargeted clip moves as the sample clip it was made from (rig_folder's second)
+    from imuloco.evaluate.metrics import mpjpe
+
+    orig, back = load_sample().clips[4], db.clips[17]
+    assert back.num_frames == orig.num_frames
+    assert mpjpe(orig, back) < 2.0
+
+
+def test_evaluate_parts_compares_skeletons_that_differ(sample):
+    c = sample.clips[0]
+    other = other_rig(c, 1.3)
+    values = evaluate_parts(other, c)  # the same movement on a 1.3 times larger rig
+    assert set(values) == set(METRIC_KEYS)
+    assert values["mpjpe_cm"] < 1e-6 and values["path_err_cm"] < 1e-6
+    assert values["angle_deg"] is None and values["dpv"] is None
+    assert values["jitter"] == pytest.approx(values["jitter_gt"], rel=1e-6)
+
+
+def test_heldout_contents_has_a_fold_per_content(sample):
+    out = folds(sample, "heldout-contents")
+    assert [f for f, _, _ in out] == ["walk", "walk-turn-left", "walk-turn-right", "run"]
+    for fold, train, test in out:
+        assert {lab["content"] for lab in test.labels} == {fold}
+        assert fold not in {lab["content"] for lab in train.labels}
+        assert len(train) + len(test) == len(sample)
+
+
+def test_seeds_give_mean_and_spread(tmp_path):
+    recs = run_bench(["ridge"], "heldout-contents", limit=8, seeds=2, out=tmp_path)
+    total = next(r for r in recs if r["motion_type"] == "all")
+    assert total["seeds"] == [0, 1] and len(total["mpjpe_cm_per_seed"]) == 2
+    assert total["mpjpe_cm"] == pytest.approx(np.mean(total["mpjpe_cm_per_seed"]))
+    assert total["mpjpe_cm_std"] == pytest.approx(np.std(total["mpjpe_cm_per_seed"], ddof=1))
+    assert total["mpjpe_cm_std"] > 0  # the training noise differs between seeds
+    assert [r["motion_type"] for r in recs] == ["walk", "walk-turn-left", "walk-turn-right",
+                                                "run", "all"]
+    assert "±" in (tmp_path / "results.md").read_text()
+
+
+def test_cross_dataset_from_the_command_line(rig_folder, tmp_path):
+    from imuloco.data import SAMPLE_DIR
+
+    res = CliRunner().invoke(cli, ["bench", "--method", "mean", "--split", "cross-dataset",
+                                   "--train", str(SAMPLE_DIR), "--test", str(rig_folder),
+                                   "--out", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    import json
+
+    recs = json.loads((tmp_path / "results.json").read_text())
+    total = next(r for r in recs if r["motion_type"] == "all")
+    assert total["data"] == f"sample -> {rig_folder.name}" and total["n_clips"] == 4
+    assert total["angle_deg"] is None and 3 < total["mpjpe_cm"] < 30
+    res = CliRunner().invoke(cli, ["bench", "--method", "mean", "--split", "cross-dataset",
+                                   "--out", str(tmp_path / "x")])
+    assert res.exit_code != 0 and "--train" in res.output

@@ -1,0 +1,248 @@
+"""Gait from real sensors: readers of the real-data layouts, the sensor-level estimators on
+simulated foot and lower-back IMUs, the protocol's matching and path alignment, and (marked
+``shared``) the protocol on the real recordings."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from imuloco.errors import FormatError
+from imuloco.evaluate.gait import gait_parameters
+from imuloco.evaluate.real import match_events, path_errors, run_real
+from imuloco.io.realimu import detect_layout, read_trials
+
+pytest.importorskip("gaitmap")
+pytest.importorskip("mobgap")
+from imuloco.evaluate.sensorgait import foot_gait, lower_back_gait, sensor_gait
+
+DEMO = "dataset-2_walk_normal_001"
+
+
+@pytest.fixture(scope="module")
+def demo_clip(sample_db):
+    return next(c for c in sample_db.clips if c.name == DEMO)
+
+
+@pytest.fixture(scope="module")
+def demo_rec(demo_clip):
+    from imuloco.sensors.simulate import simulate
+
+    return simulate(demo_clip, ["right_foot", "left_foot", "lower_back"], rate=100.0,
+                    noise="clean", seed=0)
+
+
+def test_foot_placement_reads_gravity_on_the_instep_axis(demo_rec):
+    """A flat foot's sensor (x left, y back to the heel, z dorsal) reads +g mostly on z and
+    y (the Bandai rig's foot slopes from the high ankle joint to the toe joint), never on x."""
+    acc = demo_rec.acc[:3, 0].mean(axis=0)
+    assert np.linalg.norm(acc) == pytest.approx(9.81, abs=1.5)
+    assert acc[2] > 5.0 and abs(acc[0]) < 2.0
+
+
+def test_foot_gait_on_a_simulated_foot_imu(demo_rec, demo_clip):
+    """The ZUPT strides of a simulated shoe IMU match the clip's own strides."""
+    truth = gait_parameters(demo_clip)
+    for k, foot in enumerate(("right", "left")):
+        g = foot_gait(demo_rec.times, demo_rec.acc[:, k], demo_rec.gyro[:, k], foot)
+        assert g.measured, g.reason
+        s = g.summary()
+        assert s["stride_length_m"] == pytest.approx(truth["stride_length_m"], rel=0.05)
+        assert s["cadence_spm"] == pytest.approx(truth["cadence_spm"], rel=0.05)
+        assert all(r["foot"] == foot and r["end_s"] > r["start_s"] for r in g.strides)
+
+
+def test_sensor_gait_is_consistent_by_construction(demo_rec):
+    """speed = step length x cadence / 60 exactly, steps = 2 x contacts for a foot."""
+    for placement in ("right_foot", "lower_back"):
+        g = sensor_gait(demo_rec, placement, height_m=1.7)
+        s = g.summary()
+        assert s["speed_mps"] == pytest.approx(s["step_length_m"] * s["cadence_spm"] / 60)
+        assert s["steps"] == g.steps_per_contact * len(g.initial_contacts)
+
+
+def test_lower_back_gait_on_a_simulated_l5_imu(demo_rec, demo_clip):
+    truth = gait_parameters(demo_clip)
+    g = lower_back_gait(demo_rec.times, demo_rec.acc[:, 2], demo_rec.gyro[:, 2], 0.53 * 1.7)
+    assert g.measured, g.reason
+    assert g.summary()["cadence_spm"] == pytest.approx(truth["cadence_spm"], rel=0.05)
+
+
+@pytest.mark.parametrize("seconds", [1.0, 30.0])
+def test_no_walking_is_stated_not_zero(seconds):
+    """Too short, or a sensor lying still: no gait, a reason, NaN rather than 0."""
+    t = np.arange(0, seconds, 0.01)
+    acc = np.tile([0.0, 0.0, 9.81], (len(t), 1)) + np.random.default_rng(0).normal(
+        0, 0.02, (len(t), 3))
+    gyro = np.random.default_rng(1).normal(0, 0.002, (len(t), 3))
+    for g in (foot_gait(t, acc, gyro), lower_back_gait(t, acc, gyro, 0.9)):
+        assert not g.measured and g.reason
+        assert math.isnan(g.summary()["cadence_spm"]) and math.isnan(g.summary()["steps"])
+        assert g.to_json()["reason"]
+
+
+def test_lower_back_needs_a_height(demo_rec):
+    with pytest.raises(ValueError, match="height"):
+        sensor_gait(demo_rec, "lower_back")
+
+
+def test_match_events_one_to_one():
+    errs, missed, extra = match_events(np.array([1.0, 2.0, 3.0]),
+                                       np.array([1.02, 1.05, 2.9, 5.0]))
+    assert sorted(np.round(errs, 3)) == [-0.1, 0.02]
+    assert (missed, extra) == (1, 2)
+
+
+def test_path_errors_ignore_start_pose():
+    """A path moved and turned on the floor has no error once its start is aligned."""
+    ref = np.array([[0, 0], [1, 0], [2, 0.5], [2.5, 1.5], [2, 2.5]], float)
+    a = 0.7
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    est = ref @ rot.T + [3.0, -1.0]
+    t = np.arange(5.0)
+    e = path_errors(t, est, t, ref)
+    assert e["path_final_m"] == pytest.approx(0, abs=1e-9)
+    e = path_errors(t, est * [1, -1], t, ref)  # mirrored: not a rigid motion
+    assert e["path_mean_m"] > 0.1
+
+
+def test_readers_on_generated_files(tmp_path):
+    from scipy.io import savemat
+
+    n = 400
+    t = np.arange(n) / 200.0
+    imu = np.zeros((n, 6))
+    imu[:, 2] = -9.81
+    savemat(tmp_path / "a_LLIO.mat", {"imu_data": imu, "timestamps_all": t[None],
+                                      "gt": np.zeros((n, 2)), "strideIndex": [[10, 200, 390]],
+                                      "GCP": np.array([[0, 0], [1, 0], [2, 0]])})
+    assert detect_layout(tmp_path) == "pyshoe-vicon"
+    (trial,) = read_trials(tmp_path)
+    assert trial.recording.placements == ["right_foot"]
+    assert trial.reference.bouts[0].distance_m == pytest.approx(2.0)
+    assert trial.reference.stride_ends[1] == pytest.approx(1.0)
+
+    ipol = tmp_path / "ipol"
+    ipol.mkdir()
+    (ipol / "1-1.json").write_text(json.dumps({
+        "Height": 170, "TrialBoundaries": [10, 90], "UTurnBoundaries": [40, 50],
+        "LeftFootEvents": [[12, 20], [60, 70]], "RightFootEvents": [[25, 35], [75, 85]]}))
+    for key in ("lf", "rf", "lb"):
+        rows = "\n".join("\t".join(["0"] * 10) for _ in range(100))
+        (ipol / f"1-1_{key}.txt").write_text(
+            "Acquisition frequency: 100 Hz\nPacketCounter\tAcc_X\tAcc_Y\tAcc_Z\tGyr_X\tGyr_Y"
+            "\tGyr_Z\tMag_X\tMag_Y\tMag_Z\n" + rows + "\n")
+    (trial,) = read_trials(ipol)
+    assert trial.recording.placements == ["right_foot", "left_foot", "lower_back"]
+    assert trial.reference.initial_contacts["left"].tolist() == [0.2, 0.7]
+    assert trial.reference.height_m == pytest.approx(1.7)
+    (ipol / "1-1_lb.txt").write_text("Acquisition rate 100\n")
+    with pytest.raises(FormatError, match="1-1_lb.txt:1"):
+        list(read_trials(ipol))
+
+
+def test_unknown_layout_is_named(tmp_path):
+    with pytest.raises(FormatError, match="no real-data layout"):
+        detect_layout(tmp_path)
+
+
+# ---- the real recordings ------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def real_dir():
+    from imuloco.data import shared_data_dir
+
+    d = shared_data_dir()
+    if d is None or not (d.parent / "real-imu").is_dir():
+        pytest.skip("../shared/data/real-imu is absent")
+    return d.parent / "real-imu"
+
+
+@pytest.mark.shared
+def test_real_protocol_on_one_trial_each(real_dir, tmp_path):
+    rows = run_real(real_dir, tmp_path, limit=1)
+    assert {r["dataset"] for r in rows} == {"pyshoe-vicon", "ipol-gait", "mobilise-d-lab"}
+    for f in ("real.json", "real.csv", "README.md"):
+        assert (tmp_path / f).is_file()
+    ours = {(r["dataset"], r["sensor"]): r for r in rows if r["estimator"] == "imuloco"}
+    shoe = ours[("pyshoe-vicon", "right_foot")]
+    # one trial's figures (Vicon): every stride found, the path within 1 % of the distance
+    assert shoe["steps_err_pct"] == 0
+    assert shoe["stride_mae_m"] < 0.10 and shoe["path_final_pct"] < 1.0
+    assert abs(ours[("ipol-gait", "lower_back")]["cadence_err_pct"]) < 3
+
+
+# ---- heights, consistency and the report's gait --------------------------------------------
+def test_running_lengths_agree_with_speed_and_cadence(sample_db):
+    """speed = step length x cadence / 60 on running clips too (the flight is covered)."""
+    for clip in sample_db.where(content="run").clips:
+        g = gait_parameters(clip)
+        assert g["speed_mps"] == pytest.approx(g["step_length_m"] * g["cadence_spm"] / 60)
+        assert g["stride_length_m"] == pytest.approx(2 * g["step_length_m"])
+        # the heel-to-heel separation at a strike misses the flight
+        assert g["ankle_step_length_m"] < g["step_length_m"]
+
+
+def test_to_height_scales_every_length_and_speed(demo_clip):
+    from imuloco.evaluate.gait import stature, to_height
+    from imuloco.evaluate.strides import stride_rows
+
+    h = stature(demo_clip.skeleton)
+    assert 1.4 < h < 2.0  # an adult's stature from the leg
+    tall = to_height(demo_clip, 2.0)
+    k = 2.0 / h
+    assert stature(tall.skeleton) == pytest.approx(2.0)
+    a, b = gait_parameters(demo_clip), gait_parameters(tall)
+    for key in ("stride_length_m", "step_length_m", "speed_mps", "ankle_stride_length_m"):
+        assert b[key] == pytest.approx(k * a[key], rel=1e-6)
+    assert b["cadence_spm"] == pytest.approx(a["cadence_spm"])
+    la = [r["length_m"] for r in stride_rows(demo_clip, digits=9)]
+    lb = [r["length_m"] for r in stride_rows(tall, digits=9)]
+    np.testing.assert_allclose(lb, k * np.asarray(la), rtol=1e-6)
+    with pytest.raises(ValueError, match="metres"):
+        to_height(demo_clip, 175.0)  # centimetres
+
+
+def test_reconstruct_file_height_and_foot_gait(tmp_path, demo_rec, demo_clip, sample_db):
+    """A foot sensor: the report's gait comes from the sensor's signal (ZUPT strides), the
+    motion from a baseline fitted on the fly for right_foot (no shipped model), scaled to
+    --height."""
+    from imuloco.app.pipeline import choose_method, reconstruct_file
+    from imuloco.evaluate.gait import stature
+    from imuloco.io.sensorlog import write_generic_csv
+
+    rec = demo_rec.select(["right_foot"])
+    path = write_generic_csv(rec, tmp_path / "foot.csv")
+    fitted, note = choose_method(placement="right_foot", db=sample_db)
+    assert "on the fly" in note and fitted.placements_ == ["right_foot"]
+    motion, report = reconstruct_file(path, fitted=fitted, placement="right_foot",
+                                      height=1.9)
+    assert stature(motion.skeleton) == pytest.approx(1.9)
+    assert report["height_m"] == 1.9
+    assert "right_foot sensor" in report["gait_source"] and report["gait_note"] is None
+    truth = gait_parameters(demo_clip)
+    assert report["gait"]["stride_length_m"] == pytest.approx(truth["stride_length_m"],
+                                                              rel=0.05)
+    assert len(report["strides"]) >= 3 and report["strides"][0]["foot"] == "right"
+    json.dumps(report.to_json())
+
+
+def test_a_model_refuses_a_placement_it_does_not_know(tmp_path, ridge_without_demo_clip):
+    from imuloco.app.pipeline import choose_method
+
+    model = ridge_without_demo_clip.save(tmp_path / "ankle.npz")
+    with pytest.raises(ValueError, match="'right_foot'"):
+        choose_method(model=model, placement="right_foot")
+
+
+def test_gait_report_states_when_nothing_was_measured(demo_clip, demo_rec):
+    from imuloco.evaluate.sensorgait import gait_report
+
+    still = demo_clip.slice(0, 1)
+    still = type(still)(still.skeleton, np.repeat(still.rotations, 60, axis=0),
+                        np.repeat(still.root, 60, axis=0), still.fps)
+    out = gait_report(still, demo_rec, "right_ankle")
+    assert out["gait_note"].startswith("no gait could be measured")
+    assert out["gait"]["cadence_spm"] is None and out["gait"]["steps"] is None
