@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from imuloco.core.recording import Recording
-from imuloco.errors import FormatError, UnknownNameError
+from imuloco.errors import FormatError, InputError, UnknownNameError
 from imuloco.io.sensorlog import (
     FORMATS,
     PLATFORMS,
@@ -338,9 +338,9 @@ class LogOptions:
             if value not in allowed:
                 raise UnknownNameError(f"{name} must be one of {list(allowed)}, got {value!r}")
         if self.rate is not None and not (MIN_RATE <= self.rate <= 1000.0):
-            raise ValueError(f"rate must be between {MIN_RATE:g} and 1000 Hz, got {self.rate}")
+            raise InputError(f"rate must be between {MIN_RATE:g} and 1000 Hz, got {self.rate}")
         if not (0.0 <= self.sigma_s <= 1.0) or not (self.max_gap > 0):
-            raise ValueError("sigma_s must be in 0..1 s and max_gap positive")
+            raise InputError("sigma_s must be in 0..1 s and max_gap positive")
 
 
 def read_log(path: str | Path | Sequence[str | Path], placement: str = "right_ankle",
