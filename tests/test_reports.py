@@ -16,7 +16,7 @@ REPORT_KEYS = ["recording", "calibration", "feet_pinned_by", "method", "model", 
                "motion", "height_m", "gait", "gait_source", "gait_note", "strides",
                "signal_cadence_spm", "plausibility", "seconds"]
 RECORDING_KEYS = ["files", "format", "duration_s", "source_rate_hz", "samples", "unsorted",
-                  "duplicates", "acc_unit", "gyro_unit", "gaps"]
+                  "duplicates", "acc_unit", "gyro_unit", "gaps", "time_unit", "platform"]
 
 
 @pytest.fixture(scope="module")

@@ -116,7 +116,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
 
     from tqdm.auto import tqdm
 
-    from imuloco.app.pipeline import choose_method
+    from imuloco.app.pipeline import calibrated, choose_method
     from imuloco.evaluate.gait import gait_parameters, plausibility, to_json
     from imuloco.io.bvh import write_bvh_pieces
     from imuloco.methods.training import frame_times
@@ -131,12 +131,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         fitted, note = method, f"given fitted method {method.name!r}"
     info: dict[str, Any] = {}
     if calibrate:
-        from imuloco.sensors.calibration import calibrate as calibrate_rec
-
-        rec, mounts = calibrate_rec(rec.select(fitted.placements_))
-        info["calibration"] = [{"placement": p, "up_from": m.up_source,
-                                "still_s": round(m.still_s, 2), "swings": m.swings}
-                               for p, m in zip(rec.placements, mounts)]
+        rec, info["calibration"] = calibrated(rec.select(fitted.placements_))
     if pin is None:
         pin = not fitted.pins_feet
     frames = len(frame_times(rec, fitted.fps_))
@@ -154,10 +149,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     write_bvh_pieces(pieces(), frames, output, unit=unit, overwrite=overwrite)
     bar.close()
     return {
-        "recording": {"files": log_report.files, "format": log_report.format,
-                      "duration_s": round(log_report.duration, 3),
-                      "source_rate_hz": round(log_report.source_rate, 2),
-                      "time_unit": log_report.time_unit, "platform": log_report.platform},
+        "recording": log_report.to_json(),
         **info, "method": fitted.name, "model": note, "placement": placement,
         "motion": {"frames": frames, "fps": fitted.fps_,
                    "duration_s": round((frames - 1) / fitted.fps_, 3)},

@@ -193,6 +193,21 @@ class ReconstructionReport:
         return self.to_json()[key]
 
 
+def calibrated(rec: Recording) -> tuple[Recording, list[dict[str, Any]]]:
+    """``rec`` with its leg sensors turned into their segments' anatomical frames
+    (:func:`imuloco.sensors.calibration.calibrate`) and, per placement, what was found (the
+    report's ``calibration``)."""
+    from imuloco.ops.rotations import angle
+    from imuloco.sensors.calibration import calibrate
+
+    rec, mounts = calibrate(rec)
+    return rec, [
+        {"placement": p, "up_from": m.up_source, "still_s": round(m.still_s, 2),
+         "swings": m.swings, "rotation_deg": round(float(np.degrees(angle(m.rotation))), 2),
+         "rotation_xyzw": [round(float(v), 6) for v in m.rotation]}
+        for p, m in zip(rec.placements, mounts)]
+
+
 def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
                           pin: bool | None = None) -> tuple[Motion, dict[str, Any]]:
     """Reconstruct a Motion from an imported recording with a fitted method.
@@ -216,15 +231,7 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
     info: dict[str, Any] = {}
     rec = rec.select(method.placements_)
     if calibrate:
-        from imuloco.ops.rotations import angle
-        from imuloco.sensors.calibration import calibrate as calibrate_rec
-
-        rec, mounts = calibrate_rec(rec)
-        info["calibration"] = [
-            {"placement": p, "up_from": m.up_source, "still_s": round(m.still_s, 2),
-             "swings": m.swings, "rotation_deg": round(float(np.degrees(angle(m.rotation))), 2),
-             "rotation_xyzw": [round(float(v), 6) for v in m.rotation]}
-            for p, m in zip(rec.placements, mounts)]
+        rec, info["calibration"] = calibrated(rec)
     motion = method.reconstruct(rec)
     if pin is None:
         pin = not method.pins_feet
@@ -322,15 +329,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar.set_postfix_str("gait")
     k = rec.placements.index(fitted.placements_[0])
     report = ReconstructionReport(
-        recording={
-            "files": log_report.files, "format": log_report.format,
-            "duration_s": round(log_report.duration, 3),
-            "source_rate_hz": round(log_report.source_rate, 2),
-            "samples": log_report.samples, "unsorted": log_report.unsorted,
-            "duplicates": log_report.duplicates, "acc_unit": log_report.acc_unit,
-            "gyro_unit": log_report.gyro_unit,
-            "gaps": [[round(g.start, 3), round(g.stop, 3)] for g in log_report.gaps],
-        },
+        recording=log_report.to_json(),
         calibration=info.get("calibration"), feet_pinned_by=info["feet_pinned_by"],
         model=choice, placement=placement,
         motion={"frames": motion.num_frames, "fps": motion.fps,

@@ -94,6 +94,16 @@ class LogReport:
     time_unit: str = "s"
     platform: str | None = None
 
+    def to_json(self) -> dict[str, Any]:
+        """The ``recording`` part of a reconstruction's report (keys are a contract)."""
+        return {"files": self.files, "format": self.format,
+                "duration_s": round(self.duration, 3),
+                "source_rate_hz": round(self.source_rate, 2), "samples": self.samples,
+                "unsorted": self.unsorted, "duplicates": self.duplicates,
+                "acc_unit": self.acc_unit, "gyro_unit": self.gyro_unit,
+                "gaps": [[round(g.start, 3), round(g.stop, 3)] for g in self.gaps],
+                "time_unit": self.time_unit, "platform": self.platform}
+
 
 def clean_times(times: np.ndarray, values: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, int, int]:
