@@ -10,8 +10,9 @@ with an underscore and exists only after fitting (reading it before raises
 - :meth:`Method.fit_set` calls the method's learning step :meth:`Method.learn` with that one
   explicit input, then records what the method was fitted on (``skeleton_``, ``fps_``,
   ``placements_``, ``noise_``, ``protocol_``);
-- :meth:`Method.reconstruct` turns a Recording into a Motion, :meth:`Method.stream` (online
-  methods) takes one sensor frame at a time; :attr:`Method.pins_feet` says whether the method
+- :meth:`Method.reconstruct` turns a Recording into a Motion, :meth:`Method.reconstruct_full`
+  into a :class:`Reconstruction` (the motion with the method's per-frame confidence, for methods
+  that give one), :meth:`Method.stream` (online methods) takes one sensor frame at a time; :attr:`Method.pins_feet` says whether the method
   pins its own feet (then the pipeline does not).
 
 Signals reach a method at its model rate (the training motion's frame rate) as rows of
@@ -32,6 +33,7 @@ import platform
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Self
 
@@ -44,13 +46,36 @@ from imuloco.errors import NotFittedError
 from imuloco.methods.training import TrainingSet, model_frames
 
 
+@dataclass
+class Reconstruction:
+    """A reconstructed motion and, for methods that give one, its per-frame confidence.
+
+    motion : the Motion (T frames).
+    error_m : ndarray, shape (T,), or None: the predicted rms joint position error of each
+        frame in metres (root-relative; lower is more confident), calibrated on data the model
+        did not train on where the model file says so (see ``note``).
+    unreliable : ndarray of bool, shape (T,), or None: frames flagged because the method does
+        not know the motion (see ``note`` for how the flag is set).
+    note : how ``error_m`` was calibrated and the flag set (one sentence for reports).
+    """
+
+    motion: Motion
+    error_m: np.ndarray | None = None
+    unreliable: np.ndarray | None = None
+    note: str | None = None
+
+
 class Stream(ABC):
     """Online reconstruction: one sensor frame in, one pose out, causal, bounded state.
 
     ``delay_frames``: how many frames the returned pose lags the sample just read (a model
-    with look-ahead returns frame t - delay_frames after reading frame t)."""
+    with look-ahead returns frame t - delay_frames after reading frame t). After each step,
+    ``error_m`` (metres, NaN when the method gives no confidence) and ``unreliable`` hold the
+    returned frame's confidence as in :class:`Reconstruction`."""
 
     delay_frames: int = 0
+    error_m: float = float("nan")
+    unreliable: bool = False
 
     def delay_ms(self, fps: float) -> float:
         """``delay_frames`` in milliseconds at ``fps`` frames per second."""
@@ -165,6 +190,16 @@ class Method(ABC):
     @abstractmethod
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
         """signals : (T, 6 S) at the model rate -> Motion of T frames on ``skeleton_``."""
+
+    def reconstruct_full(self, rec: Recording) -> Reconstruction:
+        """:meth:`reconstruct` with the method's per-frame confidence where it gives one."""
+        rec = rec.select(self.placements_)
+        return self.reconstruct_signals_full(model_frames(rec, self.fps_, self.gaps_missing))
+
+    def reconstruct_signals_full(self, signals: np.ndarray) -> Reconstruction:
+        """:meth:`reconstruct_signals` as a :class:`Reconstruction`; methods with a confidence
+        override this (the default gives none)."""
+        return Reconstruction(self.reconstruct_signals(signals))
 
     def stream(self) -> Stream:
         """A fresh online reconstruction session (online methods only)."""

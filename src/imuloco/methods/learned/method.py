@@ -25,7 +25,7 @@ import torch
 from imuloco.core.mirror import mirror, mirror_frames, mirror_pairs, mirror_rotations
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
-from imuloco.methods.base import Method, Stream
+from imuloco.methods.base import Method, Reconstruction, Stream
 from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Reconstructor, TorchFK
@@ -213,9 +213,13 @@ class Learned(Method):
         return self._outputs(p[0, self.lag:], logit[0, self.lag:], logvar[0, self.lag:])
 
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
+        return self.reconstruct_signals_full(signals).motion
+
+    def reconstruct_signals_full(self, signals: np.ndarray) -> Reconstruction:
         out = self.predict(signals)
-        motion = pose.decode(out.vectors, self.skeleton_, self.fps_)
-        return pin(motion, out.contacts)
+        motion = pin(pose.decode(out.vectors, self.skeleton_, self.fps_), out.contacts)
+        return Reconstruction(motion, out.sigma, None,
+                              "error_m: the network's own estimate, not calibrated")
 
     def stream(self) -> LearnedStream:
         return LearnedStream(self)
@@ -364,6 +368,7 @@ class LearnedStream(Stream):
             return self.rest[0].copy(), self.rest[1].copy()
         out = m._outputs(p[0], logit[0], logvar[0])
         self.contacts, self.sigma = out.contacts[0], float(out.sigma[0])
+        self.error_m = self.sigma
         rot, raw_root = self.integrator.step(out.vectors[0])
         sk = m.skeleton_
         _, pos = fk(rot, raw_root, sk.offsets, sk.parents)
