@@ -85,6 +85,10 @@ def _folder(**kw: Any) -> click.Path:
     return click.Path(file_okay=False, path_type=Path, **kw)
 
 
+def _existing_folder(**kw: Any) -> click.Path:
+    return click.Path(exists=True, file_okay=False, path_type=Path, **kw)
+
+
 SPLITS = ("random-clips", "heldout-styles")
 NOISES = ("clean", "phone", "imu")
 
@@ -442,6 +446,76 @@ def export_onnx_command(model_path: Path | None, output: Path, force: bool) -> N
 
     path = export_onnx(model, output, overwrite=True)  # checked above
     click.echo(f"wrote {path} (from {model_path})")
+
+
+@cli.command()
+@click.argument("results", nargs=-1, required=True, type=_existing_folder())
+@click.option("--method", "method_spec", default=None,
+              help="The method's results to use, its spec as given to bench [default: the "
+                   "folders' only method with a confidence].")
+@click.option("--check", "check_dirs", multiple=True, type=_existing_folder(),
+              help="Bench results of other data (e.g. cross-dataset) to check the calibration "
+                   "fitted on all RESULTS against.")
+@click.option("--model", "model_path", type=_existing_file(), default=None,
+              help="A model file to calibrate (written to -o, never in place).")
+@click.option("-o", "--output", type=_file(), default=None,
+              help="The calibrated model file to write (with --model).")
+@click.option("--out", "out_dir", type=_folder(), default=None,
+              help="Folder for confidence.md, confidence.json and confidence.png.")
+@force_option
+def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tuple[Path, ...],
+              model_path: Path | None, output: Path | None, out_dir: Path | None,
+              force: bool) -> None:
+    """Check and calibrate a method's predicted per-frame error on bench RESULTS folders.
+
+    RESULTS are `imuloco bench --out` folders of a protocol that tests motion the model never
+    saw (heldout-contents: each content's frames are predicted by a calibration fitted on the
+    other contents). Prints the per-content table before and after; --check applies the
+    calibration of all RESULTS to other folders; --model/-o writes it into a model file.
+    """
+    from imuloco.evaluate import confidence as conf
+    from imuloco.evaluate.bench import slug
+    from imuloco.io.atomic import atomic_write, check_output, check_outputs
+    from imuloco.methods.base import calibrated_error
+
+    if (model_path is None) != (output is None):
+        raise click.UsageError("--model and -o go together: -o is the calibrated copy")
+    check_outputs([output], force, inputs=[model_path] if model_path else [])
+    if out_dir is not None:
+        for name in ("confidence.md", "confidence.json", "confidence.png"):
+            check_output(out_dir / name, force)
+    method = slug(method_spec) if method_spec else None
+    rows = conf.load_rows(results, method)
+    source = ", ".join(str(r) for r in results)
+    calibration = conf.fit(rows, f"out-of-fold results in {source}")
+    crossed = conf.crossfit(rows)
+    tables = {"uncalibrated": conf.check(rows),
+              "calibrated on the other contents": conf.check(rows, crossed)}
+    for d in check_dirs:
+        other = conf.load_rows([d], method)
+        scores = {n: other[f"score_{n}"] for n in conf.score_names(other)}
+        tables[f"{d}: uncalibrated"] = conf.check(other)
+        tables[f"{d}: calibrated on all of RESULTS"] = conf.check(
+            other, calibrated_error(calibration, scores))
+    text = "".join(f"\n{title}\n\n{conf.markdown(t)}" for title, t in tables.items())
+    click.echo(f"calibration: {calibration}")
+    click.echo(text)
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        with atomic_write(out_dir / "confidence.md", "w") as f:
+            f.write(f"# Predicted against actual error\n\ncalibration: "
+                    f"`{json.dumps(calibration)}`\n{text}")
+        with atomic_write(out_dir / "confidence.json", "w") as f:
+            f.write(json.dumps({"calibration": calibration, "tables": tables}, indent=1) + "\n")
+        conf.plot(rows, {"uncalibrated": rows["error_m"], "calibrated (other contents)": crossed},
+                  out_dir / "confidence.png")
+    if model_path is not None:
+        from imuloco.methods import load_model
+
+        model = load_model(model_path)
+        model.set_calibration(calibration)
+        model.save(output, overwrite=True)  # checked above
+        click.echo(f"wrote {output} ({model_path} with this calibration)")
 
 
 @cli.command()
