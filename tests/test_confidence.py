@@ -183,3 +183,17 @@ def test_bench_writes_confidence_and_calibrate_uses_it(tmp_path):
     assert load_model(tmp_path / "c.npz").calibration_ == cal
     res = CliRunner().invoke(cli, ["calibrate", str(tmp_path)])
     assert res.exit_code != 0 and "no confidence-*.npz" in res.output
+
+
+def test_train_writes_the_mirrored_model(tmp_path):
+    right, left = tmp_path / "r.npz", tmp_path / "l.npz"
+    res = CliRunner().invoke(cli, ["train", "--method", "learned", "--param", "epochs=1",
+                                   "--param", "hidden=8", "--param", "layers=1", "--param",
+                                   "draws=0", "--limit", "3", "-o", str(right), "--mirrored",
+                                   str(left)])
+    assert res.exit_code == 0, res.output
+    assert load_model(left).placements_ == ["left_ankle"]
+    assert load_model(left).protocol_["mirrored_from"] == ["right_ankle"]
+    res = CliRunner().invoke(cli, ["train", "--method", "mean", "-o", str(tmp_path / "m.npz"),
+                                   "--mirrored", str(tmp_path / "n.npz")])
+    assert res.exit_code != 0 and "only learned" in res.output

@@ -90,6 +90,7 @@ def _existing_folder(**kw: Any) -> click.Path:
 
 
 SPLITS = ("random-clips", "heldout-styles")
+MIRROR_CLIPS = 20  # clips that fit a mirrored model's sensor-axis map (Learned.mirrored)
 NOISES = ("clean", "phone", "imu")
 
 force_option = click.option("--force", is_flag=True, help="Replace existing output files.")
@@ -374,11 +375,15 @@ def evaluate(ground_truth: Path, reconstructed: Path, as_json: bool) -> None:
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE",
               help="A hyperparameter of the method (repeatable), e.g. --param epochs=4.")
 @click.option("-o", "--output", type=_file(), required=True, help="Model file to write (.npz).")
+@click.option("--mirrored", "mirrored_path", type=_file(), default=None,
+              help="Also write the model of the other side's placements (right <-> left): "
+                   "the same weights reading mirrored signals (learned only).")
 @force_option
 @_reading_options
 def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: str,
           split_name: str | None, params: tuple[str, ...], limit: int | None, seed: int,
-          output: Path, force: bool, up: str, skip_frames: int) -> None:
+          output: Path, mirrored_path: Path | None, force: bool, up: str,
+          skip_frames: int) -> None:
     """Fit a method on motion clips with simulated sensors and save the model.
 
     Writes OUTPUT, and for methods that keep a training history (``learned``) its losses per
@@ -388,11 +393,14 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
     from imuloco.errors import UnknownNameError
     from imuloco.evaluate.bench import data_label, load_data
     from imuloco.evaluate.protocols import split
-    from imuloco.io.atomic import check_output
+    from imuloco.io.atomic import check_outputs
     from imuloco.methods import method_class
     from imuloco.methods.registry import parse_params
 
-    check_output(output, force)
+    check_outputs([output, mirrored_path], force)
+    if mirrored_path is not None and not hasattr(method_class(method_name), "mirrored"):
+        raise click.UsageError(f"--mirrored: method {method_name!r} has no mirrored model "
+                               "(only learned)")
     method = method_class(method_name)()
     try:
         method.set_params(**parse_params(params, "--param"))
@@ -418,6 +426,13 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
                f"{seconds / 60:.1f} min; wrote {output}")
     for path in method.write_training_report(output):
         click.echo(f"wrote {path}")
+    if mirrored_path is not None:
+        try:
+            other = method.mirrored(db.clips[:: max(len(db) // MIRROR_CLIPS, 1)])
+        except ValueError as e:
+            raise click.UsageError(f"--mirrored: {e}") from None
+        other.save(mirrored_path, overwrite=True)  # checked before training
+        click.echo(f"wrote {mirrored_path} (for {', '.join(other.placements_)})")
 
 
 @cli.command("export-onnx")
