@@ -428,19 +428,19 @@ def export_onnx_command(model_path: Path | None, output: Path, force: bool) -> N
     from imuloco.io.atomic import check_output
     from imuloco.methods import load_model
 
-    check_output(output, force, inputs=[model_path] if model_path else [])
     if model_path is None:
         model_path = shipped_model("learned", "right_ankle")
         if model_path is None:
             raise click.UsageError("no shipped learned model in this installation: give "
                                    "--model")
+    check_output(output, force, inputs=[model_path])
     model = load_model(model_path)
     if model.name != "learned":
         raise click.UsageError(f"{model_path}: method {model.name!r} has no ONNX export; "
                                "only `learned` models do")
     from imuloco.methods.learned.export import export_onnx
 
-    path = export_onnx(model, output, overwrite=True)  # checked above
+    path = export_onnx(model, output, overwrite=True)  # checked above; written atomically
     click.echo(f"wrote {path} (from {model_path})")
 
 
