@@ -447,19 +447,19 @@ def export_onnx_command(model_path: Path | None, output: Path, force: bool) -> N
     from imuloco.io.atomic import check_output
     from imuloco.methods import load_model
 
-    check_output(output, force, inputs=[model_path] if model_path else [])
     if model_path is None:
         model_path = shipped_model("learned", "right_ankle")
         if model_path is None:
             raise click.UsageError("no shipped learned model in this installation: give "
                                    "--model")
+    check_output(output, force, inputs=[model_path])
     model = load_model(model_path)
     if model.name != "learned":
         raise click.UsageError(f"{model_path}: method {model.name!r} has no ONNX export; "
                                "only `learned` models do")
     from imuloco.methods.learned.export import export_onnx
 
-    path = export_onnx(model, output, overwrite=True)  # checked above
+    path = export_onnx(model, output, overwrite=True)  # checked above; written atomically
     click.echo(f"wrote {path} (from {model_path})")
 
 
@@ -582,7 +582,7 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @platform_option
 @click.option("--piece-seconds", type=click.FloatRange(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
-                   "(bounded memory for long recordings; not with --video/--html).")
+                   "(bounded memory for long recordings; not with --video/--html/--skeleton).")
 @height_option
 @force_option
 @_units_option
@@ -607,14 +607,15 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                           *([skeleton] if skeleton else [])])
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
-        if video or html_path or skeleton or height is not None:
+        if video or html_path or skeleton:
             raise click.UsageError("--piece-seconds writes the BVH on the model's skeleton "
-                                   "only: drop --video/--html/--skeleton/--height")
+                                   "only: drop --video/--html/--skeleton")
         from imuloco.app.chunked import reconstruct_to_bvh
 
         pieces = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
                                     not no_calibrate, platform=platform, overwrite=True,
-                                    piece_s=piece_seconds, progress=True, unit=units)
+                                    piece_s=piece_seconds, progress=True, unit=units,
+                                    height=height)
         if report_path:
             with atomic_write(report_path, "w") as f:
                 f.write(json.dumps(pieces, indent=2) + "\n")
@@ -796,10 +797,11 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
               help="Private key of --cert.")
 @click.option("--allow-origin", "allow_origins", multiple=True, metavar="ORIGIN",
               help="Also accept browsers on this origin (https://host:port); repeatable.")
+@height_option
 def live(host: str, port: int, model_path: Path | None, method_name: str | None,
          placement: str, calibrate_seconds: float, replay: Path | None, fmt: str, speed: float,
          loop: bool, certfile: str | None, keyfile: str | None,
-         allow_origins: tuple[str, ...]) -> None:
+         allow_origins: tuple[str, ...], height: float | None) -> None:
     """Watch a walker live: a phone on the leg streams its sensors (open /phone on it), a
     browser shows the reconstruction as it walks (open /live). Ctrl-C stops."""
     import asyncio
@@ -816,7 +818,7 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
 
     choice = choose_model(method_name, model_path, placement, progress=True)
     server = LiveServer(choice.method, calibrate_seconds, choice.description,
-                        allow_origins=allow_origins)
+                        allow_origins=allow_origins, height_m=height)
     ssl = ssl_context(certfile, keyfile) if certfile else None
     shown = "localhost" if host in ("127.0.0.1", "0.0.0.0", "::") else host
 
