@@ -245,6 +245,8 @@ class Learned(Method):
         d2 = np.einsum("ti,ij,tj->t", d, self.novelty_precision_, d) / d.shape[1]
         a = self.novelty_alpha_
         prev = d2[0] if state is None else state * self.novelty_scale_
+        if len(d2) == 1:  # a stream's step: the recursion below, without lfilter's overhead
+            return np.array([(a * d2[0] + (1 - a) * prev) / self.novelty_scale_])
         zi = np.array([(1 - a) * prev])
         return lfilter([a], [1, -(1 - a)], d2, zi=zi)[0] / self.novelty_scale_
 
