@@ -263,6 +263,8 @@ def _folders(values: tuple[str, ...]) -> list[Path] | None:
               help="Folder for results.json and results.md.")
 @click.option("--seeds", "n_seeds", type=click.IntRange(min=1), default=1, show_default=True,
               help="Train each method with N seeds (seed, seed+1, ...): mean and spread.")
+@click.option("--fold", "fold_names", default=None, metavar="CONTENT[,CONTENT]",
+              help="heldout-contents: run only these folds (left-out contents).")
 @click.option("--speed", is_flag=True,
               help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
 @click.option("--db-frames", default=None,
@@ -290,7 +292,7 @@ def _folders(values: tuple[str, ...]) -> list[Path] | None:
 def bench(method_names: str | None, split_name: str, noise: str, placement: str,
           data_items: tuple[str, ...], train_items: tuple[str, ...],
           test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
-          speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None,
+          fold_names: str | None, speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None,
           batch_walkers: int | None, load_dirs: tuple[Path, ...], against: str | None,
           real_dir: Path | None, baseline: bool, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
@@ -341,7 +343,8 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
 
     records = run_bench(names, split_name, noise, _csv(placement), _folders(data_items), out,
                         limit, seed, progress=True, seeds=n_seeds, train=_folders(train_items),
-                        test=_folders(test_items), up=up, skip_frames=skip_frames)
+                        test=_folders(test_items), up=up, skip_frames=skip_frames,
+                        only_folds=_csv(fold_names) or None)
     click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
     click.echo(f"wrote {out / 'results.json'} and {out / 'results.md'}")
 

@@ -224,6 +224,7 @@ def run_bench(
     test: DataArg = None,
     up: str = "auto",
     skip_frames: int = 0,
+    only_folds: Sequence[str] | None = None,
 ) -> list[dict[str, Any]]:
     """Run the benchmark protocol and return its records (one per method x motion type).
 
@@ -243,6 +244,7 @@ def run_bench(
     seeds : number of training seeds (see the module docstring).
     train, test : the folders of ``cross-dataset`` (training: one or several; test: one).
     up, skip_frames : how motion files are read (see :func:`imuloco.io.bvh.read_bvh`).
+    only_folds : run only these folds of ``heldout-contents`` (left-out contents).
     """
     from imuloco.core.retarget import resampled
     from imuloco.methods import method_class
@@ -268,6 +270,12 @@ def run_bench(
         if train is not None or test is not None:
             raise UnknownNameError("--train/--test are for --split cross-dataset; use --data")
         protocol = folds(load_data(data, limit, progress, up, skip_frames), split_name)
+        if only_folds:
+            unknown = sorted(set(only_folds) - {f for f, _, _ in protocol})
+            if unknown:
+                raise UnknownNameError(f"no fold {unknown} in {split_name}; folds: "
+                                       f"{[f for f, _, _ in protocol]}")
+            protocol = [p for p in protocol if p[0] in only_folds]
         label = data_label(data)
     header = {"split": split_name, "noise": noise, "placements": placements,
               "protocol_version": PROTOCOL_VERSION, "seed": seed, "data": label,

@@ -91,6 +91,8 @@ class Learned(Method):
     proportions : augmented draws are simulated on bodies of other proportions (height up to
         +-``proportions``, legs, arms and trunk a further +-half of it;
         :func:`imuloco.methods.learned.train.proportioned`), targets on the training skeleton.
+    reverse : the fraction of augmented clips played backwards in time (stand-ins for walking
+        backwards, :func:`imuloco.methods.learned.train.reversed_motion`).
     bidirectional : a GRU that reads the recording both ways (offline only: no :meth:`stream`;
         ``lag`` is then not needed and ignored).
     threads : torch CPU threads while fitting (None: torch's default). Use 1 on a machine
@@ -103,7 +105,8 @@ class Learned(Method):
     supports_online = True
     # files from before the look-ahead and the heavier acceleration term
     legacy_params: ClassVar[dict[str, Any]] = {"lag": 0, "accel_weight": 30.0,
-                                               "proportions": 0.0, "bidirectional": False}
+                                               "proportions": 0.0, "bidirectional": False,
+                                               "reverse": 0.0}
     # inputs centred by a causal running mean (``features="centered"``, time constant ``tau``)
     # measured worse (4.06 vs 3.94 cm, docs/results/learned/experiments.md) and were removed
     retired_params: ClassVar[dict[str, Any]] = {"features": "raw", "tau": None}
@@ -113,7 +116,7 @@ class Learned(Method):
                  speed: float = 0.15, noise_scale: float = 2.0, mirror: bool = True,
                  validation: float = 0.05, dropout: float = 0.0, weight_decay: float = 1e-4,
                  position_weight: float = 10.0, accel_weight: float = 150.0, lag: int = 8,
-                 proportions: float = 0.1, bidirectional: bool = False,
+                 proportions: float = 0.1, reverse: float = 0.0, bidirectional: bool = False,
                  threads: int | None = None, seed: int = 0) -> None:
         self.hidden = hidden
         self.layers = layers
@@ -132,6 +135,7 @@ class Learned(Method):
         self.accel_weight = accel_weight
         self.lag = lag
         self.proportions = proportions
+        self.reverse = reverse
         self.bidirectional = bidirectional
         self.threads = threads
         self.seed = seed
@@ -155,7 +159,7 @@ class Learned(Method):
             can_mirror = False
         train_ex = tr.augment(train_ex, list(data.placements), data.noise, self.seed, self.draws,
                               self.speed, self.noise_scale, can_mirror, progress,
-                              self.proportions)
+                              self.proportions, self.reverse)
         train_ex = [self._looking_ahead(e) for e in train_ex]
         val_ex = [self._looking_ahead(e) for e in val_ex]
         x, y, c, pos, lengths = tr.stack(train_ex)

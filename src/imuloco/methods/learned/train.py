@@ -6,8 +6,9 @@ change (the motion time-resampled by a factor in ``1 +- speed`` before simulatin
 preset's levels scaled by a log-uniform factor up to ``noise_scale`` (white noise, biases,
 timestamp jitter, misalignment, placement offset), other body proportions (the sensor simulated
 on a body :func:`proportioned` by up to ``proportions``; the targets stay on the training
-skeleton) and every other draw left/right mirrored (:func:`imuloco.core.mirror.mirror`), so
-that a model learns both legs' gaits from one sensor.
+skeleton), every other draw left/right mirrored (:func:`imuloco.core.mirror.mirror`), so
+that a model learns both legs' gaits from one sensor, and a fraction ``reverse`` of the draws
+played backwards in time (:func:`reversed_motion`).
 """
 
 from __future__ import annotations
@@ -57,6 +58,14 @@ def scaled_noise(model: NoiseModel, scale: float, misplace: float) -> NoiseModel
                    offset_m=model.offset_m * misplace)
 
 
+def reversed_motion(motion: Motion) -> Motion:
+    """``motion`` played backwards in time. Walking backwards is close to forward walking
+    reversed in time (Winter, Pluck and Yang 1989: the joint angle patterns of the two nearly
+    mirror each other in time), so reversed forward walks stand in for backward walking."""
+    return Motion(motion.skeleton, motion.rotations[::-1].copy(), motion.root[::-1].copy(),
+                  motion.fps, motion.name)
+
+
 def proportioned(motion: Motion, rng: np.random.Generator, spread: float) -> Motion:
     """``motion`` played by a body of other proportions: the whole body scaled by a factor in
     ``1 +- spread`` (height), then the legs, the arms and the trunk (with head and pelvis
@@ -96,9 +105,11 @@ def contact_targets(motion: Motion) -> np.ndarray:
 
 def augment(examples: list[Example], placements: list[str], noise: str, seed: int,
             draws: int, speed: float, noise_scale: float, mirrored: bool,
-            progress: bool = False, proportions: float = 0.0) -> list[Example]:
+            progress: bool = False, proportions: float = 0.0,
+            reverse: float = 0.0) -> list[Example]:
     """The benchmark's examples plus ``draws`` augmented simulations of every clip (see the
-    module docstring). Draw ``d`` mirrors the motion when ``mirrored`` and ``d`` is odd."""
+    module docstring). Draw ``d`` mirrors the motion when ``mirrored`` and ``d`` is odd; each
+    augmented clip is reversed in time with probability ``reverse``."""
     out = list(examples)
     if draws <= 0:
         return out
@@ -115,6 +126,8 @@ def augment(examples: list[Example], placements: list[str], noise: str, seed: in
             motion = speed_change(motion, f)
         s = math.exp(rng.uniform(-1, 1) * math.log(noise_scale)) if noise_scale > 1 else 1.0
         model = scaled_noise(base, s, rng.uniform(0.5, 1.5))
+        if reverse > 0 and rng.uniform() < reverse:
+            motion = reversed_motion(motion)
         body = proportioned(motion, rng, proportions)
         rec = simulate(body, placements, 100.0, model,
                        clip_seed(e.labels["name"], seed + DRAW_SEED_STRIDE * d))
