@@ -92,7 +92,9 @@ class Learned(Method):
         +-``proportions``, legs, arms and trunk a further +-half of it;
         :func:`imuloco.methods.learned.train.proportioned`), targets on the training skeleton.
     reverse : the fraction of augmented clips played backwards in time (stand-ins for walking
-        backwards, :func:`imuloco.methods.learned.train.reversed_motion`).
+        backwards, :func:`imuloco.methods.learned.train.reversed_motion`). On
+        ``heldout-contents`` (``--limit 30``, seed 0) 0.3 took walking backwards, never seen,
+        from 10.32 to 7.43 cm (the mean pose: 10.03) and forward walking from 4.15 to 4.30.
     bidirectional : a GRU that reads the recording both ways (offline only: no :meth:`stream`;
         ``lag`` is then not needed and ignored).
     threads : torch CPU threads while fitting (None: torch's default). Use 1 on a machine
@@ -116,7 +118,7 @@ class Learned(Method):
                  speed: float = 0.15, noise_scale: float = 2.0, mirror: bool = True,
                  validation: float = 0.05, dropout: float = 0.0, weight_decay: float = 1e-4,
                  position_weight: float = 10.0, accel_weight: float = 150.0, lag: int = 8,
-                 proportions: float = 0.1, reverse: float = 0.0, bidirectional: bool = False,
+                 proportions: float = 0.1, reverse: float = 0.3, bidirectional: bool = False,
                  threads: int | None = None, seed: int = 0) -> None:
         self.hidden = hidden
         self.layers = layers
