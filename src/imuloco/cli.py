@@ -529,9 +529,9 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         if report_path:
             with atomic_write(report_path, "w") as f:
                 f.write(json.dumps(pieces, indent=2) + "\n")
-        m = pieces["motion"]
+        m, c = pieces["motion"], pieces["confidence"]
         click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
-                   f"{pieces['pieces']['count']} piece(s); wrote "
+                   f"{pieces['pieces']['count']} piece(s)" + _confidence_text(c) + "; wrote "
                    + ", ".join(str(p) for p in (output, report_path) if p))
         return
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
@@ -544,7 +544,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     if video or html_path:
         written += render_outputs([motion], [f"{motion.name} ({report.method})"],
                                   [video] if video else [], html_path, overwrite=True,
-                                  progress=True, max_seconds=video_seconds)
+                                  progress=True, max_seconds=video_seconds,
+                                  confidence=[report.confidence])
     if report_path:
         with atomic_write(report_path, "w") as f:
             f.write(json.dumps(report.to_json(), indent=2) + "\n")
@@ -554,8 +555,24 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                f"cadence {_num(g['cadence_rhythm_spm'], 1)} steps/min from the legs' rhythm "
                f"(raw signal: {_num(report.signal_cadence_spm, 1)}), "
                f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} detected strikes; "
-               f"speed {_num(g['speed_mps'], 2)} m/s")
+               f"speed {_num(g['speed_mps'], 2)} m/s"
+               + _confidence_text(report["confidence"]))
     click.echo("wrote " + ", ".join(str(p) for p in written))
+
+
+def _confidence_text(c: dict) -> str:
+    """'; predicted error ...' from a report's ``confidence`` (empty without one)."""
+    if not c.get("available"):
+        return ""
+    mean = c["mean_error_m"]
+    return (f"; predicted error {_num(None if mean is None else 100 * mean, 1)} cm (mean rms "
+            "over joints)" + _flagged_text(c))
+
+
+def _flagged_text(c: dict) -> str:
+    """', N % of frames flagged unreliable' from a report's ``confidence`` (or empty)."""
+    frac = c.get("unreliable_fraction")
+    return "" if frac is None else f", {100 * frac:.1f} % of frames flagged unreliable"
 
 
 @cli.command()
@@ -581,6 +598,11 @@ def demo(out_dir: Path, model_path: Path | None, method_name: str | None,
                f"steps/min from the legs' rhythm, {_num(g['cadence_spm'], 1)} from detected "
                f"strikes (ground truth {_num(gt['cadence_spm'], 1)}); "
                f"{report['seconds']:.0f} s")
+    check = report["confidence_check"]
+    if check["mean_predicted_error_m"] is not None:
+        click.echo(f"predicted error {100 * check['mean_predicted_error_m']:.1f} cm per frame "
+                   f"(mean rms over joints), actual {100 * check['mean_actual_error_m']:.1f} "
+                   "cm" + _flagged_text(report["confidence"]))
     click.echo(f"wrote {len(report['files'])} files to {out_dir}/ (open demo.html or "
                f"demo.mp4; report.md)")
 
