@@ -274,6 +274,9 @@ def test_batch_fills_the_stride_tables_confidence(confident, log_file, tmp_path,
     assert len(strides) == len(report["strides"]) > 2
     assert [s["confidence"] for s in strides] == [s["confidence"] for s in report["strides"]]
     assert all(0.03 <= s["confidence"] <= 0.05 for s in strides)
+    walker = pq.read_table(tmp_path / "walkers.parquet").to_pylist()[0]
+    assert walker["mean_error_m"] == report["confidence"]["mean_error_m"]
+    assert walker["unreliable_fraction"] == report["confidence"]["unreliable_fraction"] > 0
 
 
 # ---- the demo's plot ---------------------------------------------------------------------
