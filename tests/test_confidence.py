@@ -83,6 +83,12 @@ def test_summary_is_none_where_the_method_gives_nothing():
     j = Confidence(np.full(60, 0.05), None, 30.0).to_json()
     assert j["available"] and j["mean_error_m"] == 0.05
     assert j["unreliable_fraction"] is None and j["unreliable_segments"] is None
+    # flags without an error
+    flags = np.zeros(60, bool)
+    flags[:15] = True
+    j = Confidence(None, flags, 30.0).to_json()
+    assert j["available"] and j["mean_error_m"] is None and j["error_m_per_second"] is None
+    assert j["unreliable_fraction"] == 0.25 and j["unreliable_segments"] == [[0.0, 0.5]]
 
 
 def test_a_long_recording_keeps_its_summary_small():

@@ -589,7 +589,7 @@ def test_a_dropped_viewer_is_one_log_line(fitted, phone, caplog):
 
 # ---- the pages in a real headless browser (skipped without selenium and Debian chromium) -----
 @contextlib.contextmanager
-def _serve(method):
+def _serve_threaded(method):
     """A LiveServer of ``method`` listening on a free loopback port, its event loop in a
     thread: yields (server, loop)."""
     pytest.importorskip("websockets")
@@ -614,7 +614,7 @@ def _serve(method):
 @pytest.fixture
 def threaded_server(fitted):
     """A LiveServer listening on a free loopback port, its event loop in a thread."""
-    with _serve(fitted) as served:
+    with _serve_threaded(fitted) as served:
         yield served
 
 
@@ -758,9 +758,10 @@ def test_live_page_shows_the_predicted_error_and_flags(fitted, browser, sample_d
     clip = next(c for c in sample_db.clips if c.name == CLIP)
     path = write_generic_csv(simulate(clip, ["right_ankle"], 100.0, "phone", 13),
                              tmp_path / "walk.csv")
-    with _serve(_Confident(fitted)) as (server, loop):
+    with _serve_threaded(_Confident(fitted)) as (server, loop):
         browser.get(f"http://127.0.0.1:{server.port}/live")
         _wait_for(lambda: browser.execute_script("return imuloco.state().skel !== null"))
+        browser.get_log("browser")  # drop what earlier tests' pages logged
         replay = asyncio.run_coroutine_threadsafe(server.replay(path, speed=1.0), loop)
         seen = {True: None, False: None}
 
@@ -780,10 +781,10 @@ def test_live_page_shows_the_predicted_error_and_flags(fitted, browser, sample_d
 
         _wait_for(both, 60)
         replay.result(60)
+        assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     (c, text, cls, amber), (c2, text2, cls2, amber2) = seen[True], seen[False]
     assert c["errorM"] >= 0.04 and text.endswith(UNRELIABLE_LABEL)
     assert text.startswith(f"predicted error {100 * c['errorM']:.1f} cm")
     assert cls == "unreliable" and amber > 50
     assert c2["errorM"] < 0.04 and text2 == f"predicted error {100 * c2['errorM']:.1f} cm"
     assert cls2 == "" and amber2 == 0
-    assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]

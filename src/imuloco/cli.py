@@ -561,12 +561,12 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 
 
 def _confidence_text(c: dict) -> str:
-    """'; predicted error ...' from a report's ``confidence`` (empty without one)."""
-    if not c.get("available"):
-        return ""
-    mean = c["mean_error_m"]
-    return (f"; predicted error {_num(None if mean is None else 100 * mean, 1)} cm (mean rms "
-            "over joints)" + _flagged_text(c))
+    """'; predicted error ..., N % of frames flagged unreliable' from a report's
+    ``confidence``, what of it the method gives (empty for none)."""
+    mean = c.get("mean_error_m")
+    text = "" if mean is None else f"predicted error {100 * mean:.1f} cm (mean rms over joints)"
+    text = (text + _flagged_text(c)).removeprefix(", ")
+    return f"; {text}" if text else ""
 
 
 def _flagged_text(c: dict) -> str:

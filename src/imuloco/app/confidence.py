@@ -87,8 +87,8 @@ class Confidence:
 
     @property
     def available(self) -> bool:
-        """Whether the method gave a predicted error."""
-        return self.error_m is not None
+        """Whether the method gave a confidence (a predicted error, unreliable flags or both)."""
+        return self.error_m is not None or self.unreliable is not None
 
     def scaled(self, factor: float) -> Confidence:
         """The same with lengths times ``factor`` (the motion scaled to a wearer's height)."""
