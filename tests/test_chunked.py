@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import json
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ from click.testing import CliRunner
 from imuloco.app.chunked import reconstruct_pieces
 from imuloco.app.pipeline import reconstruct_recording
 from imuloco.core.recording import Recording
+from imuloco.evaluate.gait import stature
 from imuloco.io.bvh import read_bvh, write_bvh, write_bvh_pieces
 from imuloco.ops.rotations import geodesic
 from imuloco.sensors.simulate import simulate
@@ -73,3 +75,16 @@ def test_cli_reconstruct_in_pieces(sample_db, long_rec, tmp_path):
     # 5th height percentile): the joint angles are the same, the path nearly
     assert geodesic(a.rotations[:, 1:], b.rotations[:, 1:]).max() < 1e-6
     assert np.abs(a.root - b.root).max() < 0.5
+    # --height scales every piece by one factor: the same joint angles, offsets and path
+    # times height / stature, and the report says so
+    r3 = CliRunner().invoke(cli, [*args, "-o", str(tmp_path / "tall.bvh"), "--piece-seconds",
+                                  "10", "--height", "2.1", "--report", str(tmp_path / "t.json")])
+    assert r3.exit_code == 0, r3.output
+    c = read_bvh(tmp_path / "tall.bvh")
+    k = 2.1 / stature(b.skeleton)
+    assert abs(k - 1) > 0.05 and stature(c.skeleton) == pytest.approx(2.1, abs=1e-3)
+    np.testing.assert_allclose(c.skeleton.offsets, b.skeleton.offsets * k, atol=1e-4)
+    np.testing.assert_allclose(c.root, b.root * k, atol=1e-4)
+    assert geodesic(c.rotations, b.rotations).max() < 1e-6
+    report = json.loads((tmp_path / "t.json").read_text())
+    assert report["height_m"] == 2.1

@@ -80,3 +80,34 @@ def test_simulate_never_replaces_its_motion_file(tmp_path):
     code, out = run("simulate", motion, "-o", motion, "--force")
     assert code == 1 and "overwrite an input" in out
     assert motion.read_bytes() == BVH.read_bytes()
+
+
+def test_export_onnx_never_replaces_its_model(tmp_path):
+    pytest.importorskip("onnx")
+    from imuloco.app.pipeline import shipped_model
+
+    model = tmp_path / "l.npz"
+    model.write_bytes(shipped_model("learned", "right_ankle").read_bytes())
+    before = model.read_bytes()
+    code, out = run("export-onnx", "--model", model, "-o", model, "--force")
+    assert code == 1 and "overwrite an input" in out and model.read_bytes() == before
+
+
+def test_an_interrupted_onnx_export_leaves_the_old_file(tmp_path, monkeypatch):
+    onnx = pytest.importorskip("onnx")
+    target = tmp_path / "m.onnx"
+    target.write_bytes(b"old export")
+
+    def fail(proto):
+        raise KeyboardInterrupt  # as if the user stopped the export half-way
+
+    monkeypatch.setattr(onnx.checker, "check_model", fail)
+    res = CliRunner().invoke(cli, ["export-onnx", "-o", str(target), "--force"])
+    assert res.exit_code == 1 and "Aborted" in res.output
+    assert target.read_bytes() == b"old export"
+    assert [p.name for p in tmp_path.iterdir()] == ["m.onnx"]  # no temporary file left
+    monkeypatch.undo()
+    code, out = run("export-onnx", "-o", target, "--force")
+    assert code == 0, out
+    assert onnx.load(str(target)).graph.input[0].name == "signals"
+    assert [p.name for p in tmp_path.iterdir()] == ["m.onnx"]

@@ -246,6 +246,12 @@ def test_pieces_report_the_confidence_of_one_piece(confident, sample_db, tmp_pat
                                 calibrate=False)
     _, one = reconstruct_file(log, fitted=confident, calibrate=False)
     assert report["confidence"] == one["confidence"] and one["confidence"]["available"]
+    # in the wearer's height, as the one-piece reconstruction scales it
+    tall = reconstruct_to_bvh(log, tmp_path / "t.bvh", method=confident, piece_s=10.0,
+                              calibrate=False, height=1.95)
+    _, one = reconstruct_file(log, fitted=confident, calibrate=False, height=1.95)
+    assert tall["confidence"] == one["confidence"]
+    assert tall["confidence"]["mean_error_m"] > 1.05 * report["confidence"]["mean_error_m"]
 
 
 def test_cli_pieces_echo_the_confidence(confident, log_file, tmp_path, monkeypatch):

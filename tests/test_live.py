@@ -106,6 +106,26 @@ def test_session_calibrates_then_streams_the_offline_reconstruction(fitted, phon
     assert np.mean(signals[:, 1]) > 0.8 * np.linalg.norm(np.mean(signals[:, :3], axis=0))
 
 
+def test_session_streams_in_the_wearers_height(fitted, phone):
+    pytest.importorskip("websockets")
+    from imuloco.app.live.server import LiveServer
+    from imuloco.evaluate.gait import stature, to_height
+
+    times, acc, gyro = phone
+    server = LiveServer(fitted, calibrate_s=CALIB_S, height_m=1.55)  # not listening
+    server.start_session()
+    s = server.session
+    assert "1.55 m tall" in server._hello and stature(s.skeleton) == pytest.approx(1.55)
+    frames = [f for i in range(len(times)) for f in s.push(times[i], acc[i], gyro[i])]
+    # the poses of the offline reconstruction scaled to that height, as reconstruct --height
+    signals = offline_frames(times, acc, gyro, fitted.fps_, s.calibration.rotations)
+    offline = to_height(fitted.reconstruct_signals(signals), 1.55)
+    streamed = np.stack([f.positions for f in frames])
+    np.testing.assert_allclose(streamed, offline.positions(), atol=1e-9)
+    np.testing.assert_allclose(np.stack([f.root for f in frames]), offline.root, atol=1e-9)
+    assert 1.55 / stature(fitted.skeleton_) != pytest.approx(1.0, abs=0.02)  # a real change
+
+
 class _Late:
     """``fitted`` behind a stream that returns each pose two frames late, as a model with
     look-ahead does."""
@@ -228,6 +248,12 @@ def test_frames_and_pose_messages_carry_the_streams_confidence(fitted, phone):
     messages = frames_to_json(frames)
     assert [m["error_m"] for m in messages] == [round(e, 4) for e in err]
     assert [m["unreliable"] for m in messages] == [f.unreliable for f in frames]
+    # in the wearer's height, the predicted error (a length) is scaled with the skeleton
+    tall = LiveSession(_Confident(fitted), calibrate_s=CALIB_S, height_m=1.95)
+    got = [f for i in range(600) for f in tall.push(times[i], acc[i], gyro[i])]
+    assert tall.scale > 1.05
+    np.testing.assert_allclose([f.error_m for f in got], err * tall.scale)
+    assert [f.unreliable for f in got] == [f.unreliable for f in frames]
     # a method without confidence: null, not NaN (browsers' JSON.parse refuses NaN)
     plain = LiveSession(fitted, calibrate_s=CALIB_S)
     out = [f for i in range(600) for f in plain.push(times[i], acc[i], gyro[i])]

@@ -461,3 +461,67 @@ def test_zip_of_an_unknown_version_is_a_format_error(walk_rec, tmp_path):
     (tmp_path / "export.zip").write_bytes(bytes(blob))
     with pytest.raises(FormatError, match="export.zip"):
         read_log(tmp_path / "export.zip")
+
+
+def _table_both_ways(path: Path, monkeypatch, allow_empty: bool = False):
+    """What _read_table gives (or the FormatError it raises) with its block fast path and with
+    the line-by-line reading alone, in blocks of 64 bytes so that tables span many blocks."""
+    from imuloco.io import sensorlog
+
+    monkeypatch.setattr(sensorlog, "BLOCK_BYTES", 64)
+    out = []
+    for fast in (sensorlog._fast_block, lambda *args: False):
+        monkeypatch.setattr(sensorlog, "_fast_block", fast)
+        try:
+            header, table, lines = sensorlog._read_table(path, allow_empty)
+            out.append((header, table.tolist(), lines.tolist()))
+        except FormatError as e:
+            out.append(str(e))
+    return out
+
+
+LINE = st.one_of(
+    st.tuples(*[st.floats(-1e4, 1e4, allow_nan=False)] * 3).map(
+        lambda v: ",".join(f"{x:.6g}" for x in v)),  # a good row, most of the time
+    st.sampled_from(["", "# a comment", "1,2", "1,2,3,4", "1,nan,3", "1,1e308,2", "1, 2 ,3",
+                     '"1",2,3', "1,,3", "1e3,2,3\r", "x,2,3", "1_0,2,3", "   ", "1;2;3"]))
+
+
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(LINE, min_size=1, max_size=40), st.booleans(), st.booleans())
+def test_block_fast_path_reads_as_the_line_reading(tmp_path, monkeypatch, lines, allow_empty,
+                                                  crlf):
+    path = tmp_path / "t.csv"
+    end = "\r\n" if crlf else "\n"
+    path.write_bytes(("a,b,c" + end + end.join(lines) + end).encode())
+    fast, slow = _table_both_ways(path, monkeypatch, allow_empty)
+    assert fast == slow
+
+
+def test_a_long_log_reads_fast_and_names_a_late_bad_cell(walk_rec, tmp_path, monkeypatch):
+    """Many blocks of the default size, all read by the fast path: the values of the file; a
+    bad cell on the last line is named by its line and column."""
+    from imuloco.io import sensorlog
+
+    rows = 250_000
+    t = np.arange(rows) / 100.0
+    data = np.column_stack([t, np.sin(t[:, None] * np.arange(1, 7))])
+    path = tmp_path / "long.csv"
+    with open(path, "w") as f:
+        f.write("time_s,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z\n")
+        np.savetxt(f, data, delimiter=",", fmt="%.9g")
+    line_reads = []
+    slow = sensorlog._parse_lines
+    monkeypatch.setattr(sensorlog, "_parse_lines", lambda *a: line_reads.append(1) or slow(*a))
+    _, table, lines = sensorlog._read_table(path)
+    assert table.shape == (rows, 7) and lines[0] == 2 and lines[-1] == rows + 1
+    np.testing.assert_allclose(table, data, rtol=1e-8, atol=1e-9)
+    assert not line_reads and path.stat().st_size > 4 * sensorlog.BLOCK_BYTES
+    text = path.read_text().split("\n")
+    cells = text[-2].split(",")
+    text[-2] = ",".join([cells[0], "oops", *cells[2:]])
+    path.write_text("\n".join(text))
+    with pytest.raises(FormatError, match="column 'acc_x': expected a number, got 'oops'") as e:
+        sensorlog._read_table(path)
+    assert e.value.line == rows + 1 and line_reads == [1]

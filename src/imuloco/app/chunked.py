@@ -121,21 +121,31 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
                        calibrate: bool = True, pin: bool | None = None,
                        platform: str | None = None, overwrite: bool = False,
                        piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS,
-                       progress: bool = False, unit: str = "cm") -> dict[str, Any]:
+                       progress: bool = False, unit: str = "cm",
+                       height: float | None = None) -> dict[str, Any]:
     """Import a log, reconstruct it in pieces and write the BVH to ``output`` piece by piece.
 
     Parameters as :func:`imuloco.app.pipeline.reconstruct_file` (``method`` a name, or a fitted
     method); returns the report, with gait parameters and plausibility checks combined over
     the pieces (:func:`combine`), ``pieces`` (their count and seconds) and ``confidence``
-    (:meth:`imuloco.app.confidence.Confidence.to_json` over the whole recording). ``unit``:
-    the BVH's length unit (:func:`imuloco.io.bvh.write_bvh`).
+    (:meth:`imuloco.app.confidence.Confidence.to_json` over the whole recording, scaled with
+    ``height``). ``unit``: the BVH's length unit (:func:`imuloco.io.bvh.write_bvh`).
+    ``height``: the wearer's body height in metres; every piece is scaled to it
+    (:func:`imuloco.evaluate.gait.to_height`, the same factor for all) before its gait is
+    measured and it is written.
     """
     import time
 
     from tqdm.auto import tqdm
 
     from imuloco.app.pipeline import calibrated, choose_method
-    from imuloco.evaluate.gait import gait_parameters, plausibility, to_json
+    from imuloco.evaluate.gait import (
+        gait_parameters,
+        height_scale,
+        plausibility,
+        to_height,
+        to_json,
+    )
     from imuloco.io.bvh import write_bvh_pieces
     from imuloco.methods.training import frame_times
     from imuloco.phases import gait_phases
@@ -159,7 +169,11 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     def pieces() -> Iterator[Motion]:
         for full in reconstruction_pieces(rec, fitted, pin, piece_s, warmup_s):
             piece = full.motion
-            confidences.append(Confidence.of(full, piece.fps, f"method {fitted.name!r}"))
+            conf = Confidence.of(full, piece.fps, f"method {fitted.name!r}")
+            if height is not None:  # a uniform scale: the joins stay joined
+                k = height_scale(piece.skeleton, height)
+                piece, conf = to_height(piece, height), conf.scaled(k)  # error_m is a length
+            confidences.append(conf)
             gait.append(gait_parameters(piece, gait_phases(piece)))
             checks.append(plausibility(piece))
             sizes.append(piece.num_frames)
@@ -171,6 +185,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     return {
         "recording": log_report.to_json(),
         **info, "method": fitted.name, "model": note, "placement": placement,
+        "height_m": height,
         "motion": {"frames": frames, "fps": fitted.fps_,
                    "duration_s": round((frames - 1) / fitted.fps_, 3)},
         "pieces": {"count": len(sizes), "seconds": piece_s, "warmup_seconds": warmup_s},

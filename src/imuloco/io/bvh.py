@@ -429,18 +429,19 @@ def _is_float(s: str) -> bool:
         return False
 
 
-def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float,
-                  scale: float | None, fold_static_root: bool) -> tuple[Motion, float]:
-    """The Motion of channel values ``data`` (T, C), and the metres per file unit used."""
-    t, n = data.shape[0], len(joints)
-    # Column indices of every position channel and of each Euler order's rotation channels, so
-    # that each is one array operation over all frames and joints (one scipy call per order).
+@functools.lru_cache(maxsize=64)
+def _channel_layout(channels: tuple[tuple[str, ...], ...]
+                    ) -> tuple[list[int], list[int], list[int], list[tuple[str, tuple]]]:
+    """Column indices of every position channel (joint, axis, column) and of each Euler
+    order's rotation channels (order, (joints, columns (K, len(order)))) of joints with these
+    ``channels``, so that each is one array operation over all frames and joints. Memoised (a
+    folder's clips share one rig); read only."""
     pos_joint, pos_axis, pos_col = [], [], []
     by_order: dict[str, tuple[list[int], list[list[int]]]] = {}
     col = 0
-    for k, j in enumerate(joints):
+    for k, names in enumerate(channels):
         rot_cols, order = [], ""
-        for i, c in enumerate(j.channels):
+        for i, c in enumerate(names):
             if c.endswith("position"):
                 pos_joint.append(k)
                 pos_axis.append("XYZ".index(c[0]))
@@ -452,12 +453,22 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
             ks, cols = by_order.setdefault(order, ([], []))
             ks.append(k)
             cols.append(rot_cols)
-        col += len(j.channels)
+        col += len(names)
+    return (pos_joint, pos_axis, pos_col,
+            [(order, (np.array(ks), np.array(cols))) for order, (ks, cols) in by_order.items()])
+
+
+def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float,
+                  scale: float | None, fold_static_root: bool) -> tuple[Motion, float]:
+    """The Motion of channel values ``data`` (T, C), and the metres per file unit used."""
+    t, n = data.shape[0], len(joints)
+    pos_joint, pos_axis, pos_col, by_order = _channel_layout(tuple(tuple(j.channels)
+                                                                   for j in joints))
     local_pos = np.repeat(np.array([j.offset for j in joints])[None], t, axis=0)  # (T, J, 3)
     local_pos[:, pos_joint, pos_axis] = data[:, pos_col]
     local_rot = np.empty((t, n, 4))
     local_rot[:] = IDENTITY
-    for order, (ks, cols) in by_order.items():
+    for order, (ks, cols) in by_order:
         local_rot[:, ks] = from_euler(data[:, cols], order)  # (T, K, len(order)) angles
 
     names = [j.name for j in joints]

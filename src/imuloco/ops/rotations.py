@@ -76,13 +76,22 @@ def continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
     return np.moveaxis(q, 0, axis)
 
 
+# q * e_axis for a pure unit quaternion e_axis (the Hamilton product of qmul with b = e_axis):
+# the components of q permuted, with signs. Used by from_euler.
+_TIMES_AXIS = {"X": ([3, 2, 1, 0], np.array([1.0, 1.0, -1.0, -1.0])),
+               "Y": ([2, 3, 0, 1], np.array([-1.0, 1.0, 1.0, -1.0])),
+               "Z": ([1, 0, 3, 2], np.array([1.0, -1.0, 1.0, -1.0]))}
+
+
 def from_euler(angles: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
     """Intrinsic Euler angles to quaternions. angles : (..., len(order)) in the order of
     ``order`` (e.g. ``"ZXY"``: rotate about Z, then the new X, then the new Y, as BVH does).
 
     The product of the axis rotations, first axis outermost, in numpy: the same numbers as
     scipy's ``Rotation.from_euler`` (bit for bit, measured) at a tenth of its time (scipy 1.17
-    spends ~10 us a rotation, which dominated reading motion files)."""
+    spends ~10 us a rotation, which dominated reading motion files). Each factor
+    ``cos + sin e_axis`` multiplies in as ``q cos + (q e_axis) sin``, where ``q e_axis`` is a
+    signed permutation of q's components: the products of :func:`qmul` without its zeros."""
     order = order.upper()
     if not order or len(order) > 3 or any(a not in "XYZ" for a in order):
         raise ValueError(f"order must be 1 to 3 of the axes X, Y, Z, got {order!r}")
@@ -90,12 +99,12 @@ def from_euler(angles: np.ndarray, order: str, degrees: bool = True) -> np.ndarr
     if half.shape[-1:] != (len(order),):
         raise ValueError(f"angles must end in an axis of {len(order)}, got {half.shape}")
     sin, cos = np.sin(half), np.cos(half)
-    out = None
-    for i, axis in enumerate(order):
-        q = np.zeros(half.shape[:-1] + (4,))
-        q[..., "XYZ".index(axis)] = sin[..., i]
-        q[..., 3] = cos[..., i]
-        out = q if out is None else qmul(out, q)
+    out = np.zeros(half.shape[:-1] + (4,))
+    out[..., "XYZ".index(order[0])] = sin[..., 0]
+    out[..., 3] = cos[..., 0]
+    for i, axis in enumerate(order[1:], start=1):
+        perm, sign = _TIMES_AXIS[axis]
+        out = out * cos[..., i, None] + out[..., perm] * sign * sin[..., i, None]
     return out
 
 

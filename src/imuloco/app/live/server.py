@@ -185,12 +185,15 @@ class LiveServer:
     limits : what one connection may do.
     require_token : whether a request without the token is refused (default: when
         :meth:`start` binds an address off loopback).
+    height_m : the wearer's body height in metres: poses in their proportions (``None``: the
+        model skeleton's).
     """
 
     def __init__(self, method, calibrate_s: float = 5.0, note: str = "", token: str | None = None,
                  allow_origins: Iterable[str] = (), limits: Limits = Limits(),
-                 require_token: bool | None = None) -> None:
-        probe = LiveSession(method, calibrate_s)  # fails early on an offline method
+                 require_token: bool | None = None, height_m: float | None = None) -> None:
+        probe = LiveSession(method, calibrate_s, height_m=height_m)  # fails early: offline
+        self.height_m = height_m
         self.method = method
         self.calibrate_s = calibrate_s
         self.note = note
@@ -212,6 +215,8 @@ class LiveServer:
         delay_ms = probe.stream.delay_ms(method.fps_)
         if delay_ms:  # a model with look-ahead shows each pose that much after the step
             note = "; ".join(filter(None, [note, f"poses {delay_ms:.0f} ms late (look-ahead)"]))
+        if height_m is not None:
+            note = "; ".join(filter(None, [note, f"scaled to a {height_m:g} m tall walker"]))
         self._hello = json.dumps(dict(skeleton_message(method), note=note))
         self._last_status_t = -np.inf
 
@@ -420,7 +425,8 @@ class LiveServer:
 
     def start_session(self, calibration=None) -> None:
         """A fresh session (frames from 0); ``calibration`` reuses a phone's mounting."""
-        self.session = LiveSession(self.method, self.calibrate_s, calibration=calibration)
+        self.session = LiveSession(self.method, self.calibrate_s, calibration=calibration,
+                                   height_m=self.height_m)
         self._last_status_t = -np.inf
         self.publish({"type": "reset"})
         self.set_status(self.session.describe())

@@ -24,6 +24,7 @@ import numpy as np
 
 from imuloco.core.recording import Recording
 from imuloco.errors import InputError
+from imuloco.evaluate.gait import height_scale
 from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import about_y, qmul, qrot
 
@@ -157,9 +158,10 @@ class Frame:
     clock; trigger : time of the sample whose arrival completed it (for a model with
     look-ahead, ``delay_frames`` frames later); rotations : (J, 4) local
     quaternions x, y, z, w; root : (3,) metres; positions : (J, 3) world joint positions,
-    metres, Y up; error_m : the method's predicted rms joint position error of the frame,
-    metres (NaN: the method gives none); unreliable : the method flags the frame (it does not
-    know the motion); see :class:`imuloco.methods.base.Stream`.
+    metres, Y up (root and positions in the session's height, see :class:`LiveSession`);
+    error_m : the method's predicted rms joint position error of the frame, metres, in the
+    session's height too (NaN: the method gives none); unreliable : the method flags the frame
+    (it does not know the motion); see :class:`imuloco.methods.base.Stream`.
     """
 
     index: int
@@ -197,6 +199,9 @@ class LiveSession:
     sigma_s, radius_s : resampling kernel (see the module docstring).
     calibration : a calibration found earlier for the same phone (skips calibrating).
     max_gap_s : a longer pause between samples is a dropout (see :meth:`push`).
+    height_m : the wearer's body height in metres: the skeleton and the root path are scaled
+        to it as :func:`imuloco.evaluate.gait.to_height` scales a reconstruction (``None``: the
+        model skeleton's proportions).
 
     Bounded state: samples beyond ``MAX_RATE_HZ`` per second of their own timestamps (after a
     burst of ``RATE_BURST``) are dropped and counted in :attr:`dropped`, so the calibration
@@ -206,7 +211,7 @@ class LiveSession:
 
     def __init__(self, method, calibrate_s: float = 5.0, sigma_s: float | None = None,
                  radius_s: float | None = None, calibration: Calibration | None = None,
-                 max_gap_s: float = MAX_GAP_S) -> None:
+                 max_gap_s: float = MAX_GAP_S, height_m: float | None = None) -> None:
         if not getattr(method, "supports_online", False):
             raise InputError(f"method {method.name!r} has no online mode; live needs one of "
                              "the methods `imuloco methods` lists as online")
@@ -217,6 +222,9 @@ class LiveSession:
         self.placements = list(method.placements_)
         self.calibrate_s = calibrate_s
         self.max_gap_s = max_gap_s
+        self.height_m = height_m
+        self.scale = 1.0 if height_m is None else height_scale(method.skeleton_, height_m)
+        self.skeleton = method.skeleton_.scaled(self.scale)  # the skeleton frames are posed on
         self.stream = method.stream()
         self.resampler = KernelResampler(float(method.fps_), sigma_s, radius_s)
         self.calibration = calibration
@@ -343,11 +351,12 @@ class LiveSession:
             acc = qrot(self.calibration.rotations, acc)
             gyro = qrot(self.calibration.rotations, gyro)
         row = np.concatenate([acc, gyro], axis=-1).reshape(-1)  # (6S,) as Recording.channels
-        sk = self.method.skeleton_
+        sk = self.skeleton
         out = []
         d = self.stream.delay_frames  # a model with look-ahead returns frame k - d
         for k, tk, x in self.resampler.push(t, row):
             rot, root = self.stream.step(x)
+            root = root * self.scale
             if k < self._first_k + d:
                 continue
             tf = tk - d / self.resampler.fps
@@ -358,7 +367,7 @@ class LiveSession:
             self._recent.append((tf, root, float(_yaw(rot[0]))))
             pos = fk(rot, root, sk.offsets, sk.parents)[1]
             out.append(Frame(k - d, tf, t, rot, root, pos,  # a duck-typed stream may lack them
-                             float(getattr(self.stream, "error_m", math.nan)),
+                             float(getattr(self.stream, "error_m", math.nan)) * self.scale,
                              bool(getattr(self.stream, "unreliable", False))))
         return out
 

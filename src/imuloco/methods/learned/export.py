@@ -26,7 +26,7 @@ import torch
 from torch import nn
 
 from imuloco.core.mirror import mirror_pairs
-from imuloco.io.atomic import check_output
+from imuloco.io.atomic import atomic_path, check_output
 from imuloco.methods.learned.method import CONTACT_SWAP, Learned
 from imuloco.methods.learned.model import CONTACT_PARTS, rotation_from_6d
 
@@ -76,7 +76,8 @@ class _Exported(nn.Module):
 def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Path:
     """Write ``model`` as an ONNX graph (see the module docstring); the metadata hold the
     placements, fps, joint names and parents, and the contact order. Checked with
-    :func:`onnx.checker.check_model`."""
+    :func:`onnx.checker.check_model`. Written atomically (:func:`imuloco.io.atomic.atomic_path`):
+    a failed export leaves ``path`` as it was."""
     import onnx
 
     path = Path(path)
@@ -85,26 +86,27 @@ def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Pa
     c = model.x_mean_.shape[0]
     x = torch.zeros(1, 5, c)
     h = model.net_.initial_state(1)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with warnings.catch_warnings():
-        # the TorchScript-based exporter (no onnxscript needed) announces its deprecation
-        warnings.simplefilter("ignore")
-        torch.onnx.export(module, (x, h), str(path), dynamo=False, opset_version=17,
-                          input_names=["signals", "h"],
-                          output_names=["pose", "contacts", "sigma", "h_out"],
-                          dynamic_axes={"signals": {1: "frames"}, "pose": {1: "frames"},
-                                        "contacts": {1: "frames"}, "sigma": {1: "frames"}})
-    proto = onnx.load(str(path))
-    sk = model.skeleton_
-    meta = {"method": model.name, "placements": json.dumps(model.placements_),
-            "fps": str(model.fps_), "joints": json.dumps(list(sk.names)),
-            "parents": json.dumps([int(p) for p in sk.parents]),
-            "offsets_m": json.dumps(np.asarray(sk.offsets).round(6).tolist()),
-            "contacts": json.dumps(list(CONTACT_PARTS)), "lag": str(int(model.lag)),
-            "channels": "per sensor acc x,y,z (m/s^2) then gyro x,y,z (rad/s), sensor frame"}
-    for k, v in meta.items():
-        entry = proto.metadata_props.add()
-        entry.key, entry.value = k, v
-    onnx.checker.check_model(proto)
-    onnx.save(proto, str(path))
+    with atomic_path(path) as tmp:  # a temporary file beside path, renamed when complete
+        with warnings.catch_warnings():
+            # the TorchScript-based exporter (no onnxscript needed) announces its deprecation
+            warnings.simplefilter("ignore")
+            torch.onnx.export(module, (x, h), str(tmp), dynamo=False, opset_version=17,
+                              input_names=["signals", "h"],
+                              output_names=["pose", "contacts", "sigma", "h_out"],
+                              dynamic_axes={"signals": {1: "frames"}, "pose": {1: "frames"},
+                                            "contacts": {1: "frames"}, "sigma": {1: "frames"}})
+        proto = onnx.load(str(tmp))
+        sk = model.skeleton_
+        meta = {"method": model.name, "placements": json.dumps(model.placements_),
+                "fps": str(model.fps_), "joints": json.dumps(list(sk.names)),
+                "parents": json.dumps([int(p) for p in sk.parents]),
+                "offsets_m": json.dumps(np.asarray(sk.offsets).round(6).tolist()),
+                "contacts": json.dumps(list(CONTACT_PARTS)), "lag": str(model.lag_),
+                "channels": "per sensor acc x,y,z (m/s^2) then gyro x,y,z (rad/s), sensor "
+                            "frame"}
+        for k, v in meta.items():
+            entry = proto.metadata_props.add()
+            entry.key, entry.value = k, v
+        onnx.checker.check_model(proto)
+        onnx.save(proto, str(tmp))
     return path
