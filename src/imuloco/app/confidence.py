@@ -1,12 +1,14 @@
 """A reconstruction's per-frame confidence, summarised for the reports a user reads.
 
 Methods that know how sure they are (``learned``) return with their motion a per-frame
-*predicted error*: the rms joint position error (metres, joints relative to the pelvis; lower
-is better) they expect on that frame, and may flag frames as *unreliable*, where they do not
-know the motion (:class:`imuloco.methods.base.Reconstruction`). :class:`Confidence` holds both
-beside the frame rate; :meth:`Confidence.to_json` is the reports' ``confidence`` (the JSON report
-of ``imuloco reconstruct``, ``batch``'s NAME.json, the demo's report.json). Methods that give
-nothing (``ridge``, ...) are ``available: false`` with ``None`` values, never zeros.
+*predicted error*: the rms joint position error (metres, root-relative; lower is better) they
+expect on that frame, and may flag frames as *unreliable*, where they do not know the motion
+(:class:`imuloco.methods.base.Reconstruction`). :class:`Confidence` holds both beside the frame
+rate; :meth:`Confidence.to_json` is the reports' ``confidence`` (the JSON report of ``imuloco
+reconstruct``, ``batch``'s NAME.json, the demo's report.json). Methods that give
+nothing (``ridge``, ...) are ``available: false`` with ``None`` values, never zeros. Whether
+the predicted error is honest is checked, and calibrated, on bench results by
+:mod:`imuloco.evaluate.confidence`.
 """
 
 from __future__ import annotations
