@@ -622,9 +622,9 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         if report_path:
             with atomic_write(report_path, "w") as f:
                 f.write(json.dumps(pieces, indent=2) + "\n")
-        m = pieces["motion"]
+        m, c = pieces["motion"], pieces["confidence"]
         click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
-                   f"{pieces['pieces']['count']} piece(s); wrote "
+                   f"{pieces['pieces']['count']} piece(s)" + _confidence_text(c) + "; wrote "
                    + ", ".join(str(p) for p in (output, report_path) if p))
         return
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
@@ -637,7 +637,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     if video or html_path:
         written += render_outputs([motion], [f"{motion.name} ({report.method})"],
                                   [video] if video else [], html_path, overwrite=True,
-                                  progress=True, max_seconds=video_seconds)
+                                  progress=True, max_seconds=video_seconds,
+                                  confidence=[report.confidence])
     if report_path:
         with atomic_write(report_path, "w") as f:
             f.write(json.dumps(report.to_json(), indent=2) + "\n")
@@ -647,8 +648,24 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                f"cadence {_num(g['cadence_rhythm_spm'], 1)} steps/min from the legs' rhythm "
                f"(raw signal: {_num(report.signal_cadence_spm, 1)}), "
                f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} detected strikes; "
-               f"speed {_num(g['speed_mps'], 2)} m/s")
+               f"speed {_num(g['speed_mps'], 2)} m/s"
+               + _confidence_text(report["confidence"]))
     click.echo("wrote " + ", ".join(str(p) for p in written))
+
+
+def _confidence_text(c: dict) -> str:
+    """'; predicted error ..., N % of frames flagged unreliable' from a report's
+    ``confidence``, what of it the method gives (empty for none)."""
+    mean = c.get("mean_error_m")
+    text = "" if mean is None else f"predicted error {100 * mean:.1f} cm (mean rms over joints)"
+    text = (text + _flagged_text(c)).removeprefix(", ")
+    return f"; {text}" if text else ""
+
+
+def _flagged_text(c: dict) -> str:
+    """', N % of frames flagged unreliable' from a report's ``confidence`` (or empty)."""
+    frac = c.get("unreliable_fraction")
+    return "" if frac is None else f", {100 * frac:.1f} % of frames flagged unreliable"
 
 
 @cli.command()
@@ -674,6 +691,11 @@ def demo(out_dir: Path, model_path: Path | None, method_name: str | None,
                f"steps/min from the legs' rhythm, {_num(g['cadence_spm'], 1)} from detected "
                f"strikes (ground truth {_num(gt['cadence_spm'], 1)}); "
                f"{report['seconds']:.0f} s")
+    check = report["confidence_check"]
+    if check["mean_predicted_error_m"] is not None:
+        click.echo(f"predicted error {100 * check['mean_predicted_error_m']:.1f} cm per frame "
+                   f"(mean rms over joints), actual {100 * check['mean_actual_error_m']:.1f} "
+                   "cm" + _flagged_text(report["confidence"]))
     click.echo(f"wrote {len(report['files'])} files to {out_dir}/ (open demo.html or "
                f"demo.mp4; report.md)")
 
@@ -690,9 +712,13 @@ RENDER_TYPES = (".mp4", ".gif", ".html", ".png")
 @click.option("-o", "--output", "outputs", multiple=True, type=_file(),
               help="File(s) to write: .mp4, .gif, .html or .png (a strip of frames).")
 @click.option("--seconds", type=float, default=None, help="Only the first seconds (videos).")
+@click.option("--report", "report_file", type=_existing_file(), default=None,
+              help="MOTION's reconstruction report (reconstruct --report, batch's NAME.json): "
+                   "the viewer shows its predicted error per second and unreliable segments.")
 @force_option
 def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
-           outputs: tuple[Path, ...], seconds: float | None, force: bool) -> None:
+           outputs: tuple[Path, ...], seconds: float | None, report_file: Path | None,
+           force: bool) -> None:
     """Render a MOTION file (BVH, ...) as stick-figure video, HTML viewer or frame strip:
     into a folder (--out DIR) and/or to named files (-o FILE, repeatable)."""
     import numpy as np
@@ -710,15 +736,22 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
     if bad:
         raise click.BadParameter(f"unsupported output type(s) {bad}: use .mp4, .gif, .html "
                                  "or .png", param_hint="--output")
-    check_outputs(outputs, force, inputs=[motion_file, *([gt_file] if gt_file else [])])
+    check_outputs(outputs, force, inputs=[motion_file, *([gt_file] if gt_file else []),
+                                          *([report_file] if report_file else [])])
     motion = read_motion(motion_file)
     motions, titles = [motion], [motion.name or motion_file.stem]
+    confidence = [None]
+    if report_file is not None:
+        from imuloco.app.confidence import Confidence
+
+        confidence = [Confidence.from_report(report_file, motion.num_frames, motion.fps)]
     if gt_file is not None:
         motions, titles = [read_motion(gt_file), motion], ["ground truth", titles[0]]
+        confidence = [None, *confidence]
     videos = [p for p in outputs if p.suffix.lower() in (".mp4", ".gif")]
     html = next((p for p in outputs if p.suffix.lower() == ".html"), None)
     written = render_outputs(motions, titles, videos, html, overwrite=True, progress=True,
-                             max_seconds=seconds)
+                             max_seconds=seconds, confidence=confidence)
     for p in outputs:
         if p.suffix.lower() == ".png":
             span = motion.duration if seconds is None else min(seconds, motion.duration)
