@@ -197,3 +197,23 @@ def test_train_writes_the_mirrored_model(tmp_path):
     res = CliRunner().invoke(cli, ["train", "--method", "mean", "-o", str(tmp_path / "m.npz"),
                                    "--mirrored", str(tmp_path / "n.npz")])
     assert res.exit_code != 0 and "only learned" in res.output
+
+
+def test_a_model_without_novelty_measures_it_on_its_training_motions(tiny, sample_db, signals):
+    from imuloco.methods.training import TrainingSet
+
+    arrays, values = tiny.get_state()
+    for k in ("novelty_mean", "novelty_precision"):
+        arrays.pop(k)
+    old = get_method("learned", **TINY)
+    old.set_setup(tiny.skeleton_, tiny.fps_, tiny.placements_, tiny.noise_)
+    old.set_state(arrays, values)  # as a file from before novelty loads
+    full = old.reconstruct_signals_full(signals)
+    assert full.unreliable is None and "before novelty" in full.note
+    data = TrainingSet.synthesize(sample_db.subset([0, 12]), ["right_ankle"], "phone", 0)
+    old.measure_novelty(data)
+    assert old.novelty_threshold_ > 1.0  # the 99th percentile over the median
+    # about 1 on the motions it was measured on, by construction (the median is the scale)
+    novelty = np.concatenate([old.predict(e.signals).novelty for e in data.examples])
+    assert np.median(novelty) == pytest.approx(1.0, rel=0.25)  # predict pads the ends
+    assert old.reconstruct_signals_full(signals).unreliable is not None

@@ -144,15 +144,9 @@ class Learned(Method):
 
     # ---- learning ---------------------------------------------------------------------------
     def learn(self, data: TrainingSet, progress: bool = False) -> None:
-        examples = data.examples
         if self.threads:
             torch.set_num_threads(int(self.threads))
-        val_mask = [zlib.crc32(e.labels["name"].encode()) < self.validation * 2**32
-                    for e in examples]
-        if all(val_mask):
-            val_mask = [False] * len(examples)
-        train_ex = [e for e, v in zip(examples, val_mask) if not v]
-        val_ex = [e for e, v in zip(examples, val_mask) if v]
+        train_ex, val_ex = self._validation_split(data.examples)
         sk = data.skeleton
         try:
             mirror_pairs(sk)
@@ -189,6 +183,26 @@ class Learned(Method):
         self.net_.eval()
         self._fit_novelty(train_set, val_set, data.fps)
         self.calibration_ = None
+
+    def _validation_split(self, examples: list[Example]) -> tuple[list[Example], list[Example]]:
+        """Training and validation clips: ``validation`` of them by CRC32 of the name."""
+        val = [zlib.crc32(e.labels["name"].encode()) < self.validation * 2**32
+               for e in examples]
+        if all(val):
+            val = [False] * len(examples)
+        return ([e for e, v in zip(examples, val) if not v],
+                [e for e, v in zip(examples, val) if v])
+
+    def measure_novelty(self, data: TrainingSet) -> None:
+        """Fit the novelty reference (:meth:`_fit_novelty`) of a model trained without one (a
+        file from before novelty existed) on ``data``: the motions it was trained on, simulated
+        the same way; clips are split into training and validation as :meth:`learn` does."""
+        self.check_fitted()
+        train_ex, val_ex = self._validation_split(data.examples)
+        train_set = self._arrays(*tr.stack([self._looking_ahead(e) for e in train_ex]))
+        val_set = (self._arrays(*tr.stack([self._looking_ahead(e) for e in val_ex]))
+                   if val_ex else None)
+        self._fit_novelty(train_set, val_set, data.fps)
 
     @property
     def channels_(self) -> int:
