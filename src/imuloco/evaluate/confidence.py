@@ -164,12 +164,13 @@ def plot(rows: Rows, predictions: dict[str, np.ndarray], path: str | Path,
         x = [r["actual_cm"] for r in table]
         y = [r["predicted_cm"] for r in table]
         top = max(top, *x, *y)
-        ax.scatter(x, y, label=label)
+        ax.scatter(x, y, label=label, zorder=3)
         for r, xi, yi in zip(table, x, y):
             ax.annotate(r[by], (xi, yi), fontsize=7, xytext=(3, 3), textcoords="offset points")
     line = np.array([0, top * 1.1])
-    ax.plot(line, line, "k-", lw=0.8)
-    ax.fill_between(line, line * (1 - TOLERANCE), line * (1 + TOLERANCE), color="0.9")
+    ax.plot(line, line, "k-", lw=0.8, zorder=2)
+    ax.fill_between(line, line * (1 - TOLERANCE), line * (1 + TOLERANCE), color="0.9", zorder=0,
+                    label=f"within ±{TOLERANCE:.0%}")
     ax.set_xlabel(f"actual rms error per {by}, cm")
     ax.set_ylabel(f"predicted rms error per {by}, cm")
     ax.legend(fontsize=8)
