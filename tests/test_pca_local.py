@@ -77,3 +77,16 @@ def test_local_model_is_the_neighbours_principal_axes(fitted):
     # the same subspace and spreads as the SVD's (axes up to sign)
     np.testing.assert_allclose(comp.T @ comp, vt[:d].T @ vt[:d], atol=1e-8)
     np.testing.assert_allclose(sd, s[:d] / np.sqrt(len(x) - 1) + 1e-6, rtol=1e-8)
+
+
+def test_nearest_rows_are_the_exact_neighbours():
+    from imuloco.methods.pca_local import _Rows
+
+    rng = np.random.default_rng(1)
+    x = rng.normal(0, 1, (500, 40)) * rng.uniform(0.1, 10, 40) + 100.0  # far from the origin
+    rows = _Rows(x)
+    for q in x[:20] + rng.normal(0, 0.3, (20, 40)):
+        exact = np.argsort(np.linalg.norm(x - q, axis=1))
+        assert set(rows.nearest(q, 25)) == set(exact[:25])
+        assert rows.nearest(q, 1)[0] == exact[0]
+    assert sorted(rows.nearest(x[0], 900)) == list(range(500))
