@@ -130,6 +130,7 @@ def test_batch_writes_outputs_tables_and_error_rows(logs, fitted, client, tmp_pa
     assert w[0]["speed_mps"] == rows[0]["speed_mps"] and w[0]["method"] == "ridge"
     assert w[0]["placement"] == "right_ankle" and len(w[0]["model_sha256"]) == 64
     assert w[0]["height_m"] is None and w[3]["frames"] is None
+    assert w[0]["mean_error_m"] is None and w[0]["unreliable_fraction"] is None  # ridge
     strides = pq.read_table(tmp_path / "strides.parquet")
     assert strides.column_names == ["walker", *STRIDE_FIELDS]
     reported = sum(len(json.loads((tmp_path / f"{r['name']}.json").read_text())["strides"])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import urllib.error
 import urllib.request
@@ -13,6 +14,7 @@ import pytest
 from imuloco.app.live.session import (
     KernelResampler,
     LiveSession,
+    frames_to_json,
     kernel_resample,
     offline_frames,
 )
@@ -211,6 +213,52 @@ async def _stream_through_server(fitted, phone, n_samples: int, timeout: float =
     finally:
         await server.close()
     return page, hello, err, poses, seen, calibration
+
+
+class _Confident(_Late):
+    """``fitted`` behind a stream with a made-up confidence: the predicted error cycles through
+    1-5 cm, frames of 4 cm or more flagged unreliable."""
+
+    def stream(self):
+        from imuloco.methods.base import Stream
+
+        inner = self.method.stream()
+
+        class Confident(Stream):
+            k = 0
+
+            def step(self, sample):
+                self.k += 1
+                self.error_m = 0.01 * (1 + self.k % 5)
+                self.unreliable = self.error_m >= 0.04
+                return inner.step(sample)
+
+        return Confident()
+
+
+def test_frames_and_pose_messages_carry_the_streams_confidence(fitted, phone):
+    times, acc, gyro = phone
+    frames = []
+    s = LiveSession(_Confident(fitted), calibrate_s=CALIB_S)
+    for i in range(600):
+        frames += s.push(times[i], acc[i], gyro[i])
+    err = np.array([f.error_m for f in frames])
+    assert len(frames) > 20 and set(np.round(err, 3)) == {0.01, 0.02, 0.03, 0.04, 0.05}
+    assert [f.unreliable for f in frames] == list(err >= 0.04)
+    messages = frames_to_json(frames)
+    assert [m["error_m"] for m in messages] == [round(e, 4) for e in err]
+    assert [m["unreliable"] for m in messages] == [f.unreliable for f in frames]
+    # in the wearer's height, the predicted error (a length) is scaled with the skeleton
+    tall = LiveSession(_Confident(fitted), calibrate_s=CALIB_S, height_m=1.95)
+    got = [f for i in range(600) for f in tall.push(times[i], acc[i], gyro[i])]
+    assert tall.scale > 1.05
+    np.testing.assert_allclose([f.error_m for f in got], err * tall.scale)
+    assert [f.unreliable for f in got] == [f.unreliable for f in frames]
+    # a method without confidence: null, not NaN (browsers' JSON.parse refuses NaN)
+    plain = LiveSession(fitted, calibrate_s=CALIB_S)
+    out = [f for i in range(600) for f in plain.push(times[i], acc[i], gyro[i])]
+    text = json.dumps(frames_to_json(out), allow_nan=False)
+    assert all(m["error_m"] is None and m["unreliable"] is False for m in json.loads(text))
 
 
 def test_server_streams_poses_equal_to_the_offline_method(fitted, phone):
@@ -566,9 +614,10 @@ def test_a_dropped_viewer_is_one_log_line(fitted, phone, caplog):
 
 
 # ---- the pages in a real headless browser (skipped without selenium and Debian chromium) -----
-@pytest.fixture
-def threaded_server(fitted):
-    """A LiveServer listening on a free loopback port, its event loop in a thread."""
+@contextlib.contextmanager
+def _serve_threaded(method):
+    """A LiveServer of ``method`` listening on a free loopback port, its event loop in a
+    thread: yields (server, loop)."""
     pytest.importorskip("websockets")
     import threading
 
@@ -577,13 +626,22 @@ def threaded_server(fitted):
     loop = asyncio.new_event_loop()
     thread = threading.Thread(target=loop.run_forever, daemon=True)
     thread.start()
-    server = LiveServer(fitted, calibrate_s=CALIB_S)
+    server = LiveServer(method, calibrate_s=CALIB_S)
     asyncio.run_coroutine_threadsafe(server.start("127.0.0.1", 0), loop).result(20)
-    yield server, loop
-    asyncio.run_coroutine_threadsafe(server.close(), loop).result(20)
-    loop.call_soon_threadsafe(loop.stop)
-    thread.join(20)
-    loop.close()
+    try:
+        yield server, loop
+    finally:
+        asyncio.run_coroutine_threadsafe(server.close(), loop).result(20)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(20)
+        loop.close()
+
+
+@pytest.fixture
+def threaded_server(fitted):
+    """A LiveServer listening on a free loopback port, its event loop in a thread."""
+    with _serve_threaded(fitted) as served:
+        yield served
 
 
 def _wait_for(check, timeout: float = 30.0):
@@ -715,3 +773,44 @@ def test_calibration_waits_for_the_walk_and_takes_up_from_standing(fitted, phone
     # gravity at rest now reads straight up the segment
     np.testing.assert_allclose(qrot(c.rotations[0], qrot(q, np.array([0.0, 9.81, 0.0]))),
                                [0.0, 9.81, 0.0], atol=0.05)
+
+
+def test_live_page_shows_the_predicted_error_and_flags(fitted, browser, sample_db, tmp_path):
+    """Pose messages carry the stream's confidence through the server to the page, which
+    writes the predicted error and tints a flagged walker."""
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.viz.html import UNRELIABLE_LABEL
+
+    clip = next(c for c in sample_db.clips if c.name == CLIP)
+    path = write_generic_csv(simulate(clip, ["right_ankle"], 100.0, "phone", 13),
+                             tmp_path / "walk.csv")
+    with _serve_threaded(_Confident(fitted)) as (server, loop):
+        browser.get(f"http://127.0.0.1:{server.port}/live")
+        _wait_for(lambda: browser.execute_script("return imuloco.state().skel !== null"))
+        browser.get_log("browser")  # drop what earlier tests' pages logged
+        replay = asyncio.run_coroutine_threadsafe(server.replay(path, speed=1.0), loop)
+        seen = {True: None, False: None}
+
+        def both() -> bool:
+            got = browser.execute_script("""
+                imuloco.draw();
+                const c = document.getElementById('view');
+                const px = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+                let amber = 0;
+                for (let i = 0; i < px.length; i += 4)
+                  if (px[i] === 255 && px[i + 1] === 176 && px[i + 2] === 0) amber++;
+                const line = document.getElementById('confidence');
+                return [imuloco.state().confidence, line.textContent, line.className, amber];""")
+            if got[0]["errorM"] is not None and seen[got[0]["unreliable"]] is None:
+                seen[got[0]["unreliable"]] = got
+            return all(seen.values())
+
+        _wait_for(both, 60)
+        replay.result(60)
+        assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+    (c, text, cls, amber), (c2, text2, cls2, amber2) = seen[True], seen[False]
+    assert c["errorM"] >= 0.04 and text.endswith(UNRELIABLE_LABEL)
+    assert text.startswith(f"predicted error {100 * c['errorM']:.1f} cm")
+    assert cls == "unreliable" and amber > 50
+    assert c2["errorM"] < 0.04 and text2 == f"predicted error {100 * c2['errorM']:.1f} cm"
+    assert cls2 == "" and amber2 == 0

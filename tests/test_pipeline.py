@@ -256,6 +256,13 @@ def test_demo_writes_everything(tmp_path, read_mp4):
     assert video.shape[0] == motion.num_frames and video.shape[2] == 2 * 320
     assert iio.imread(out / "demo.gif").shape[0] == (motion.num_frames + 1) // 2
     assert "| mpjpe_cm |" in (out / "report.md").read_text()
+    # the shipped model's predicted error, beside the actual one
+    c, check = report["confidence"], report["confidence_check"]
+    assert c["available"] and check["mean_predicted_error_m"] == pytest.approx(
+        c["mean_error_m"], abs=2e-4)
+    assert check["mean_actual_error_m"] > 0 and check["ratio"] > 0
+    assert "## Confidence" in (out / "report.md").read_text()
+    assert "predicted error" in res.output
     res = CliRunner().invoke(cli, ["demo", "--out", str(out)])
     assert res.exit_code != 0 and "--force" in res.output
 

@@ -128,3 +128,82 @@ def test_shared_projection_matches_the_python_renderer(browser, page):
     screen = project(pts - [center[0], floor, center[2]], az, el) * scale
     expected = np.stack([300 + screen[:, 0], 0.82 * 600 - screen[:, 1]], axis=1)
     np.testing.assert_allclose(got, expected, atol=1e-9)
+
+
+AMBER = (0xFF, 0xB0, 0x00)  # StickFigure.UNRELIABLE_COLOR
+
+
+def _count_colour(driver, element: str, rgb: tuple[int, int, int]) -> int:
+    return driver.execute_script("""
+        const c = document.getElementById(arguments[0]);
+        const px = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        let n = 0;
+        for (let i = 0; i < px.length; i += 4)
+          if (px[i] === arguments[1] && px[i + 1] === arguments[2] && px[i + 2] === arguments[3])
+            n++;
+        return n;""", element, *rgb)
+
+
+def test_viewer_shows_the_predicted_error_and_marks_unreliable_frames(browser, sample_db,
+                                                                      tmp_path):
+    import numpy as np
+
+    from imuloco.viz.html import STICKFIGURE, UNRELIABLE_LABEL, write_viewer
+
+    assert f'"{UNRELIABLE_LABEL}"' in STICKFIGURE.read_text()  # the page says what Python says
+    clip = sample_db.where(content="walk", style="normal").clips[0].slice(0, 120)
+    err = np.linspace(0.02, 0.08, 120)
+    err[10] = np.nan  # a frame the method could not judge
+    flags = np.zeros(120, bool)
+    flags[40:60] = True
+    page = write_viewer([clip, clip], tmp_path / "v.html", ["ground truth", "reconstruction"],
+                        error_m=[None, err], unreliable=[None, flags])
+    browser.get(page.as_uri())
+    _wait(browser, "return window.imuloco && imuloco.state.framesDrawn > 1")
+    browser.execute_script("imuloco.setPlaying(false); imuloco.seek(50);")
+    c = browser.execute_script("return imuloco.confidence(1);")
+    assert c["unreliable"] and c["errorM"] == pytest.approx(err[50], abs=1e-4)
+    assert c["text"] == f"predicted error {100 * err[50]:.1f} cm \u00b7 {UNRELIABLE_LABEL}"
+    line = browser.find_element("id", "confidence")
+    assert UNRELIABLE_LABEL in line.text and "unreliable" in line.get_attribute("class")
+    assert browser.execute_script("return imuloco.confidence(0).text;") == ""  # no data
+    # the flagged figure is drawn over an amber halo, in its own (right) panel only
+    w = browser.execute_script("return document.getElementById('view').width;")
+    halo = browser.execute_script("""
+        const c = document.getElementById('view'), w = c.width;
+        const px = c.getContext('2d').getImageData(0, 0, w, c.height).data;
+        let left = 0, right = 0;
+        for (let i = 0; i < px.length; i += 4)
+          if (px[i] === 255 && px[i + 1] === 176 && px[i + 2] === 0)
+            ((i / 4) % w < w / 2) ? left++ : right++;
+        return [left, right];""")
+    assert halo[0] == 0 and halo[1] > 100, (halo, w)
+    # a reliable frame: no halo, no label, its own predicted error
+    browser.execute_script("imuloco.seek(90);")
+    assert _count_colour(browser, "view", AMBER) == 0
+    assert "unreliable" not in line.get_attribute("class")
+    assert line.text == f"reconstruction: predicted error {100 * err[90]:.1f} cm"
+    browser.execute_script("imuloco.seek(10);")
+    assert line.text == "reconstruction: no prediction for this frame"  # NaN
+    # the timeline strip: amber over the flagged sixth of its width; a click seeks
+    assert browser.find_element("id", "confidence-bar").is_displayed()
+    sw = browser.execute_script("return document.getElementById('strip').width;")
+    amber = _count_colour(browser, "strip", AMBER)
+    sh = browser.execute_script("return document.getElementById('strip').height;")
+    assert amber == pytest.approx(sw * sh * 20 / 120, rel=0.15)
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    strip = browser.find_element("id", "strip")
+    ActionChains(browser).move_to_element_with_offset(strip, strip.size["width"] // 4, 0) \
+        .click().perform()
+    frame = browser.execute_script("return imuloco.state.frame;")
+    assert abs(frame - 90) <= 2  # three quarters of 120 frames
+    assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+
+
+def test_viewer_without_confidence_has_no_strip(browser, page):
+    browser.get(page.as_uri())
+    _wait(browser, "return window.imuloco && imuloco.state.framesDrawn > 1")
+    assert not browser.find_element("id", "confidence-bar").is_displayed()
+    assert browser.execute_script("return imuloco.confidence(1).text;") == ""
+    assert _count_colour(browser, "view", AMBER) == 0

@@ -85,7 +85,12 @@ def _folder(**kw: Any) -> click.Path:
     return click.Path(file_okay=False, path_type=Path, **kw)
 
 
+def _existing_folder(**kw: Any) -> click.Path:
+    return click.Path(exists=True, file_okay=False, path_type=Path, **kw)
+
+
 SPLITS = ("random-clips", "heldout-styles")
+MIRROR_CLIPS = 20  # clips that fit a mirrored model's sensor-axis map (Learned.mirrored)
 NOISES = ("clean", "phone", "imu")
 
 force_option = click.option("--force", is_flag=True, help="Replace existing output files.")
@@ -370,11 +375,15 @@ def evaluate(ground_truth: Path, reconstructed: Path, as_json: bool) -> None:
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE",
               help="A hyperparameter of the method (repeatable), e.g. --param epochs=4.")
 @click.option("-o", "--output", type=_file(), required=True, help="Model file to write (.npz).")
+@click.option("--mirrored", "mirrored_path", type=_file(), default=None,
+              help="Also write the model of the other side's placements (right <-> left): "
+                   "the same weights reading mirrored signals (learned only).")
 @force_option
 @_reading_options
 def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: str,
           split_name: str | None, params: tuple[str, ...], limit: int | None, seed: int,
-          output: Path, force: bool, up: str, skip_frames: int) -> None:
+          output: Path, mirrored_path: Path | None, force: bool, up: str,
+          skip_frames: int) -> None:
     """Fit a method on motion clips with simulated sensors and save the model.
 
     Writes OUTPUT, and for methods that keep a training history (``learned``) its losses per
@@ -384,11 +393,14 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
     from imuloco.errors import UnknownNameError
     from imuloco.evaluate.bench import data_label, load_data
     from imuloco.evaluate.protocols import split
-    from imuloco.io.atomic import check_output
+    from imuloco.io.atomic import check_outputs
     from imuloco.methods import method_class
     from imuloco.methods.registry import parse_params
 
-    check_output(output, force)
+    check_outputs([output, mirrored_path], force)
+    if mirrored_path is not None and not hasattr(method_class(method_name), "mirrored"):
+        raise click.UsageError(f"--mirrored: method {method_name!r} has no mirrored model "
+                               "(only learned)")
     method = method_class(method_name)()
     try:
         method.set_params(**parse_params(params, "--param"))
@@ -414,6 +426,13 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
                f"{seconds / 60:.1f} min; wrote {output}")
     for path in method.write_training_report(output):
         click.echo(f"wrote {path}")
+    if mirrored_path is not None:
+        try:
+            other = method.mirrored(db.clips[:: max(len(db) // MIRROR_CLIPS, 1)])
+        except ValueError as e:
+            raise click.UsageError(f"--mirrored: {e}") from None
+        other.save(mirrored_path, overwrite=True)  # checked before training
+        click.echo(f"wrote {mirrored_path} (for {', '.join(other.placements_)})")
 
 
 @cli.command("export-onnx")
@@ -442,6 +461,76 @@ def export_onnx_command(model_path: Path | None, output: Path, force: bool) -> N
 
     path = export_onnx(model, output, overwrite=True)  # checked above; written atomically
     click.echo(f"wrote {path} (from {model_path})")
+
+
+@cli.command()
+@click.argument("results", nargs=-1, required=True, type=_existing_folder())
+@click.option("--method", "method_spec", default=None,
+              help="The method's results to use, its spec as given to bench [default: the "
+                   "folders' only method with a confidence].")
+@click.option("--check", "check_dirs", multiple=True, type=_existing_folder(),
+              help="Bench results of other data (e.g. cross-dataset) to check the calibration "
+                   "fitted on all RESULTS against.")
+@click.option("--model", "model_path", type=_existing_file(), default=None,
+              help="A model file to calibrate (written to -o, never in place).")
+@click.option("-o", "--output", type=_file(), default=None,
+              help="The calibrated model file to write (with --model).")
+@click.option("--out", "out_dir", type=_folder(), default=None,
+              help="Folder for confidence.md, confidence.json and confidence.png.")
+@force_option
+def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tuple[Path, ...],
+              model_path: Path | None, output: Path | None, out_dir: Path | None,
+              force: bool) -> None:
+    """Check and calibrate a method's predicted per-frame error on bench RESULTS folders.
+
+    RESULTS are `imuloco bench --out` folders of a protocol that tests motion the model never
+    saw (heldout-contents: each content's frames are predicted by a calibration fitted on the
+    other contents). Prints the per-content table before and after; --check applies the
+    calibration of all RESULTS to other folders; --model/-o writes it into a model file.
+    """
+    from imuloco.evaluate import confidence as conf
+    from imuloco.evaluate.bench import slug
+    from imuloco.io.atomic import atomic_write, check_output, check_outputs
+    from imuloco.methods.base import calibrated_error
+
+    if (model_path is None) != (output is None):
+        raise click.UsageError("--model and -o go together: -o is the calibrated copy")
+    check_outputs([output], force, inputs=[model_path] if model_path else [])
+    if out_dir is not None:
+        for name in ("confidence.md", "confidence.json", "confidence.png"):
+            check_output(out_dir / name, force)
+    method = slug(method_spec) if method_spec else None
+    rows = conf.load_rows(results, method)
+    source = ", ".join(str(r) for r in results)
+    calibration = conf.fit(rows, f"out-of-fold results in {source}")
+    crossed = conf.crossfit(rows)
+    tables = {"uncalibrated": conf.check(rows),
+              "calibrated on the other contents": conf.check(rows, crossed)}
+    for d in check_dirs:
+        other = conf.load_rows([d], method)
+        scores = {n: other[f"score_{n}"] for n in conf.score_names(other)}
+        tables[f"{d}: uncalibrated"] = conf.check(other)
+        tables[f"{d}: calibrated on all of RESULTS"] = conf.check(
+            other, calibrated_error(calibration, scores))
+    text = "".join(f"\n{title}\n\n{conf.markdown(t)}" for title, t in tables.items())
+    click.echo(f"calibration: {calibration}")
+    click.echo(text)
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        with atomic_write(out_dir / "confidence.md", "w") as f:
+            f.write(f"# Predicted against actual error\n\ncalibration: "
+                    f"`{json.dumps(calibration)}`\n{text}")
+        with atomic_write(out_dir / "confidence.json", "w") as f:
+            f.write(json.dumps({"calibration": calibration, "tables": tables}, indent=1) + "\n")
+        conf.plot(rows, {"uncalibrated": rows["error_m"], "calibrated (other contents)": crossed},
+                  out_dir / "confidence.png")
+    if model_path is not None:
+        from imuloco.methods import load_model
+
+        model = load_model(model_path)
+        model.set_calibration(calibration)
+        model.save(output, overwrite=True)  # checked above
+        click.echo(f"wrote {output} ({model_path} with this calibration)")
 
 
 @cli.command()
@@ -530,9 +619,9 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         if report_path:
             with atomic_write(report_path, "w") as f:
                 f.write(json.dumps(pieces, indent=2) + "\n")
-        m = pieces["motion"]
+        m, c = pieces["motion"], pieces["confidence"]
         click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
-                   f"{pieces['pieces']['count']} piece(s); wrote "
+                   f"{pieces['pieces']['count']} piece(s)" + _confidence_text(c) + "; wrote "
                    + ", ".join(str(p) for p in (output, report_path) if p))
         return
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
@@ -545,7 +634,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     if video or html_path:
         written += render_outputs([motion], [f"{motion.name} ({report.method})"],
                                   [video] if video else [], html_path, overwrite=True,
-                                  progress=True, max_seconds=video_seconds)
+                                  progress=True, max_seconds=video_seconds,
+                                  confidence=[report.confidence])
     if report_path:
         with atomic_write(report_path, "w") as f:
             f.write(json.dumps(report.to_json(), indent=2) + "\n")
@@ -555,8 +645,24 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                f"cadence {_num(g['cadence_rhythm_spm'], 1)} steps/min from the legs' rhythm "
                f"(raw signal: {_num(report.signal_cadence_spm, 1)}), "
                f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} detected strikes; "
-               f"speed {_num(g['speed_mps'], 2)} m/s")
+               f"speed {_num(g['speed_mps'], 2)} m/s"
+               + _confidence_text(report["confidence"]))
     click.echo("wrote " + ", ".join(str(p) for p in written))
+
+
+def _confidence_text(c: dict) -> str:
+    """'; predicted error ..., N % of frames flagged unreliable' from a report's
+    ``confidence``, what of it the method gives (empty for none)."""
+    mean = c.get("mean_error_m")
+    text = "" if mean is None else f"predicted error {100 * mean:.1f} cm (mean rms over joints)"
+    text = (text + _flagged_text(c)).removeprefix(", ")
+    return f"; {text}" if text else ""
+
+
+def _flagged_text(c: dict) -> str:
+    """', N % of frames flagged unreliable' from a report's ``confidence`` (or empty)."""
+    frac = c.get("unreliable_fraction")
+    return "" if frac is None else f", {100 * frac:.1f} % of frames flagged unreliable"
 
 
 @cli.command()
@@ -582,6 +688,11 @@ def demo(out_dir: Path, model_path: Path | None, method_name: str | None,
                f"steps/min from the legs' rhythm, {_num(g['cadence_spm'], 1)} from detected "
                f"strikes (ground truth {_num(gt['cadence_spm'], 1)}); "
                f"{report['seconds']:.0f} s")
+    check = report["confidence_check"]
+    if check["mean_predicted_error_m"] is not None:
+        click.echo(f"predicted error {100 * check['mean_predicted_error_m']:.1f} cm per frame "
+                   f"(mean rms over joints), actual {100 * check['mean_actual_error_m']:.1f} "
+                   "cm" + _flagged_text(report["confidence"]))
     click.echo(f"wrote {len(report['files'])} files to {out_dir}/ (open demo.html or "
                f"demo.mp4; report.md)")
 

@@ -9,7 +9,8 @@ machines these live on a shared file system). Per recording a worker writes ``NA
 checks, plus ``strides`` and ``batch``: recording, model hash, placement, height); then this
 process writes ``summary.csv`` and ``summary.json`` (one row per walker: cadence, speed, step
 and stride length, ...), ``walkers.parquet`` (the same rows with height, placement and model,
-:data:`WALKER_FIELDS`) and ``strides.parquet`` (one row per stride, ``walker`` then
+:data:`WALKER_FIELDS`, with the method's mean predicted error and flagged share) and
+``strides.parquet`` (one row per stride, ``walker`` then
 :data:`imuloco.evaluate.strides.STRIDE_FIELDS`).
 
 - The model travels as its file's bytes, scattered once to the workers and loaded once per
@@ -50,7 +51,10 @@ GAIT_COLUMNS = ("cadence_spm", "cadence_rhythm_spm", "speed_mps", "step_length_m
                 "stride_length_m", "steps", "stance_pct", "double_support_pct")
 COLUMNS = ("name", "recording", "status", "frames", "duration_s", *GAIT_COLUMNS,
            "signal_cadence_spm", "seconds", "error")  # summary.csv
-WALKER_FIELDS = (*COLUMNS, "height_m", "placement", "method", "model", "model_sha256")
+# + the method's confidence over the recording (metres of predicted rms joint position error,
+# share of frames flagged; None for methods without one)
+WALKER_FIELDS = (*COLUMNS, "height_m", "placement", "method", "model", "model_sha256",
+                 "mean_error_m", "unreliable_fraction")
 _STRINGS = {"name", "recording", "status", "error", "placement", "method", "model",
             "model_sha256", "walker", "foot"}
 _INTEGERS = {"frames", "steps"}
@@ -152,12 +156,15 @@ def walker_rows(name: str, report: dict[str, Any]) -> tuple[dict, list[dict]]:
     """The walker's row (:data:`WALKER_FIELDS` but the job's ``method`` and ``model``) and its
     stride rows from a report written by :func:`reconstruct_one`."""
     gait, batch = report["gait"], report["batch"]
+    confidence = report.get("confidence") or {}  # none in reports of older versions
     row = {"name": name, "recording": batch["recording"], "status": "ok",
            "frames": report["motion"]["frames"], "duration_s": report["motion"]["duration_s"],
            **{k: gait.get(k) for k in GAIT_COLUMNS},
            "signal_cadence_spm": report["signal_cadence_spm"], "seconds": report["seconds"],
            "error": "", "height_m": batch["height_m"], "placement": batch["placement"],
-           "model_sha256": batch["model_sha256"]}
+           "model_sha256": batch["model_sha256"],
+           "mean_error_m": confidence.get("mean_error_m"),
+           "unreliable_fraction": confidence.get("unreliable_fraction")}
     return row, [{"walker": name, **s} for s in report["strides"]]
 
 

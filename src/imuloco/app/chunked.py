@@ -10,7 +10,9 @@ the previous piece at the join (the methods integrate the heading and the root's
 their own start). For methods with a finite window (the baselines) the result equals the
 one-piece reconstruction to rounding; recurrent methods (``learned``) forget their start
 within the warm-up, so pieces differ from one piece by what their state still remembers.
-Gait parameters are computed per piece and combined (:func:`combine`).
+Gait parameters are computed per piece and combined (:func:`combine`); a method's per-frame
+confidence (:meth:`imuloco.methods.base.Method.reconstruct_signals_full`) is cut with its piece
+and summarised over the whole recording (a few bytes per frame).
 """
 
 from __future__ import annotations
@@ -21,8 +23,10 @@ from typing import Any
 
 import numpy as np
 
+from imuloco.app.confidence import Confidence
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
+from imuloco.methods.base import Reconstruction
 
 PIECE_SECONDS = 600.0  # 10 min: 18,000 frames at 30 fps, ~100 MB of analysis
 WARMUP_SECONDS = 20.0  # longer than any method's window (learned: 120 frames = 4 s)
@@ -62,6 +66,16 @@ def reconstruct_pieces(rec: Recording, method, pin: bool = False,
     ``pin``: pin each piece's feet during their detected contacts
     (:func:`imuloco.methods.postprocess.pin_detected_contacts`), as the pipeline does for
     methods that do not pin them themselves."""
+    for piece in reconstruction_pieces(rec, method, pin, piece_s, warmup_s):
+        yield piece.motion
+
+
+def reconstruction_pieces(rec: Recording, method, pin: bool = False,
+                          piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS
+                          ) -> Iterator[Reconstruction]:
+    """:func:`reconstruct_pieces` with each piece's confidence: consecutive
+    :class:`imuloco.methods.base.Reconstruction` pieces (``error_m``, ``unreliable`` cut as
+    the motion)."""
     from imuloco.methods.postprocess import pin_detected_contacts
     from imuloco.methods.training import model_frames
 
@@ -74,14 +88,17 @@ def reconstruct_pieces(rec: Recording, method, pin: bool = False,
     last = None
     for start in range(0, frames, step):
         begin, stop = max(0, start - warm), min(frames, start + step)
-        motion = method.reconstruct_signals(signals[begin:stop])
+        full = method.reconstruct_signals_full(signals[begin:stop])
+        motion = full.motion
         if pin:
             motion = pin_detected_contacts(motion)
         if last is not None:
             motion = continue_from(motion, start - begin - 1, *last)
         piece = motion.slice(start - begin, motion.num_frames)
         last = (piece.rotations[-1, 0].copy(), piece.root[-1].copy())
-        yield piece
+        err, flags = (None if a is None else np.asarray(a)[start - begin:]
+                      for a in (full.error_m, full.unreliable))
+        yield Reconstruction(piece, err, flags, full.note)
 
 
 def combine(reports: list[dict[str, float]], frames: list[int]) -> dict[str, float]:
@@ -110,17 +127,25 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
 
     Parameters as :func:`imuloco.app.pipeline.reconstruct_file` (``method`` a name, or a fitted
     method); returns the report, with gait parameters and plausibility checks combined over
-    the pieces (:func:`combine`) and ``pieces`` (their count and seconds). ``unit``: the
-    BVH's length unit (:func:`imuloco.io.bvh.write_bvh`). ``height``: the wearer's body height
-    in metres; every piece is scaled to it (:func:`imuloco.evaluate.gait.to_height`, the same
-    factor for all) before its gait is measured and it is written.
+    the pieces (:func:`combine`), ``pieces`` (their count and seconds) and ``confidence``
+    (:meth:`imuloco.app.confidence.Confidence.to_json` over the whole recording, scaled with
+    ``height``). ``unit``: the BVH's length unit (:func:`imuloco.io.bvh.write_bvh`).
+    ``height``: the wearer's body height in metres; every piece is scaled to it
+    (:func:`imuloco.evaluate.gait.to_height`, the same factor for all) before its gait is
+    measured and it is written.
     """
     import time
 
     from tqdm.auto import tqdm
 
     from imuloco.app.pipeline import calibrated, choose_method
-    from imuloco.evaluate.gait import gait_parameters, plausibility, to_height, to_json
+    from imuloco.evaluate.gait import (
+        gait_parameters,
+        height_scale,
+        plausibility,
+        to_height,
+        to_json,
+    )
     from imuloco.io.bvh import write_bvh_pieces
     from imuloco.methods.training import frame_times
     from imuloco.phases import gait_phases
@@ -138,13 +163,17 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     if pin is None:
         pin = not fitted.pins_feet
     frames = len(frame_times(rec, fitted.fps_))
-    gait, checks, sizes = [], [], []
+    gait, checks, sizes, confidences = [], [], [], []
     bar = tqdm(total=frames, desc="reconstruct", unit="frame", disable=not progress)
 
     def pieces() -> Iterator[Motion]:
-        for piece in reconstruct_pieces(rec, fitted, pin, piece_s, warmup_s):
+        for full in reconstruction_pieces(rec, fitted, pin, piece_s, warmup_s):
+            piece = full.motion
+            conf = Confidence.of(full, piece.fps, f"method {fitted.name!r}")
             if height is not None:  # a uniform scale: the joins stay joined
-                piece = to_height(piece, height)
+                k = height_scale(piece.skeleton, height)
+                piece, conf = to_height(piece, height), conf.scaled(k)  # error_m is a length
+            confidences.append(conf)
             gait.append(gait_parameters(piece, gait_phases(piece)))
             checks.append(plausibility(piece))
             sizes.append(piece.num_frames)
@@ -162,5 +191,6 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         "pieces": {"count": len(sizes), "seconds": piece_s, "warmup_seconds": warmup_s},
         "gait": to_json(combine(gait, sizes)),
         "plausibility": to_json(combine(checks, sizes)),
+        "confidence": Confidence.concatenate(confidences).to_json(),
         "seconds": round(time.perf_counter() - t0, 2),
     }

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+from imuloco.app.confidence import Confidence
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
 
@@ -150,6 +151,10 @@ class ReconstructionReport:
     signal_cadence_spm : the cadence of the raw signal (Welch), steps per minute.
     skeleton : the user's rig the motion was retargeted onto (``None``: the model's).
     seconds : wall time of the whole reconstruction.
+    confidence : the method's per-frame predicted error and unreliable flags
+        (:class:`imuloco.app.confidence.Confidence`, in metres of the reported motion: scaled
+        with ``height_m``, on the model's skeleton also when retargeted onto ``skeleton``);
+        the JSON's ``confidence`` is its summary.
     """
 
     recording: dict[str, Any]
@@ -167,6 +172,7 @@ class ReconstructionReport:
     plausibility: dict[str, Any]
     skeleton: dict[str, Any] | None = None
     seconds: float = 0.0
+    confidence: Confidence | None = None
 
     @property
     def method(self) -> str:
@@ -185,6 +191,8 @@ class ReconstructionReport:
                    signal_cadence_spm=self.signal_cadence_spm, plausibility=self.plausibility)
         if self.skeleton is not None:
             out["skeleton"] = self.skeleton
+        if self.confidence is not None:
+            out["confidence"] = self.confidence.to_json()
         out["seconds"] = self.seconds
         return out
 
@@ -224,7 +232,10 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
 
     Returns
     -------
-    The motion at the model's frame rate and a dict with the calibration found.
+    The motion at the model's frame rate and a dict with the calibration found
+    (``calibration``), ``feet_pinned_by`` and ``confidence`` (the method's per-frame predicted
+    error and flags, :class:`imuloco.app.confidence.Confidence`, from
+    :meth:`imuloco.methods.base.Method.reconstruct_full`).
     """
     from imuloco.methods.postprocess import pin_detected_contacts
 
@@ -232,7 +243,9 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
     rec = rec.select(method.placements_)
     if calibrate:
         rec, info["calibration"] = calibrated(rec)
-    motion = method.reconstruct(rec)
+    full = method.reconstruct_full(rec)
+    motion = full.motion
+    info["confidence"] = Confidence.of(full, motion.fps, f"method {method.name!r}")
     if pin is None:
         pin = not method.pins_feet
     info["feet_pinned_by"] = "pipeline" if pin else ("method" if method.pins_feet else "none")
@@ -299,8 +312,15 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     """
     from tqdm.auto import tqdm
 
-    from imuloco.evaluate.gait import plausibility, signal_cadence, to_height, to_json
+    from imuloco.evaluate.gait import (
+        height_scale,
+        plausibility,
+        signal_cadence,
+        to_height,
+        to_json,
+    )
     from imuloco.evaluate.sensorgait import gait_report
+    from imuloco.evaluate.strides import with_confidence
     from imuloco.sensors.reallog import read_log
 
     steps = ["import", "model", "reconstruct", "gait"]
@@ -320,14 +340,18 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar.update()
     bar.set_postfix_str(f"{fitted.name} on {rec.times[-1]:.0f} s")
     motion, info = reconstruct_recording(rec, fitted, calibrate, pin)
+    confidence = info["confidence"]
     if height is not None:
-        motion = to_height(motion, height)
+        k = height_scale(motion.skeleton, height)
+        motion, confidence = to_height(motion, height), confidence.scaled(k)  # lengths
     name = Path(recording_path if isinstance(recording_path, (str, Path))
                 else recording_path[0]).stem
     motion.name = name
     bar.update()
     bar.set_postfix_str("gait")
     k = rec.placements.index(fitted.placements_[0])
+    gait = gait_report(motion, rec, placement, height)
+    gait["strides"] = with_confidence(gait["strides"], confidence.error_m, motion.fps)
     report = ReconstructionReport(
         recording=log_report.to_json(),
         calibration=info.get("calibration"), feet_pinned_by=info["feet_pinned_by"],
@@ -335,9 +359,9 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         motion={"frames": motion.num_frames, "fps": motion.fps,
                 "duration_s": round(motion.duration, 3)},
         height_m=height,
-        **gait_report(motion, rec, placement, height),
+        **gait,
         signal_cadence_spm=to_json({"v": signal_cadence(rec, k)})["v"],
-        plausibility=to_json(plausibility(motion)),
+        plausibility=to_json(plausibility(motion)), confidence=confidence,
     )
     if skeleton is not None:
         bar.set_postfix_str(f"retargeting onto {Path(skeleton).name}")
@@ -352,10 +376,12 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
 
 def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequence[Path] = (),
                    html: Path | None = None, overwrite: bool = False, progress: bool = False,
-                   max_seconds: float | None = None) -> list[Path]:
+                   max_seconds: float | None = None,
+                   confidence: Sequence[Confidence | None] | None = None) -> list[Path]:
     """Write the stick-figure video(s) (``.mp4``/``.gif``, frames drawn once; one video is
     streamed to its encoder, as a long recording's frames do not fit in memory) and the HTML
-    viewer of ``motions`` side by side."""
+    viewer of ``motions`` side by side; ``confidence`` (per motion, or None) is shown in the
+    viewer (predicted error per frame, unreliable frames marked)."""
     from imuloco.io.atomic import check_outputs
     from imuloco.viz.html import write_viewer
     from imuloco.viz.skeleton import StickRenderer, write_video
@@ -376,8 +402,12 @@ def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequ
             for path, step in zip(video, steps):
                 out.append(write_video(frames[::step], path, renderer.fps / step, overwrite))
     if html is not None:
+        conf = list(confidence) if confidence is not None else [None] * len(motions)
         out.append(write_viewer(motions, html, titles, title=" vs ".join(titles),
-                                overwrite=overwrite))
+                                overwrite=overwrite,
+                                error_m=[None if c is None else c.error_m for c in conf],
+                                unreliable=[None if c is None else c.unreliable
+                                            for c in conf]))
     return out
 
 
@@ -392,7 +422,9 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     writes into ``out_dir``: ``reconstruction.bvh``, the side-by-side ground truth and
     reconstruction ``demo.mp4`` and ``demo.gif``, the viewer ``demo.html``, plots
     (``signals.png``, ``phases.png``, ``errors.png``) and ``report.md`` / ``report.json`` with
-    the metrics (:func:`imuloco.evaluate.metrics.evaluate`) and gait parameters of both.
+    the metrics (:func:`imuloco.evaluate.metrics.evaluate`) and gait parameters of both, and
+    for a method with a confidence its predicted error beside the actual one
+    (:func:`confidence_check`; per frame in ``errors.png`` and the viewer).
     ``unit`` is the BVH's length unit (``cm`` or ``m``).
     With ``skeleton`` (a motion file of the user's rig) ``reconstruction.bvh`` is on that rig
     (:func:`onto_rig`); the video, viewer and metrics stay on the model's skeleton.
@@ -446,6 +478,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     n = min(gt.num_frames, motion.num_frames)
     gt_cut, rec_cut = gt.slice(0, n), motion.slice(0, n)
     rec_cut.name = "reconstruction"
+    conf = recon.confidence.sliced(0, n)
     write_bvh(rec_cut if skeleton is None else onto_rig(rec_cut, load_rig(skeleton)),
               paths["reconstruction.bvh"], unit=unit, overwrite=overwrite)
     bar.update()
@@ -453,16 +486,18 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     bar.set_postfix_str("rendering")
     titles = ["ground truth", f"reconstruction ({recon.method})"]
     render_outputs([gt_cut, rec_cut], titles, [paths["demo.mp4"], paths["demo.gif"]],
-                   paths["demo.html"], overwrite=overwrite)
+                   paths["demo.html"], overwrite=overwrite, confidence=[None, conf])
     bar.update()
 
     bar.set_postfix_str("report")
     phases = gait_phases(rec_cut)
     plot_signals(rec, paths["signals.png"], phases, overwrite=overwrite)
     plot_phases(phases, paths["phases.png"], overwrite=overwrite)
-    plot_errors(gt_cut, rec_cut, paths["errors.png"], overwrite=overwrite)
+    plot_errors(gt_cut, rec_cut, paths["errors.png"], overwrite=overwrite,
+                predicted_m=conf.error_m, unreliable=conf.unreliable)
     report["clip"] = clip
     report["metrics"] = to_json(evaluate(gt_cut, rec_cut))
+    report["confidence_check"] = confidence_check(gt_cut, rec_cut, conf)
     report["gait_ground_truth"] = to_json(gait_parameters(gt_cut))
     report["files"] = names
     report["seconds"] = round(time.perf_counter() - t0, 2)
@@ -475,8 +510,84 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     return report
 
 
+def confidence_check(gt: Motion, rec: Motion, confidence: Confidence) -> dict[str, Any]:
+    """A method's predicted error against the actual one, frame by frame, where a ground
+    truth exists (the demo's ``confidence_check``): ``mean_predicted_error_m``,
+    ``mean_actual_error_m`` (the per-frame rms joint position error,
+    :func:`imuloco.evaluate.metrics.rmse_per_frame`, the quantity predicted), their
+    ``ratio`` (predicted / actual: 1 is calibrated, below 1 over-confident), their 90th
+    percentiles (``p90_predicted_error_m``, ``p90_actual_error_m``), the ``spearman`` rank
+    correlation of the two over frames, and the actual error on ``unreliable`` and
+    ``reliable`` frames (metres); every value ``None`` for a method without confidence."""
+    from scipy.stats import spearmanr
+
+    from imuloco.evaluate.gait import to_json
+    from imuloco.evaluate.metrics import rmse_per_frame
+
+    keys = ("mean_predicted_error_m", "mean_actual_error_m", "ratio", "p90_predicted_error_m",
+            "p90_actual_error_m", "spearman", "actual_error_unreliable_m",
+            "actual_error_reliable_m")
+    out: dict[str, float | None] = dict.fromkeys(keys)
+    if not confidence.available:
+        return out
+    actual = rmse_per_frame(gt, rec) / 100.0
+    pred = confidence.error_m[:len(actual)]
+    ok = np.isfinite(pred)
+    if ok.sum() < 2:
+        return out
+    out["mean_predicted_error_m"] = float(pred[ok].mean())
+    out["mean_actual_error_m"] = float(actual[ok].mean())
+    out["ratio"] = out["mean_predicted_error_m"] / out["mean_actual_error_m"]
+    out["p90_predicted_error_m"] = float(np.percentile(pred[ok], 90))
+    out["p90_actual_error_m"] = float(np.percentile(actual[ok], 90))
+    if np.ptp(pred[ok]) > 0:
+        out["spearman"] = float(spearmanr(pred[ok], actual[ok]).statistic)
+    if confidence.unreliable is not None:
+        flags = confidence.unreliable[:len(actual)]
+        for key, sel in (("actual_error_unreliable_m", flags), ("actual_error_reliable_m", ~flags)):
+            if sel.any():
+                out[key] = float(actual[sel].mean())
+    return to_json(out)
+
+
 def _fmt(v: Any) -> str:
     return "–" if v is None else (f"{v:.3g}" if isinstance(v, float) else str(v))
+
+
+def confidence_markdown(report: dict[str, Any]) -> list[str]:
+    """The demo report's lines on the method's confidence (predicted beside actual error)."""
+    conf = report.get("confidence") or {}
+    lines = ["## Confidence (the method's predicted error)", ""]
+    if not conf.get("available"):
+        return [*lines, f"None: {conf.get('note') or 'the method gives no confidence'}.", ""]
+    check = report.get("confidence_check") or {}
+
+    def cm(v: float | None) -> str:
+        return "–" if v is None else f"{100 * v:.2f}"
+
+    frac = conf.get("unreliable_fraction")
+    lines += [
+        ("The method predicts, per frame, its rms joint position error (relative to the "
+         "pelvis); here it is set beside the actual error against the ground truth "
+         "(`errors.png` draws both per frame; the viewer shows it and marks flagged frames)."),
+        "",
+        "| | predicted | actual |",
+        "|---|---:|---:|",
+        (f"| mean rms joint position error (cm) | {cm(check.get('mean_predicted_error_m'))} "
+         f"| {cm(check.get('mean_actual_error_m'))} |"),
+        (f"| 90th percentile (cm) | {cm(check.get('p90_predicted_error_m'))} "
+         f"| {cm(check.get('p90_actual_error_m'))} |"),
+        "",
+        (f"Predicted / actual: {_fmt(check.get('ratio'))} (1 is calibrated, below 1 "
+         f"over-confident); Spearman rank correlation over frames: "
+         f"{_fmt(check.get('spearman'))}. Frames flagged unreliable: "
+         + ("not flagged by this method" if frac is None else
+            f"{100 * frac:.1f} % (actual error there {cm(check.get('actual_error_unreliable_m'))}"
+            f" cm, elsewhere {cm(check.get('actual_error_reliable_m'))} cm)") + "."),
+        f"Note: {(conf.get('note') or '–').rstrip('.')}.",
+        "",
+    ]
+    return lines
 
 
 def demo_markdown(report: dict[str, Any]) -> str:
@@ -512,6 +623,7 @@ def demo_markdown(report: dict[str, Any]) -> str:
           for k, v in report["gait"].items()],
         f"| cadence of the raw signal (Welch) | | {_fmt(report['signal_cadence_spm'])} |",
         "",
+        *confidence_markdown(report),
         "## Files",
         "",
         ("`reconstruction.bvh` (opens in Blender), `demo.mp4` / `demo.gif` (ground truth "

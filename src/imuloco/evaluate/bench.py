@@ -30,7 +30,12 @@ Protocol details fixed here (see also :mod:`imuloco.evaluate.protocols`):
   ``offline_fps`` is test frames over the wall time of ``reconstruct_signals`` (simulation and
   metrics excluded); online latency is the wall time of each ``stream().step`` over the first
   test clip (at most :data:`LATENCY_FRAMES` frames), median and 99th percentile;
-  ``model_bytes`` the size of the saved model file. Each method runs with one BLAS/OpenMP
+  ``model_bytes`` the size of the saved model file.
+- Confidence: for a method that predicts its own per-frame error
+  (:class:`imuloco.methods.base.Reconstruction`), ``confidence-METHOD.npz`` holds per test
+  frame the actual rms joint (or body-part) position error, the predicted one, the unreliable
+  flag and the uncalibrated scores, with clip, content, fold and seed: what
+  :mod:`imuloco.evaluate.confidence` checks and calibrates. Each method runs with one BLAS/OpenMP
   thread (threadpoolctl), like a single core, so that timings compare across machines'
   core counts (torch's own thread pool is the method's business).
 
@@ -41,6 +46,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import re
 import tempfile
 import time
 from collections.abc import Sequence
@@ -55,6 +61,7 @@ from imuloco.core.motion import MotionDatabase
 from imuloco.errors import UnknownNameError
 from imuloco.evaluate import metrics
 from imuloco.evaluate.protocols import MOTION_TYPES, PROTOCOL_VERSION, folds
+from imuloco.io.atomic import atomic_write
 from imuloco.methods.training import (
     TEST_SEED_OFFSET,
     Example,
@@ -159,30 +166,47 @@ def evaluate_method(
     train_s = time.perf_counter() - t0 + (saved_seconds() - saved)  # as if nothing cached
     clips, rec_s, joint_sum, frames, curves = [], 0.0, 0.0, 0, {}
     cross = False
+    confidence: list[dict[str, np.ndarray]] = []
     for ex in tqdm(test, desc=f"{name}: reconstructing", disable=not progress, unit="clip"):
         gt = ex.motion
         t0 = time.perf_counter()
-        rec = method.reconstruct_signals(ex.signals)
+        full = method.reconstruct_signals_full(ex.signals)
         rec_s += time.perf_counter() - t0
+        rec = full.motion
         frames += gt.num_frames
         if gt.skeleton.names != rec.skeleton.names:
             cross = True
             values = metrics.evaluate_parts(gt, rec)
+            actual = np.sqrt((metrics.part_errors(gt, rec)[0][:, 1:] ** 2).mean(axis=1))
         else:
             rec = metrics.align_heading(rec, gt, 0)
             values = metrics.evaluate(gt, rec)
             err = metrics.joint_errors(gt, rec) * metrics.CM
             joint_sum = joint_sum + err.sum(axis=0)
             curves[ex.labels["name"]] = np.sqrt((err[:, 1:] ** 2).mean(axis=1))
+            actual = curves[ex.labels["name"]] / metrics.CM
         clips.append({"name": ex.labels["name"], "motion_type": ex.labels.get("content"),
                       "n_frames": gt.num_frames, **values})
+        if full.error_m is not None:
+            confidence.append(_confidence_rows(full, actual, ex.labels))
     p50, p99, delay = _latency(method, test[0].signals)
     cost = {"train_s": train_s, "offline_fps": frames / rec_s if rec_s > 0 else None,
             "online_latency_ms_p50": p50, "online_latency_ms_p99": p99,
             "online_delay_ms": delay,
             "model_bytes": _model_bytes(method)}
     return {"clips": clips, "cost": cost, "per_joint": None if cross else joint_sum / frames,
-            "curves": curves}
+            "curves": curves, "confidence": confidence}
+
+
+def _confidence_rows(full, actual: np.ndarray, labels: dict[str, Any]) -> dict[str, np.ndarray]:
+    """Per-frame confidence rows of one test clip (see the module docstring)."""
+    n = len(actual)
+    rows = {"actual_m": actual, "error_m": np.asarray(full.error_m, float),
+            "unreliable": (np.zeros(n, bool) if full.unreliable is None
+                           else np.asarray(full.unreliable, bool)),
+            "clip": np.full(n, labels["name"]), "content": np.full(n, labels.get("content") or "")}
+    rows.update({f"score_{k}": np.asarray(v, float) for k, v in (full.scores or {}).items()})
+    return rows
 
 
 def run_bench(
@@ -270,7 +294,9 @@ def run_bench(
     details = {m: {"clips": r[0]["clips"],
                    "per_joint": (None if any(p is None for p in r[0]["per_joint"])
                                  else np.mean(r[0]["per_joint"], axis=0)),
-                   "curves": r[0]["curves"]} for m, r in runs.items()}
+                   "curves": r[0]["curves"],
+                   "confidence": [rows for run in r for rows in run["confidence"]]}
+               for m, r in runs.items()}
     if out is not None:
         write_results(records, details, all_test, Path(out))
     return records
@@ -289,9 +315,14 @@ def _run_fold(fold: str, train_db: MotionDatabase, test_db: MotionDatabase,
                                       seed + k, params=specs[name][1], progress=progress)
             for c in res["clips"]:
                 c["fold"] = fold
+            for rows in res["confidence"]:
+                n = len(rows["actual_m"])
+                rows.update(fold=np.full(n, fold), seed=np.full(n, seed + k))
             if len(runs[name]) <= k:
-                runs[name].append({"clips": [], "costs": [], "per_joint": [], "curves": {}})
+                runs[name].append({"clips": [], "costs": [], "per_joint": [], "curves": {},
+                                   "confidence": []})
             run = runs[name][k]
+            run["confidence"] += res["confidence"]
             run["clips"] += res["clips"]
             run["costs"].append(res["cost"])
             run["per_joint"].append(res["per_joint"])
@@ -321,6 +352,11 @@ def _mean_costs(costs: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def slug(spec: str) -> str:
+    """A method spec as a file-name part: ``learned[lag=4]`` -> ``learned_lag=4_``."""
+    return re.sub(r"[^A-Za-z0-9=.,-]+", "_", spec)
+
+
 def write_results(records: list[dict[str, Any]], details: dict[str, dict[str, Any]],
                   test: list[Example], out: Path) -> None:
     """``results.json`` (the records), ``per_clip.json`` and ``results.md`` with its plots."""
@@ -332,6 +368,12 @@ def write_results(records: list[dict[str, Any]], details: dict[str, dict[str, An
                                   for k, v in c.items()}}
                 for m, d in details.items() for c in d["clips"]]
     (out / "per_clip.json").write_text(json.dumps(per_clip, indent=1) + "\n")
+    for m, d in details.items():
+        if d.get("confidence"):
+            rows = d["confidence"]
+            arrays = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
+            with atomic_write(out / f"confidence-{slug(m)}.npz", "wb") as f:
+                np.savez_compressed(f, **arrays)
     skeleton = test[0].motion.skeleton
     clip = test[0].labels["name"]
     per_joint = {m: d["per_joint"] for m, d in details.items() if d["per_joint"] is not None}

@@ -375,18 +375,13 @@ def evaluate_files(ground_truth: str | Path, reconstructed: str | Path,
     return evaluate(gt.slice(0, n), rec), note
 
 
-def evaluate_parts(gt: Motion, rec: Motion) -> dict[str, float | None]:
-    """:func:`evaluate`'s metrics for a reconstruction on another skeleton than its ground
-    truth's (the ``cross-dataset`` protocol), on the canonical body parts only.
-
-    The reconstruction's part positions are scaled by the ratio of leg lengths (ground truth
-    over reconstruction) about its first pelvis position, then turned and moved so that at
-    frame 0 its pelvis stands over the ground truth's and faces its heading. Position errors
-    are in the heading frame at the pelvis (parts but the pelvis; upper and lower halves as
-    :data:`imuloco.core.bodymap.UPPER_PARTS` / ``LOWER_PARTS``), jitter is over the parts,
-    the root is the pelvis. ``angle_deg`` and ``dpv`` compare joint by joint and are None.
-    """
-    from imuloco.core.bodymap import LOWER_PARTS, PARTS, UPPER_PARTS
+def part_errors(gt: Motion, rec: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                  np.ndarray, np.ndarray]:
+    """Per frame and canonical body part distance (T, P), metres, of a reconstruction on
+    another skeleton (see :func:`evaluate_parts` for the scaling and alignment), with the
+    ground truth's and the aligned reconstruction's part positions (T, P, 3) and headings
+    (T,)."""
+    from imuloco.core.bodymap import PARTS
 
     if gt.num_frames != rec.num_frames or abs(gt.fps - rec.fps) > 1e-6 * gt.fps:
         raise ValueError(f"motions {gt.name!r} and {rec.name!r} differ in length or frame "
@@ -405,6 +400,25 @@ def evaluate_parts(gt: Motion, rec: Motion) -> dict[str, float | None]:
     hr = hr + (hg[0] - hr[0])
     err = np.linalg.norm(to_heading_frame(pg, pg[:, k["pelvis"]], hg)
                          - to_heading_frame(pr, pr[:, k["pelvis"]], hr), axis=-1)
+    return err, pg, pr, hg, hr
+
+
+def evaluate_parts(gt: Motion, rec: Motion) -> dict[str, float | None]:
+    """:func:`evaluate`'s metrics for a reconstruction on another skeleton than its ground
+    truth's (the ``cross-dataset`` protocol), on the canonical body parts only.
+
+    The reconstruction's part positions are scaled by the ratio of leg lengths (ground truth
+    over reconstruction) about its first pelvis position, then turned and moved so that at
+    frame 0 its pelvis stands over the ground truth's and faces its heading. Position errors
+    are in the heading frame at the pelvis (parts but the pelvis; upper and lower halves as
+    :data:`imuloco.core.bodymap.UPPER_PARTS` / ``LOWER_PARTS``), jitter is over the parts,
+    the root is the pelvis. ``angle_deg`` and ``dpv`` compare joint by joint and are None.
+    """
+    from imuloco.core.bodymap import LOWER_PARTS, PARTS, UPPER_PARTS
+
+    parts = list(PARTS)
+    k = {p: i for i, p in enumerate(parts)}
+    err, pg, pr, hg, hr = part_errors(gt, rec)
     body = [k[p] for p in parts if p != "pelvis"]
     upper, lower = [k[p] for p in UPPER_PARTS], [k[p] for p in LOWER_PARTS]
     contacts = gt_contacts(gt)

@@ -228,22 +228,28 @@ def published_path_row(trial: RealTrial) -> dict[str, Any] | None:
 
 
 def reconstruction_gait(trial: RealTrial, placement: str, fitted) -> SensorGait:
-    """The former path: the sensor's signal reconstructed as a right-ankle phone, gait read
-    from the motion's strikes (:func:`imuloco.evaluate.gait.gait_parameters`)."""
+    """Gait read from a reconstruction's strikes (:func:`imuloco.evaluate.gait.
+    gait_parameters`): the sensor's signal reconstructed by ``fitted`` (a model of that
+    placement, or the former path: a right-ankle model reading it as a shin phone), on the
+    walker's height when the reference gives it."""
     from imuloco.app.pipeline import reconstruct_recording
     from imuloco.core.recording import Recording
+    from imuloco.evaluate.gait import to_height
     from imuloco.evaluate.strides import stride_rows
     from imuloco.phases import gait_phases
 
     rec = trial.recording.select([placement])
     rec = Recording(rec.times, rec.acc, rec.gyro, list(fitted.placements_))
     motion, _ = reconstruct_recording(rec, fitted)
+    if np.isfinite(trial.reference.height_m):
+        motion = to_height(motion, trial.reference.height_m)
     ph = gait_phases(motion)
     strikes = np.sort(np.concatenate([ph.steps["left"], ph.steps["right"]])) / motion.fps
     ankle = motion.part_positions(["right_ankle"])[:, 0]
     rows = [r for r in stride_rows(motion, ph) if r["foot"] == "right"]
     t = np.arange(motion.num_frames) / motion.fps + rec.times[0]
-    return SensorGait(placement, f"reconstruction ({fitted.name}) strikes", strides=rows,
+    return SensorGait(placement, f"reconstruction ({fitted.name}, "
+                      f"{fitted.placements_[0]} model) strikes", strides=rows,
                       initial_contacts=strikes + rec.times[0], steps_per_contact=1, times=t,
                       path=ankle[:, [0, 2, 1]] * [1.0, -1.0, 1.0])  # z up: (x, -z, y)
 
@@ -254,17 +260,24 @@ def run_real(folder: str | Path, out: str | Path | None = None, limit: int | Non
     ``real.csv`` and ``README.md`` into ``out`` when given.
 
     limit : at most this many trials per data set.
-    baseline : also measure the former path (a right-ankle reconstruction's gait) on the
-        foot sensors.
+    baseline : also measure the gait of the reconstruction (estimator ``reconstruction``):
+        by the shipped ``learned`` model of the sensor's placement, else (the former path)
+        the right-ankle one reading the sensor as a shin phone.
     """
     from tqdm.auto import tqdm
 
     rows: list[dict[str, Any]] = []
-    fitted = None
-    if baseline:
-        from imuloco.app.pipeline import choose_method
+    models: dict[str, Any] = {}
 
-        fitted, _ = choose_method(placement="right_ankle")
+    def model_for(placement: str):
+        from imuloco.app.pipeline import choose_method, shipped_model
+
+        if placement not in models:
+            own = shipped_model("learned", placement) is not None
+            models[placement] = choose_method(
+                "learned" if own else None, placement=placement if own else "right_ankle")[0]
+        return models[placement]
+
     for layout, path in find_datasets(folder):
         trials = list(read_trials(path, layout, limit))
         for trial in tqdm(trials, desc=layout, unit="trial", disable=not progress):
@@ -276,9 +289,9 @@ def run_real(folder: str | Path, out: str | Path | None = None, limit: int | Non
                 except ValueError as e:  # e.g. a lower back without the walker's height
                     gait = not_measured(placement, "", str(e))
                 rows.append(evaluate_gait(gait, trial, "imuloco"))
-                if baseline and placement.endswith("_foot"):
+                if baseline:
                     try:
-                        base = reconstruction_gait(trial, placement, fitted)
+                        base = reconstruction_gait(trial, placement, model_for(placement))
                         rows.append(evaluate_gait(base, trial, "reconstruction"))
                     except ValueError as e:  # a motion the phase detector cannot read
                         rows.append({"dataset": trial.dataset, "recording": trial.name,

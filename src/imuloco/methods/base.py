@@ -57,12 +57,27 @@ class Reconstruction:
     unreliable : ndarray of bool, shape (T,), or None: frames flagged because the method does
         not know the motion (see ``note`` for how the flag is set).
     note : how ``error_m`` was calibrated and the flag set (one sentence for reports).
+    scores : the uncalibrated per-frame quantities (T,) ``error_m`` is calibrated from, by name
+        (what :mod:`imuloco.evaluate.confidence` fits a calibration on).
     """
 
     motion: Motion
     error_m: np.ndarray | None = None
     unreliable: np.ndarray | None = None
     note: str | None = None
+    scores: dict[str, np.ndarray] | None = None
+
+
+def calibrated_error(calibration: dict[str, Any], scores: dict[str, np.ndarray]) -> np.ndarray:
+    """Predicted error (T,) in metres from a method's per-frame ``scores`` (T,) by name under
+    a ``calibration`` ``{"coef": [a, b_1, ...], "scores": [name_1, ...]}``:
+    ``exp(a) * prod_k scores[name_k] ** b_k`` (fitted by :func:`imuloco.evaluate.confidence.
+    fit`)."""
+    coef = calibration["coef"]
+    out = np.full(len(next(iter(scores.values()))), np.exp(coef[0]))
+    for b, name in zip(coef[1:], calibration["scores"]):
+        out = out * np.maximum(np.asarray(scores[name], float), 1e-6) ** b
+    return out
 
 
 class Stream(ABC):
@@ -200,6 +215,13 @@ class Method(ABC):
         """:meth:`reconstruct_signals` as a :class:`Reconstruction`; methods with a confidence
         override this (the default gives none)."""
         return Reconstruction(self.reconstruct_signals(signals))
+
+    def set_calibration(self, calibration: dict[str, Any]) -> None:
+        """Use ``calibration`` (:func:`imuloco.evaluate.confidence.fit`) for ``error_m`` from
+        now on (saved with the model); methods that predict no error refuse it."""
+        from imuloco.errors import InputError
+
+        raise InputError(f"method {self.name!r} predicts no per-frame error to calibrate")
 
     def stream(self) -> Stream:
         """A fresh online reconstruction session (online methods only)."""

@@ -4,7 +4,10 @@ The page is the template ``viewer.html`` beside this module with the motions' wo
 positions embedded as JSON (integer millimetres, Y up) and the stick-figure drawing of
 ``stickfigure.js`` (shared with the live page, :mod:`imuloco.app.live.server`) inlined: no script or
 style is fetched from the network, so the file works offline and can be mailed around. Several
-motions play side by side on one clock.
+motions play side by side on one clock. A motion with a per-frame predicted error (a method's
+confidence, :class:`imuloco.methods.base.Reconstruction`) shows it in its panel and on a
+timeline strip under the controls, and frames the method flags as unreliable are marked: the
+figure drawn over an amber halo, with the label :data:`UNRELIABLE_LABEL`.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ STICKFIGURE = Path(__file__).with_name("stickfigure.js")
 DATA_MARK = "/*__IMULOCO_DATA__*/null"
 TITLE_MARK = "__IMULOCO_TITLE__"
 STICKFIGURE_MARK = "/*__IMULOCO_STICKFIGURE__*/"
+UNRELIABLE_LABEL = "unreliable: the model does not know this motion"  # also in viewer.html
 
 
 def _fill(page: str, values: dict[str, str]) -> str:
@@ -50,11 +54,15 @@ def inline_stickfigure(page: str) -> str:
 
 
 def viewer_data(motions: Sequence[Motion], titles: Sequence[str] | None = None,
-                title: str = "imuloco") -> dict:
+                title: str = "imuloco",
+                error_m: Sequence[np.ndarray | None] | None = None,
+                unreliable: Sequence[np.ndarray | None] | None = None) -> dict:
     """The JSON the viewer reads.
 
     All motions are drawn at the frame times of the first (nearest frame, clamped), on the
-    first motion's skeleton topology (they must share ``parents``).
+    first motion's skeleton topology (they must share ``parents``). ``error_m`` and
+    ``unreliable``: per motion, its per-frame predicted error (T,) in metres and unreliable
+    flags (T,) bool, or None (a motion without them).
 
     Returns
     -------
@@ -62,7 +70,9 @@ def viewer_data(motions: Sequence[Motion], titles: Sequence[str] | None = None,
     ``floor`` and ``height`` (metres), ``azimuth`` (radians, the first frame's camera),
     ``turn`` (per frame, radians: how far the first figure's heading turned since the first
     frame, which the camera follows in "follow" mode) and ``tracks``: a list of
-    ``{"label", "positions"}`` with positions flattened from (T, J, 3) integer millimetres.
+    ``{"label", "positions"}`` with positions flattened from (T, J, 3) integer millimetres,
+    and where given ``error_mm`` (per frame, 0.1 mm, None for NaN) and ``unreliable`` (per
+    frame, 0 or 1).
     """
     if not motions:
         raise ValueError("viewer: no motion to show")
@@ -73,14 +83,24 @@ def viewer_data(motions: Sequence[Motion], titles: Sequence[str] | None = None,
             raise ValueError(f"viewer: motion {m.name!r} has another skeleton topology than "
                              f"{first.name!r}")
     titles = list(titles) if titles is not None else [m.name for m in motions]
+    errors = list(error_m) if error_m is not None else [None] * len(motions)
+    flags = list(unreliable) if unreliable is not None else [None] * len(motions)
     times = first.times
     tracks, floors = [], []
-    for m, label in zip(motions, titles):
+    for m, label, err, flag in zip(motions, titles, errors, flags):
         idx = np.clip(np.round(times * m.fps).astype(int), 0, m.num_frames - 1)
         pos = m.positions()[idx]
         floors.append(float(np.percentile(pos[:, :, 1].min(axis=1), 5)))
-        tracks.append({"label": label,
-                       "positions": np.round(pos * 1000).astype(np.int64).ravel().tolist()})
+        track = {"label": label,
+                 "positions": np.round(pos * 1000).astype(np.int64).ravel().tolist()}
+        if err is not None:
+            e = np.asarray(err, dtype=np.float64)[np.minimum(idx, len(err) - 1)]
+            track["error_mm"] = [None if not np.isfinite(v) else round(float(v) * 1000, 1)
+                                 for v in e]
+        if flag is not None:
+            track["unreliable"] = np.asarray(flag, dtype=bool)[
+                np.minimum(idx, len(flag) - 1)].astype(int).tolist()
+        tracks.append(track)
     pos0 = first.positions()[0]
     az = follow_azimuth(first)
     try:
@@ -96,24 +116,29 @@ def viewer_data(motions: Sequence[Motion], titles: Sequence[str] | None = None,
 
 
 def viewer_html(motions: Sequence[Motion], titles: Sequence[str] | None = None,
-                title: str = "imuloco") -> str:
+                title: str = "imuloco", error_m: Sequence[np.ndarray | None] | None = None,
+                unreliable: Sequence[np.ndarray | None] | None = None) -> str:
     """The viewer page (a str of HTML) for ``motions``, see :func:`viewer_data`."""
     page = TEMPLATE.read_text(encoding="utf-8")
     if any(mark not in page for mark in (DATA_MARK, TITLE_MARK, STICKFIGURE_MARK)):
         raise RuntimeError(f"{TEMPLATE}: the data, title or stick-figure placeholder is missing")
-    data = json.dumps(viewer_data(motions, titles, title), separators=(",", ":"))
+    data = json.dumps(viewer_data(motions, titles, title, error_m, unreliable),
+                      separators=(",", ":"))
     data = data.replace("</", "<\\/")  # a label cannot close the <script> element
     return _fill(page, {DATA_MARK: data, TITLE_MARK: html.escape(title),
                         STICKFIGURE_MARK: stickfigure_js()})
 
 
 def write_viewer(motions: Sequence[Motion], path: str | Path, titles: Sequence[str] | None = None,
-                 title: str | None = None, overwrite: bool = False) -> Path:
-    """Write the viewer of ``motions`` to ``path`` (``.html``). Refuses to replace an existing
-    file unless ``overwrite``."""
+                 title: str | None = None, overwrite: bool = False,
+                 error_m: Sequence[np.ndarray | None] | None = None,
+                 unreliable: Sequence[np.ndarray | None] | None = None) -> Path:
+    """Write the viewer of ``motions`` to ``path`` (``.html``; ``error_m``, ``unreliable``: see
+    :func:`viewer_data`). Refuses to replace an existing file unless ``overwrite``."""
     path = Path(path)
     check_output(path, overwrite)
-    page = viewer_html(motions, titles, title or motions[0].name or "imuloco")
+    page = viewer_html(motions, titles, title or motions[0].name or "imuloco", error_m,
+                       unreliable)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(path, "w") as f:
         f.write(page)

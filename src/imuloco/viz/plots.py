@@ -98,10 +98,17 @@ def plot_phases(phases: GaitPhases, path: str | Path, max_seconds: float | None 
     return _save(fig, path, overwrite)
 
 
-def plot_errors(gt: Motion, rec: Motion, path: str | Path, overwrite: bool = False) -> Path:
+def plot_errors(gt: Motion, rec: Motion, path: str | Path, overwrite: bool = False,
+                predicted_m: np.ndarray | None = None, unreliable: np.ndarray | None = None
+                ) -> Path:
     """Mean position error per joint (bars) and the per-frame RMSE over time, cm, of a
-    reconstruction against its ground truth (:mod:`imuloco.evaluate.metrics`)."""
+    reconstruction against its ground truth (:mod:`imuloco.evaluate.metrics`).
+
+    predicted_m : ndarray, shape (T,), optional: the method's predicted rms joint position
+        error per frame, metres, drawn beside the actual one.
+    unreliable : ndarray of bool, shape (T,), optional: frames the method flags, shaded."""
     from imuloco.evaluate.metrics import joint_errors, rmse_per_frame
+    from imuloco.phases.contacts import runs
 
     err = joint_errors(gt, rec) * 100.0  # (T, J) cm
     per_joint = err[:, 1:].mean(axis=0)
@@ -114,8 +121,23 @@ def plot_errors(gt: Motion, rec: Motion, path: str | Path, overwrite: bool = Fal
     left.set_ylabel("mean error (cm)")
     left.set_title("position error per joint (relative to the pelvis, heading frame)",
                    fontsize=9)
-    right.plot(gt.times, curve, color="tab:purple", lw=1)
+    title = f"per-frame RMSE over time (mean {curve.mean():.1f} cm)"
+    right.plot(gt.times, curve, color="tab:purple", lw=1, label="actual")
+    n = len(curve)
+    if predicted_m is not None:
+        pred = np.asarray(predicted_m, dtype=np.float64)[:n] * 100.0
+        right.plot(gt.times[:len(pred)], pred, color="tab:orange", lw=1,
+                   label="predicted by the method")
+        title += f"; predicted mean {np.nanmean(pred):.1f} cm"
+    if unreliable is not None:
+        flags = np.asarray(unreliable, dtype=bool)[:n]
+        starts, stops, vals = runs(flags)
+        for k, (a, b) in enumerate(zip(starts[vals], stops[vals])):
+            right.axvspan(a / gt.fps, b / gt.fps, color="tab:red", alpha=0.12, lw=0,
+                          label="flagged unreliable" if k == 0 else None)
+    if predicted_m is not None or unreliable is not None:
+        right.legend(loc="upper right", fontsize=7)
     right.set_xlabel("time (s)")
     right.set_ylabel("RMSE (cm)")
-    right.set_title(f"per-frame RMSE over time (mean {curve.mean():.1f} cm)", fontsize=9)
+    right.set_title(title, fontsize=9)
     return _save(fig, path, overwrite)

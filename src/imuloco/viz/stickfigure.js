@@ -6,6 +6,21 @@
 const StickFigure = (() => {
   "use strict";
   const SIDE_COLORS = { left: "#1f77b4", right: "#d62728", center: "#444444" };
+  // A frame the method flags as unreliable: the figure is drawn over a halo of this colour,
+  // with this label (imuloco.viz.html.UNRELIABLE_LABEL).
+  const UNRELIABLE_COLOR = "#ffb000";
+  const UNRELIABLE_LABEL = "unreliable: the model does not know this motion";
+
+  // The line a page shows for a frame's confidence: errorM the predicted rms joint position
+  // error in metres (null or NaN: none), unreliable a bool (null: not flagged by the method).
+  function confidenceText(errorM, unreliable) {
+    const parts = [];
+    if (errorM !== null && errorM !== undefined && Number.isFinite(errorM)) {
+      parts.push(`predicted error ${(errorM * 100).toFixed(1)} cm`);
+    }
+    if (unreliable) parts.push(UNRELIABLE_LABEL);
+    return parts.join(" \u00b7 ");
+  }
 
   // The camera's screen axes in world coordinates: {right, up}, unit 3-vectors.
   function cameraAxes(azimuth, elevation) {
@@ -55,9 +70,20 @@ const StickFigure = (() => {
 
   // Bones from each joint's parent, coloured by side (sides[j]: left, right or center), and a
   // dot on the head joint. pts: [[x, y], ...] pixels per joint; parents[0] is the root's.
-  function drawFigure(ctx, pts, parents, sides, head, dpr) {
-    ctx.lineWidth = 3 * dpr;
+  // halo: a colour drawn wide under the bones (UNRELIABLE_COLOR marks an unreliable frame).
+  function drawFigure(ctx, pts, parents, sides, head, dpr, halo = null) {
     ctx.lineCap = "round";
+    if (halo) {
+      ctx.lineWidth = 11 * dpr;
+      ctx.strokeStyle = halo;
+      ctx.beginPath();
+      for (let j = 1; j < pts.length; j++) {
+        ctx.moveTo(pts[parents[j]][0], pts[parents[j]][1]);
+        ctx.lineTo(pts[j][0], pts[j][1]);
+      }
+      ctx.stroke();
+    }
+    ctx.lineWidth = 3 * dpr;
     for (let j = 1; j < pts.length; j++) {
       const p = parents[j];
       ctx.strokeStyle = SIDE_COLORS[sides[j]];
@@ -113,5 +139,6 @@ const StickFigure = (() => {
     }, { passive: false });
   }
 
-  return { SIDE_COLORS, cameraAxes, projector, fitCanvas, drawGrid, drawFigure, orbitControls };
+  return { SIDE_COLORS, UNRELIABLE_COLOR, UNRELIABLE_LABEL, confidenceText, cameraAxes,
+           projector, fitCanvas, drawGrid, drawFigure, orbitControls };
 })();

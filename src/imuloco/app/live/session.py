@@ -15,6 +15,7 @@ the whole signal; kernel regression handles a phone's irregular timestamps direc
 from __future__ import annotations
 
 import logging
+import math
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -157,7 +158,10 @@ class Frame:
     clock; trigger : time of the sample whose arrival completed it (for a model with
     look-ahead, ``delay_frames`` frames later); rotations : (J, 4) local
     quaternions x, y, z, w; root : (3,) metres; positions : (J, 3) world joint positions,
-    metres, Y up (root and positions in the session's height, see :class:`LiveSession`).
+    metres, Y up (root and positions in the session's height, see :class:`LiveSession`);
+    error_m : the method's predicted rms joint position error of the frame, metres, in the
+    session's height too (NaN: the method gives none); unreliable : the method flags the frame
+    (it does not know the motion); see :class:`imuloco.methods.base.Stream`.
     """
 
     index: int
@@ -166,6 +170,8 @@ class Frame:
     rotations: np.ndarray
     root: np.ndarray
     positions: np.ndarray
+    error_m: float = float("nan")
+    unreliable: bool = False
 
 
 @dataclass
@@ -360,7 +366,9 @@ class LiveSession:
             rot[0] = qmul(self._turn, rot[0])
             self._recent.append((tf, root, float(_yaw(rot[0]))))
             pos = fk(rot, root, sk.offsets, sk.parents)[1]
-            out.append(Frame(k - d, tf, t, rot, root, pos))
+            out.append(Frame(k - d, tf, t, rot, root, pos,  # a duck-typed stream may lack them
+                             float(getattr(self.stream, "error_m", math.nan)) * self.scale,
+                             bool(getattr(self.stream, "unreliable", False))))
         return out
 
     def _continue_walker(self, t: float, rot: np.ndarray, root: np.ndarray) -> None:
@@ -401,6 +409,10 @@ def offline_frames(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, fps: fl
 
 
 def frames_to_json(frames: Sequence[Frame]) -> list[dict]:
-    """Pose messages: joint positions in millimetres (0.1 mm), flattened (J * 3)."""
+    """Pose messages: joint positions in millimetres (0.1 mm), flattened (J * 3); ``error_m``
+    the frame's predicted error in metres (0.1 mm; ``None`` when the method gives none) and
+    ``unreliable`` whether the method flags it."""
     return [{"type": "pose", "frame": f.index, "t": round(f.time, 4), "trigger": f.trigger,
-             "positions": np.round(f.positions * 1000.0, 1).ravel().tolist()} for f in frames]
+             "positions": np.round(f.positions * 1000.0, 1).ravel().tolist(),
+             "error_m": round(f.error_m, 4) if np.isfinite(f.error_m) else None,
+             "unreliable": f.unreliable} for f in frames]

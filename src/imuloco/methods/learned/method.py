@@ -24,8 +24,9 @@ import torch
 
 from imuloco.core.mirror import mirror, mirror_frames, mirror_pairs, mirror_rotations
 from imuloco.core.motion import Motion
+from imuloco.errors import InputError
 from imuloco.methods import pose
-from imuloco.methods.base import Method, Reconstruction, Stream
+from imuloco.methods.base import Method, Reconstruction, Stream, calibrated_error
 from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Reconstructor, TorchFK
@@ -46,13 +47,15 @@ class Prediction:
     vectors : ndarray, shape (T, 6 J + 4), pose vectors (:mod:`imuloco.methods.pose`).
     contacts : ndarray, shape (T, 4), contact probabilities of
         :data:`imuloco.methods.learned.model.CONTACT_PARTS`.
-    sigma : ndarray, shape (T,), predicted rms joint position error, metres (the confidence:
-        lower is more confident).
+    sigma : ndarray, shape (T,), the network's predicted rms joint position error, metres.
+    novelty : ndarray, shape (T,), how unfamiliar the frame's features are (about 1 on the
+        motions the model was trained on; :meth:`Learned._fit_novelty`).
     """
 
     vectors: np.ndarray
     contacts: np.ndarray
     sigma: np.ndarray
+    novelty: np.ndarray
 
 
 class Learned(Method):
@@ -85,6 +88,11 @@ class Learned(Method):
         frames late (:attr:`LearnedStream.delay_frames`; 8 frames = 267 ms at 30 fps). On
         held-out styles (every third clip) lag 8 gave 3.29 cm against 3.52 with none (the
         lower body 2.98 vs 3.37) and less jitter and skate; lag 4 3.35, 11 3.25, 15 3.48.
+    proportions : augmented draws are simulated on bodies of other proportions (height up to
+        +-``proportions``, legs, arms and trunk a further +-half of it;
+        :func:`imuloco.methods.learned.train.proportioned`), targets on the training skeleton.
+    bidirectional : a GRU that reads the recording both ways (offline only: no :meth:`stream`;
+        ``lag`` is then not needed and ignored).
     threads : torch CPU threads while fitting (None: torch's default). Use 1 on a machine
         shared with other jobs: torch's thread pool stalls when its cores are taken (a batch
         took 10x longer with 2 threads than with 1 on a loaded 2-core machine).
@@ -94,7 +102,8 @@ class Learned(Method):
     summary = "imuloco's causal GRU: pose, contacts and confidence; feet pinned (torch)"
     supports_online = True
     # files from before the look-ahead and the heavier acceleration term
-    legacy_params: ClassVar[dict[str, Any]] = {"lag": 0, "accel_weight": 30.0}
+    legacy_params: ClassVar[dict[str, Any]] = {"lag": 0, "accel_weight": 30.0,
+                                               "proportions": 0.0, "bidirectional": False}
     # inputs centred by a causal running mean (``features="centered"``, time constant ``tau``)
     # measured worse (4.06 vs 3.94 cm, docs/results/learned/experiments.md) and were removed
     retired_params: ClassVar[dict[str, Any]] = {"features": "raw", "tau": None}
@@ -104,6 +113,7 @@ class Learned(Method):
                  speed: float = 0.15, noise_scale: float = 2.0, mirror: bool = True,
                  validation: float = 0.05, dropout: float = 0.0, weight_decay: float = 1e-4,
                  position_weight: float = 10.0, accel_weight: float = 150.0, lag: int = 8,
+                 proportions: float = 0.1, bidirectional: bool = False,
                  threads: int | None = None, seed: int = 0) -> None:
         self.hidden = hidden
         self.layers = layers
@@ -121,6 +131,8 @@ class Learned(Method):
         self.position_weight = position_weight
         self.accel_weight = accel_weight
         self.lag = lag
+        self.proportions = proportions
+        self.bidirectional = bidirectional
         self.threads = threads
         self.seed = seed
 
@@ -142,7 +154,8 @@ class Learned(Method):
         except (KeyError, ValueError):
             can_mirror = False
         train_ex = tr.augment(train_ex, list(data.placements), data.noise, self.seed, self.draws,
-                              self.speed, self.noise_scale, can_mirror, progress)
+                              self.speed, self.noise_scale, can_mirror, progress,
+                              self.proportions)
         train_ex = [self._looking_ahead(e) for e in train_ex]
         val_ex = [self._looking_ahead(e) for e in val_ex]
         x, y, c, pos, lengths = tr.stack(train_ex)
@@ -160,7 +173,7 @@ class Learned(Method):
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(self.seed)
             self.net_ = Reconstructor(x.shape[1], y.shape[1], self.hidden, self.layers,
-                                      self.dropout)
+                                      self.dropout, self.bidirectional)
             self.history_ = tr.train(self.net_, TorchFK(sk.offsets, sk.parents), train_set,
                                      val_set, self.y_mean_, self.y_std_, self.epochs,
                                      self.batch_size, self.window, self.lr,
@@ -168,17 +181,93 @@ class Learned(Method):
                                                     accel=self.accel_weight), self.seed,
                                      progress, self.weight_decay)
         self.net_.eval()
+        self._fit_novelty(train_set, val_set, data.fps)
+        self.calibration_ = None
 
     @property
     def channels_(self) -> int:
         """Sensor channels (6 per sensor) the model reads."""
         return int(self.x_mean_.shape[0])
 
+    @property
+    def lag_(self) -> int:
+        """The look-ahead in use: ``lag``, none for a bidirectional model."""
+        return 0 if self.bidirectional else int(self.lag)
+
     def _looking_ahead(self, e: Example) -> Example:
-        """Training inputs: row t holds the signals of frame t + ``lag`` (the last frame's
+        """Training inputs: row t holds the signals of frame t + ``lag_`` (the last frame's
         repeated past the end), the look-ahead the network learns to use."""
-        s = _hold_last(np.nan_to_num(e.signals), self.lag)[self.lag:]
+        s = _hold_last(np.nan_to_num(e.signals), self.lag_)[self.lag_:]
         return Example(e.motion, s, e.labels)
+
+    # ---- confidence -------------------------------------------------------------------------
+    def _clip_features(self, arrays: tr.Arrays, max_clips: int = 400) -> list[np.ndarray]:
+        """The network's features (:meth:`Reconstructor.encode`) of up to ``max_clips`` clips
+        of ``arrays`` (evenly spaced), each run from a zero state."""
+        pick = np.unique(np.linspace(0, len(arrays.starts) - 1,
+                                     min(max_clips, len(arrays.starts))).astype(int))
+        out = []
+        with torch.no_grad():
+            for i in pick:
+                s, n = int(arrays.starts[i]), int(arrays.lengths[i])
+                out.append(self.net_.encode(torch.from_numpy(arrays.x[s:s + n])[None])[0][0]
+                           .numpy().astype(np.float64))
+        return out
+
+    def _fit_novelty(self, train_set: tr.Arrays, val_set: tr.Arrays | None, fps: float) -> None:
+        """How far a frame's features lie from the training data's: a Mahalanobis distance
+        (the feature-space detector of unfamiliar inputs of Lee et al. 2018) under a
+        Ledoit-Wolf covariance of training features, per feature, smoothed causally
+        (:data:`NOVELTY_TAU_S`) and divided by its median on the validation clips (held-out
+        clips of the training motions; the training clips when there are none). Frames above
+        its :data:`FLAG_QUANTILE` quantile there are flagged unreliable."""
+        from sklearn.covariance import LedoitWolf
+
+        feats = np.concatenate(self._clip_features(train_set))
+        rows = np.random.default_rng(self.seed).permutation(len(feats))[:20000]
+        lw = LedoitWolf().fit(feats[rows])
+        self.novelty_mean_, self.novelty_precision_ = lw.location_, lw.precision_
+        self.novelty_alpha_ = 1.0 / (NOVELTY_TAU_S * fps)
+        self.novelty_scale_ = 1.0
+        ref = val_set if val_set is not None and len(val_set.starts) else train_set
+        nov = np.concatenate([self._novelty(f) for f in self._clip_features(ref)])
+        self.novelty_scale_ = float(np.median(nov))
+        self.novelty_threshold_ = float(np.quantile(nov, FLAG_QUANTILE) / self.novelty_scale_)
+
+    def _novelty(self, feats: np.ndarray, state: float | None = None) -> np.ndarray:
+        """Smoothed, scaled novelty (T,) of features (T, W) (NaN for a model file from before
+        novelty was measured); ``state``: the last value of a stream's previous frames."""
+        from scipy.signal import lfilter
+
+        if self.novelty_mean_ is None:
+            return np.full(len(feats), np.nan)
+        d = feats - self.novelty_mean_
+        d2 = np.einsum("ti,ij,tj->t", d, self.novelty_precision_, d) / d.shape[1]
+        a = self.novelty_alpha_
+        prev = d2[0] if state is None else state * self.novelty_scale_
+        zi = np.array([(1 - a) * prev])
+        return lfilter([a], [1, -(1 - a)], d2, zi=zi)[0] / self.novelty_scale_
+
+    def set_calibration(self, calibration: dict[str, Any]) -> None:
+        self.check_fitted()
+        if sorted(calibration.get("scores", [])) != sorted(SCORES) or len(
+                calibration.get("coef", [])) != len(SCORES) + 1:
+            raise InputError(f"learned: a calibration must map the scores {list(SCORES)} "
+                             f"(coef a, then one exponent each), got {calibration}")
+        self.calibration_ = dict(calibration)
+
+    def confidence(self, out: Prediction) -> tuple[np.ndarray, np.ndarray | None, str]:
+        """Predicted rms joint position error (T,) in metres, unreliable flags (T,) and a
+        note, from a prediction's network sigma and novelty (see :attr:`calibration_`)."""
+        flag = None if self.novelty_mean_ is None else out.novelty > self.novelty_threshold_
+        why = ("no frames flagged (a model file from before novelty was measured)"
+               if flag is None else f"frames flagged where the features are farther from the training data than "
+               f"{FLAG_QUANTILE:.0%} of held-out training-motion frames'")
+        cal = self.calibration_
+        if cal is None:
+            return out.sigma, flag, "error_m: the network's own estimate, not calibrated; " + why
+        err = calibrated_error(cal, {"sigma_m": out.sigma, "novelty": out.novelty})
+        return err, flag, f"error_m calibrated on {cal['source']}; " + why
 
     def _arrays(self, x: np.ndarray, y: np.ndarray, c: np.ndarray, pos: np.ndarray,
                 lengths: np.ndarray) -> tr.Arrays:
@@ -193,13 +282,14 @@ class Learned(Method):
         s = np.nan_to_num(np.asarray(signals, dtype=np.float64)) @ self.input_map_.T
         return torch.as_tensor((s - self.x_mean_) / self.x_std_, dtype=torch.float32)
 
-    def _outputs(self, p: torch.Tensor, logit: torch.Tensor, logvar: torch.Tensor) -> Prediction:
+    def _outputs(self, p: torch.Tensor, logit: torch.Tensor, logvar: torch.Tensor,
+                 novelty: np.ndarray) -> Prediction:
         vectors = p.numpy().astype(np.float64) * self.y_std_ + self.y_mean_
         contacts = torch.sigmoid(logit).numpy().astype(np.float64)
         if self.output_mirror_:
             vectors, contacts = self._mirror_vectors(vectors), contacts[..., CONTACT_SWAP]
         sigma = np.exp(0.5 * logvar.numpy()[..., 0].astype(np.float64))
-        return Prediction(vectors, contacts, sigma)
+        return Prediction(vectors, contacts, sigma, novelty)
 
     def predict(self, signals: np.ndarray) -> Prediction:
         """Network outputs for signals (T, 6 S) at the model rate, run from a zero state."""
@@ -207,10 +297,13 @@ class Learned(Method):
         if signals.ndim != 2 or signals.shape[1] != self.channels_:
             raise ValueError(f"learned: expected signals (T, {self.channels_}) for "
                              f"placements {self.placements_}, got {signals.shape}")
-        signals = _hold_last(signals, self.lag)  # as a stream would be fed to get every frame
+        k = self.lag_
+        signals = _hold_last(signals, k)  # as a stream would be fed to get every frame
         with torch.no_grad():
-            p, logit, logvar, _ = self.net_(self._inputs(signals)[None])
-        return self._outputs(p[0, self.lag:], logit[0, self.lag:], logvar[0, self.lag:])
+            feats, _ = self.net_.encode(self._inputs(signals)[None])
+            p, logit, logvar = self.net_.heads(feats)
+        novelty = self._novelty(feats[0].numpy().astype(np.float64))
+        return self._outputs(p[0, k:], logit[0, k:], logvar[0, k:], novelty[k:])
 
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
         return self.reconstruct_signals_full(signals).motion
@@ -218,10 +311,15 @@ class Learned(Method):
     def reconstruct_signals_full(self, signals: np.ndarray) -> Reconstruction:
         out = self.predict(signals)
         motion = pin(pose.decode(out.vectors, self.skeleton_, self.fps_), out.contacts)
-        return Reconstruction(motion, out.sigma, None,
-                              "error_m: the network's own estimate, not calibrated")
+        err, flag, note = self.confidence(out)
+        return Reconstruction(motion, err, flag, note,
+                              {"sigma_m": out.sigma, "novelty": out.novelty})
 
     def stream(self) -> LearnedStream:
+        if self.bidirectional:
+            raise NotImplementedError(
+                "this learned model reads the recording both ways (bidirectional=True): it "
+                "reconstructs offline only; use a causal model (bidirectional=False) online")
         return LearnedStream(self)
 
     @property
@@ -293,7 +391,13 @@ class Learned(Method):
         arrays.update(x_mean=self.x_mean_, x_std=self.x_std_, y_mean=self.y_mean_,
                       y_std=self.y_std_, input_map=self.input_map_, frames=self.frames_)
         values = {"output_mirror": bool(self.output_mirror_), "history": self.history_,
-                  "channels": int(self.x_mean_.shape[0]), "pose_dim": int(self.y_mean_.shape[0])}
+                  "channels": int(self.x_mean_.shape[0]), "pose_dim": int(self.y_mean_.shape[0]),
+                  "calibration": self.calibration_}
+        if self.novelty_mean_ is not None:
+            arrays.update(novelty_mean=self.novelty_mean_,
+                          novelty_precision=self.novelty_precision_)
+            values.update(novelty_alpha=self.novelty_alpha_, novelty_scale=self.novelty_scale_,
+                          novelty_threshold=self.novelty_threshold_)
         return arrays, values
 
     def set_state(self, arrays: dict[str, np.ndarray], values: dict[str, Any]) -> None:
@@ -304,8 +408,15 @@ class Learned(Method):
         self.history_ = values.get("history", [])
         if "protocol" in values:  # files from before the base class saved the protocol
             self.protocol_ = values["protocol"]
+        self.calibration_ = values.get("calibration")
+        self.novelty_mean_ = arrays.get("novelty_mean")  # None: a file from before novelty
+        if self.novelty_mean_ is not None:
+            self.novelty_precision_ = arrays["novelty_precision"]
+            self.novelty_alpha_ = float(values["novelty_alpha"])
+            self.novelty_scale_ = float(values["novelty_scale"])
+            self.novelty_threshold_ = float(values["novelty_threshold"])
         self.net_ = Reconstructor(int(values["channels"]), int(values["pose_dim"]), self.hidden,
-                                  self.layers, self.dropout)
+                                  self.layers, self.dropout, self.bidirectional)
         self.net_.load_state_dict({k[4:]: torch.as_tensor(arrays[k]) for k in arrays
                                    if k.startswith("net.")})
         self.net_.eval()
@@ -324,6 +435,9 @@ def _hold_last(s: np.ndarray, n: int) -> np.ndarray:
     return np.concatenate([s, np.repeat(s[-1:], n, axis=0)])
 
 
+SCORES = ("novelty", "sigma_m")  # the uncalibrated per-frame scores a calibration maps
+NOVELTY_TAU_S = 1.0  # time constant (s) of the causal smoothing of the novelty
+FLAG_QUANTILE = 0.99  # frames above this quantile of held-out training-motion novelty: flagged
 PIN_PARTS = CONTACT_PARTS  # heel contact pins the ankle joint, toe contact the toe joint
 # Pinning corrections smoothed over a few frames (pin_feet's ``smoothing``): on 20 "exhausted"
 # clips (phone noise, test seeds; the shipped model saw these motions in training) its jitter
@@ -346,7 +460,7 @@ class LearnedStream(Stream):
 
     def __init__(self, model: Learned) -> None:
         self.model = model
-        self.delay_frames = int(model.lag)
+        self.delay_frames = model.lag_
         self.seen = 0
         mean = model.y_mean_[None]
         self.rest = PoseIntegrator(model.skeleton_, model.fps_).step(
@@ -357,18 +471,26 @@ class LearnedStream(Stream):
         self.pinner = FootPinner(PIN_SMOOTHING)
         self.contacts = np.zeros(len(PIN_PARTS))
         self.sigma = float("nan")
+        self.novelty: float | None = None  # the smoothed novelty of the last frame read
 
     def step(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         m = self.model
         with torch.no_grad():
             x = m._inputs(np.asarray(sample)[None])
-            p, logit, logvar, self.h = m.net_(x[None], self.h)
+            feats, self.h = m.net_.encode(x[None], self.h)
+            p, logit, logvar = m.net_.heads(feats)
+        nov = m._novelty(feats[0].numpy().astype(np.float64), self.novelty)
+        self.novelty = float(nov[-1])
         self.seen += 1
         if self.seen <= self.delay_frames:  # frame 0 is not due yet
             return self.rest[0].copy(), self.rest[1].copy()
-        out = m._outputs(p[0], logit[0], logvar[0])
+        # the novelty of the frame read, not of the (delayed) frame returned: it lags the
+        # offline result's by the look-ahead, within the smoothing's time constant
+        out = m._outputs(p[0], logit[0], logvar[0], nov)
         self.contacts, self.sigma = out.contacts[0], float(out.sigma[0])
-        self.error_m = self.sigma
+        err, flag, _ = m.confidence(out)
+        self.error_m = float(err[0])
+        self.unreliable = bool(flag[0]) if flag is not None else False
         rot, raw_root = self.integrator.step(out.vectors[0])
         sk = m.skeleton_
         _, pos = fk(rot, raw_root, sk.offsets, sk.parents)

@@ -1,8 +1,9 @@
 """The network of the ``learned`` method and the differentiable pieces its losses need (torch).
 
-``Reconstructor`` is causal: a per-frame input layer, a stacked GRU and per-frame output heads,
-so the same weights run a whole sequence at once (:meth:`Reconstructor.forward`) or one frame at
-a time with a bounded hidden state (:meth:`Reconstructor.step`). Heads, per frame:
+``Reconstructor`` is a per-frame input layer, a stacked GRU and per-frame output heads. Causal
+(the default), the same weights run a whole sequence at once (:meth:`Reconstructor.forward`) or
+one frame at a time with a bounded hidden state; bidirectional (offline only), every frame's
+pose reads the whole recording, both ways. Heads, per frame:
 
 - ``pose`` : the standardized pose vector of :mod:`imuloco.methods.pose` (6-D local rotations,
   root height, root velocity in the heading frame, yaw rate);
@@ -32,27 +33,40 @@ class Reconstructor(nn.Module):
     layers : stacked GRU layers.
     dropout : dropout after the input layer and between GRU layers while training (it has no
         weights: models with any dropout share one file layout).
+    bidirectional : a GRU that reads the sequence both ways (offline only: no ``h`` to carry).
     """
 
     def __init__(self, channels: int, pose_dim: int, hidden: int = 256, layers: int = 2,
-                 dropout: float = 0.0) -> None:
+                 dropout: float = 0.0, bidirectional: bool = False) -> None:
         super().__init__()
         self.inp = nn.Sequential(nn.Linear(channels, hidden), nn.GELU(), nn.Dropout(dropout))
         self.gru = nn.GRU(hidden, hidden, layers, batch_first=True,
-                          dropout=dropout if layers > 1 else 0.0)
-        self.pose = nn.Linear(hidden, pose_dim)
-        self.contact = nn.Linear(hidden, len(CONTACT_PARTS))
-        self.logvar = nn.Linear(hidden, 1)
-        self.hidden, self.layers = hidden, layers
+                          dropout=dropout if layers > 1 else 0.0, bidirectional=bidirectional)
+        width = hidden * (2 if bidirectional else 1)
+        self.pose = nn.Linear(width, pose_dim)
+        self.contact = nn.Linear(width, len(CONTACT_PARTS))
+        self.logvar = nn.Linear(width, 1)
+        self.hidden, self.layers, self.width = hidden, layers, width
+        self.directions = 2 if bidirectional else 1
+
+    def encode(self, x: torch.Tensor, h: torch.Tensor | None = None
+               ) -> tuple[torch.Tensor, torch.Tensor]:
+        """x : (B, T, C) -> the last GRU layer's outputs (B, T, width) (the features the
+        heads read, and the novelty of :mod:`.method` measures), new h."""
+        return self.gru(self.inp(x), h)
+
+    def heads(self, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Features (B, T, width) -> pose (B, T, D), contact logits (B, T, 4), logvar."""
+        return self.pose(y), self.contact(y), self.logvar(y)
 
     def forward(self, x: torch.Tensor, h: torch.Tensor | None = None
                 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """x : (B, T, C), h : (layers, B, hidden) or None -> pose, contact, logvar, new h."""
-        y, h = self.gru(self.inp(x), h)
-        return self.pose(y), self.contact(y), self.logvar(y), h
+        y, h = self.encode(x, h)
+        return (*self.heads(y), h)
 
     def initial_state(self, batch: int = 1) -> torch.Tensor:
-        return torch.zeros(self.layers, batch, self.hidden)
+        return torch.zeros(self.layers * self.directions, batch, self.hidden)
 
 
 def rotation_from_6d(d: torch.Tensor) -> torch.Tensor:

@@ -4,8 +4,10 @@ Augmentation (what real use brings that the benchmark's one noise draw per clip 
 every clip is simulated again ``draws`` times, each time with its own seed, a random speed
 change (the motion time-resampled by a factor in ``1 +- speed`` before simulating), the noise
 preset's levels scaled by a log-uniform factor up to ``noise_scale`` (white noise, biases,
-timestamp jitter, misalignment, placement offset), and every other draw left/right mirrored
-(:func:`imuloco.core.mirror.mirror`), so that a model learns both legs' gaits from one sensor.
+timestamp jitter, misalignment, placement offset), other body proportions (the sensor simulated
+on a body :func:`proportioned` by up to ``proportions``; the targets stay on the training
+skeleton) and every other draw left/right mirrored (:func:`imuloco.core.mirror.mirror`), so
+that a model learns both legs' gaits from one sensor.
 """
 
 from __future__ import annotations
@@ -55,6 +57,35 @@ def scaled_noise(model: NoiseModel, scale: float, misplace: float) -> NoiseModel
                    offset_m=model.offset_m * misplace)
 
 
+def proportioned(motion: Motion, rng: np.random.Generator, spread: float) -> Motion:
+    """``motion`` played by a body of other proportions: the whole body scaled by a factor in
+    ``1 +- spread`` (height), then the legs, the arms and the trunk (with head and pelvis
+    width) each by a further factor in ``1 +- spread / 2``; rotations unchanged, the root path
+    scaled with the legs (so that the feet keep their ground contacts). What a sensor on a
+    taller, shorter or longer-legged wearer reads; ``spread`` 0 returns ``motion``."""
+    if spread <= 0:
+        return motion
+    sk = motion.skeleton
+    height = rng.uniform(1 - spread, 1 + spread)
+    legs, arms, trunk = rng.uniform(1 - spread / 2, 1 + spread / 2, 3)
+    factor = np.full(sk.num_joints, trunk)
+    tops = {f"{s}_{p}": f for s in ("left", "right") for p, f in (("hip", legs),
+                                                                  ("shoulder", arms))}
+    if not set(tops) <= set(sk.body_map or {}):  # limbs unknown: one factor for all
+        tops, legs = {}, trunk
+    limbs = [(sk.part(p), f) for p, f in tops.items()]
+    for top, f in limbs:  # every joint below a hip or shoulder: that limb's segments
+        below = np.zeros(sk.num_joints, bool)
+        for j in range(sk.num_joints):
+            below[j] = sk.parents[j] == top or (sk.parents[j] >= 0 and below[sk.parents[j]])
+        factor[below] = f
+    k = height * factor
+    skel = type(sk)(list(sk.names), sk.parents.copy(), sk.offsets * k[:, None],
+                    {j: v * k[j] for j, v in sk.end_sites.items()},
+                    dict(sk.body_map or {}))
+    return Motion(skel, motion.rotations, motion.root * (height * legs), motion.fps, motion.name)
+
+
 def contact_targets(motion: Motion) -> np.ndarray:
     """Heel and toe contacts (T, 4) in :data:`CONTACT_PARTS` order, from
     :func:`imuloco.phases.contacts.foot_contacts`."""
@@ -65,7 +96,7 @@ def contact_targets(motion: Motion) -> np.ndarray:
 
 def augment(examples: list[Example], placements: list[str], noise: str, seed: int,
             draws: int, speed: float, noise_scale: float, mirrored: bool,
-            progress: bool = False) -> list[Example]:
+            progress: bool = False, proportions: float = 0.0) -> list[Example]:
     """The benchmark's examples plus ``draws`` augmented simulations of every clip (see the
     module docstring). Draw ``d`` mirrors the motion when ``mirrored`` and ``d`` is odd."""
     out = list(examples)
@@ -84,7 +115,8 @@ def augment(examples: list[Example], placements: list[str], noise: str, seed: in
             motion = speed_change(motion, f)
         s = math.exp(rng.uniform(-1, 1) * math.log(noise_scale)) if noise_scale > 1 else 1.0
         model = scaled_noise(base, s, rng.uniform(0.5, 1.5))
-        rec = simulate(motion, placements, 100.0, model,
+        body = proportioned(motion, rng, proportions)
+        rec = simulate(body, placements, 100.0, model,
                        clip_seed(e.labels["name"], seed + DRAW_SEED_STRIDE * d))
         out.append(Example(motion, to_frames(rec, motion), dict(e.labels, draw=str(d))))
     return out
