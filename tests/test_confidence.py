@@ -334,3 +334,64 @@ def test_demo_report_sets_predicted_beside_actual(sample_db):
     assert f"{100 * actual.mean():.2f} |" in md and "Predicted / actual: 0.5" in md
     none = confidence_check(gt, rec, Confidence(None, None, gt.fps))
     assert set(none.values()) == {None}
+
+
+# ---- a BVH and its companion JSON in the viewer ------------------------------------------
+def test_render_shows_a_reports_confidence(confident, log_file, tmp_path, monkeypatch):
+    from imuloco.app import pipeline
+
+    monkeypatch.setattr(pipeline, "choose_model",
+                        lambda *a, **k: ModelChoice(confident, "given", "made up"))
+    res = CliRunner().invoke(cli, ["reconstruct", str(log_file), "-o", str(tmp_path / "w.bvh"),
+                                   "--report", str(tmp_path / "w.json")])
+    assert res.exit_code == 0, res.output
+    report = json.loads((tmp_path / "w.json").read_text())["confidence"]
+    res = CliRunner().invoke(cli, ["render", str(tmp_path / "w.bvh"), "--report",
+                                   str(tmp_path / "w.json"), "-o", str(tmp_path / "w.html")])
+    assert res.exit_code == 0, res.output
+    page = (tmp_path / "w.html").read_text()
+    data = json.loads(page.split("const DATA = ", 1)[1].split(";\n", 1)[0])
+    track, fps = data["tracks"][0], data["fps"]
+    err = np.array(track["error_mm"]) / 1000
+    # each second shows that second's mean
+    for k, mean in enumerate(report["error_m_per_second"]):
+        assert np.all(np.abs(err[int(k * fps):int((k + 1) * fps)] - mean) < 1e-4)
+    flags = np.array(track["unreliable"], bool)
+    expected = np.zeros(len(flags), bool)
+    for a, b in report["unreliable_segments"]:
+        expected[round(a * fps):round(b * fps)] = True
+    assert flags.any() and np.array_equal(flags, expected)
+
+
+@pytest.mark.parametrize(("text", "field"), [
+    ("{", "not JSON"),
+    ('{"gait": {}}', "field confidence:"),
+    ('{"confidence": {"error_m_per_second": [0.1, "x"]}}', "confidence.error_m_per_second"),
+    ('{"confidence": {"error_m_per_second": [0.1], "error_m_bin_s": 0}}',
+     "confidence.error_m_bin_s"),
+    ('{"confidence": {"unreliable_segments": [[2, 1]]}}', "confidence.unreliable_segments"),
+    ('{"confidence": {"unreliable_segments": [[0, NaN]]}}', "confidence.unreliable_segments"),
+])
+def test_render_refuses_a_bad_report_naming_the_field(spinning_motion, tmp_path, text, field):
+    from imuloco.io.bvh import write_bvh
+
+    bvh = write_bvh(spinning_motion, tmp_path / "m.bvh")
+    (tmp_path / "r.json").write_text(text)
+    res = CliRunner().invoke(cli, ["render", str(bvh), "--report", str(tmp_path / "r.json"),
+                                   "-o", str(tmp_path / "m.html")])
+    assert res.exit_code == 1 and "r.json" in res.output and field in res.output, res.output
+    assert "Traceback" not in res.output and not (tmp_path / "m.html").exists()
+
+
+def test_a_report_with_extreme_numbers_still_gives_frames():
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "r.json"
+        path.write_text(json.dumps({"confidence": {
+            "error_m_per_second": [0.02, None], "error_m_bin_s": 1e-300,
+            "unreliable_segments": [[1e300, 1e308], [0.0, 0.1]]}}))
+        c = Confidence.from_report(path, 30, 30.0)
+    assert np.isnan(c.error_m[1:]).all() and c.error_m[0] == 0.02
+    assert c.unreliable.sum() == 3 and c.unreliable[:3].all()

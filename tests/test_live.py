@@ -273,6 +273,8 @@ def test_server_streams_poses_equal_to_the_offline_method(fitted, phone):
     assert err["type"] == "error" and "rows" in err["text"]
     assert seen.index("calibrated") < seen.index("pose")
     assert [p["frame"] for p in poses] == list(range(len(poses)))
+    # ridge gives no confidence: every message says so (null, not NaN)
+    assert all(p["error_m"] is None and p["unreliable"] is False for p in poses)
     pos = np.array([p["positions"] for p in poses]).reshape(len(poses), sk.num_joints, 3) / 1000
     assert np.isfinite(pos).all()
     times, acc, gyro = phone

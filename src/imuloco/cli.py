@@ -709,9 +709,13 @@ RENDER_TYPES = (".mp4", ".gif", ".html", ".png")
 @click.option("-o", "--output", "outputs", multiple=True, type=_file(),
               help="File(s) to write: .mp4, .gif, .html or .png (a strip of frames).")
 @click.option("--seconds", type=float, default=None, help="Only the first seconds (videos).")
+@click.option("--report", "report_file", type=_existing_file(), default=None,
+              help="MOTION's reconstruction report (reconstruct --report, batch's NAME.json): "
+                   "the viewer shows its predicted error per second and unreliable segments.")
 @force_option
 def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
-           outputs: tuple[Path, ...], seconds: float | None, force: bool) -> None:
+           outputs: tuple[Path, ...], seconds: float | None, report_file: Path | None,
+           force: bool) -> None:
     """Render a MOTION file (BVH, ...) as stick-figure video, HTML viewer or frame strip:
     into a folder (--out DIR) and/or to named files (-o FILE, repeatable)."""
     import numpy as np
@@ -729,15 +733,22 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
     if bad:
         raise click.BadParameter(f"unsupported output type(s) {bad}: use .mp4, .gif, .html "
                                  "or .png", param_hint="--output")
-    check_outputs(outputs, force, inputs=[motion_file, *([gt_file] if gt_file else [])])
+    check_outputs(outputs, force, inputs=[motion_file, *([gt_file] if gt_file else []),
+                                          *([report_file] if report_file else [])])
     motion = read_motion(motion_file)
     motions, titles = [motion], [motion.name or motion_file.stem]
+    confidence = [None]
+    if report_file is not None:
+        from imuloco.app.confidence import Confidence
+
+        confidence = [Confidence.from_report(report_file, motion.num_frames, motion.fps)]
     if gt_file is not None:
         motions, titles = [read_motion(gt_file), motion], ["ground truth", titles[0]]
+        confidence = [None, *confidence]
     videos = [p for p in outputs if p.suffix.lower() in (".mp4", ".gif")]
     html = next((p for p in outputs if p.suffix.lower() == ".html"), None)
     written = render_outputs(motions, titles, videos, html, overwrite=True, progress=True,
-                             max_seconds=seconds)
+                             max_seconds=seconds, confidence=confidence)
     for p in outputs:
         if p.suffix.lower() == ".png":
             span = motion.duration if seconds is None else min(seconds, motion.duration)

@@ -13,8 +13,10 @@ the predicted error is honest is checked, and calibrated, on bench results by
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -86,6 +88,59 @@ class Confidence:
 
         return cls(join([p.error_m for p in parts]), join([p.unreliable for p in parts]),
                    parts[0].fps, parts[0].note)
+
+    @classmethod
+    def from_report(cls, path: str | Path, frames: int, fps: float) -> Confidence:
+        """Per-frame values back from a reconstruction report's ``confidence`` (the JSON file
+        at ``path``, :meth:`to_json`) for its motion of ``frames`` frames at ``fps``: each bin's
+        mean predicted error over its frames, flags over the listed segments (the report keeps
+        the :data:`MAX_SEGMENTS` longest, so shorter ones beyond them are missing). A file
+        that is not such a report raises :class:`imuloco.errors.FormatError` naming the field."""
+        from imuloco.errors import FormatError
+
+        def fail(field: str, expected: str) -> FormatError:
+            return FormatError(path, None, f"field {field}: expected {expected}")
+
+        def number(v: Any) -> bool:
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+        try:
+            data = json.loads(Path(path).read_text(encoding="utf-8"))
+        except UnicodeDecodeError:
+            raise FormatError(path, None, "not a UTF-8 text file (expected a JSON report)"
+                              ) from None
+        except json.JSONDecodeError as e:
+            raise FormatError(path, e.lineno, f"not JSON: {e.msg}") from None
+        c = data.get("confidence") if isinstance(data, dict) else None
+        if not isinstance(c, dict):
+            raise fail("confidence", "an object (a report of `imuloco reconstruct --report` or "
+                       "batch's NAME.json)")
+        note = c.get("note") if isinstance(c.get("note"), str) else None
+        err = flags = None
+        per_s, bin_s = c.get("error_m_per_second"), c.get("error_m_bin_s", 1)
+        if per_s is not None:
+            if not isinstance(per_s, list) or not per_s or not all(
+                    v is None or number(v) and v >= 0 for v in per_s):
+                raise fail("confidence.error_m_per_second",
+                           "a non-empty list of errors in metres (>= 0) or null")
+            if not number(bin_s) or bin_s <= 0:
+                raise fail("confidence.error_m_bin_s", "a positive number of seconds")
+            means = np.array([np.nan if v is None else v for v in per_s], dtype=np.float64)
+            with np.errstate(over="ignore"):  # a tiny bin: every frame in the last bin
+                bins = np.floor(np.arange(frames) / fps / bin_s)
+            err = means[np.clip(bins, 0, len(means) - 1).astype(np.int64)]
+        segments = c.get("unreliable_segments")
+        if segments is not None:
+            if not isinstance(segments, list) or not all(
+                    isinstance(s, list) and len(s) == 2 and all(map(number, s))
+                    and 0 <= s[0] <= s[1] for s in segments):
+                raise fail("confidence.unreliable_segments",
+                           "a list of [start_s, end_s] with 0 <= start_s <= end_s")
+            flags = np.zeros(frames, dtype=bool)
+            end = frames / fps
+            for a, b in segments:
+                flags[round(min(a, end) * fps):round(min(b, end) * fps)] = True
+        return cls(err, flags, float(fps), note)
 
     @property
     def available(self) -> bool:
