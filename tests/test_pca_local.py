@@ -54,3 +54,39 @@ def test_save_load_round_trip(fitted, sample_db, tmp_path):
     a = fitted.reconstruct_signals(ex.signals[:10])
     b = loaded.reconstruct_signals(ex.signals[:10])
     assert np.allclose(a.rotations, b.rotations, atol=1e-6)
+
+
+def test_solver_sensor_positions_are_the_posed_skeletons(fitted, sample_db):
+    """The solver's chain-only kinematics give the sensor positions of the full pose."""
+    rng = np.random.default_rng(0)
+    vec = pose.encode(sample_db.clips[-1].slice(0, 20)) + rng.normal(0, 0.1, (20, 1))
+    root, theta = np.array([0.3, 0.9, -1.2]), 0.7
+    rot, new_root, _ = fitted._step(vec, root, theta)
+    expected, _ = fitted._sensors(rot, new_root)
+    np.testing.assert_allclose(fitted._sensor_positions(vec, root, theta), expected, atol=1e-12)
+
+
+def test_local_model_is_the_neighbours_principal_axes(fitted):
+    q = fitted.poses_[100].astype(np.float64)
+    mu, comp, sd = fitted._local_model(q)
+    # the k nearest database poses, by brute force
+    dist = np.linalg.norm(fitted.poses_ / fitted.scale_ - q / fitted.scale_, axis=1)
+    x = fitted.poses_[np.argsort(dist)[:fitted.k]].astype(np.float64) - mu
+    _, s, vt = np.linalg.svd(x, full_matrices=False)
+    d = len(comp)
+    # the same subspace and spreads as the SVD's (axes up to sign)
+    np.testing.assert_allclose(comp.T @ comp, vt[:d].T @ vt[:d], atol=1e-8)
+    np.testing.assert_allclose(sd, s[:d] / np.sqrt(len(x) - 1) + 1e-6, rtol=1e-8)
+
+
+def test_nearest_rows_are_the_exact_neighbours():
+    from imuloco.methods.pca_local import _Rows
+
+    rng = np.random.default_rng(1)
+    x = rng.normal(0, 1, (500, 40)) * rng.uniform(0.1, 10, 40) + 100.0  # far from the origin
+    rows = _Rows(x)
+    for q in x[:20] + rng.normal(0, 0.3, (20, 40)):
+        exact = np.argsort(np.linalg.norm(x - q, axis=1))
+        assert set(rows.nearest(q, 25)) == set(exact[:25])
+        assert rows.nearest(q, 1)[0] == exact[0]
+    assert sorted(rows.nearest(x[0], 900)) == list(range(500))
