@@ -474,7 +474,9 @@ def _table_both_ways(path: Path, monkeypatch, allow_empty: bool = False):
         monkeypatch.setattr(sensorlog, "_fast_block", fast)
         try:
             header, table, lines = sensorlog._read_table(path, allow_empty)
-            out.append((header, table.tolist(), lines.tolist()))
+            # NaN (an empty cell where allowed) as None: nan != nan would fail equal tables
+            out.append((header, [[None if v != v else v for v in row] for row in table.tolist()],
+                        lines.tolist()))
         except FormatError as e:
             out.append(str(e))
     return out
