@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -475,7 +476,7 @@ def _table_both_ways(path: Path, monkeypatch, allow_empty: bool = False):
         try:
             header, table, lines = sensorlog._read_table(path, allow_empty)
             # NaN (an empty cell where allowed) as None: nan != nan would fail equal tables
-            out.append((header, [[None if v != v else v for v in row] for row in table.tolist()],
+            out.append((header, [[None if math.isnan(v) else v for v in row] for row in table.tolist()],
                         lines.tolist()))
         except FormatError as e:
             out.append(str(e))
