@@ -102,7 +102,7 @@ def test_a_calibration_is_applied_saved_and_checked(tiny, signals, tmp_path):
 def test_bidirectional_looks_both_ways_and_is_offline_only(sample_db, signals):
     bi = get_method("learned", **TINY, bidirectional=True).fit(sample_db.subset([12]),
                                                                ["right_ankle"], "phone", seed=0)
-    assert bi.lag_ == 0
+    assert bi.lookahead == 0
     a = bi.predict(signals).vectors
     late = signals.copy()
     late[60:] += 5.0

@@ -101,7 +101,7 @@ def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Pa
                 "fps": str(model.fps_), "joints": json.dumps(list(sk.names)),
                 "parents": json.dumps([int(p) for p in sk.parents]),
                 "offsets_m": json.dumps(np.asarray(sk.offsets).round(6).tolist()),
-                "contacts": json.dumps(list(CONTACT_PARTS)), "lag": str(model.lag_),
+                "contacts": json.dumps(list(CONTACT_PARTS)), "lag": str(model.lookahead),
                 "channels": "per sensor acc x,y,z (m/s^2) then gyro x,y,z (rad/s), sensor "
                             "frame"}
         for k, v in meta.items():

@@ -210,14 +210,14 @@ class Learned(Method):
         return int(self.x_mean_.shape[0])
 
     @property
-    def lag_(self) -> int:
+    def lookahead(self) -> int:
         """The look-ahead in use: ``lag``, none for a bidirectional model."""
         return 0 if self.bidirectional else int(self.lag)
 
     def _looking_ahead(self, e: Example) -> Example:
-        """Training inputs: row t holds the signals of frame t + ``lag_`` (the last frame's
+        """Training inputs: row t holds the signals of frame t + ``lookahead`` (the last frame's
         repeated past the end), the look-ahead the network learns to use."""
-        s = _hold_last(np.nan_to_num(e.signals), self.lag_)[self.lag_:]
+        s = _hold_last(np.nan_to_num(e.signals), self.lookahead)[self.lookahead:]
         return Example(e.motion, s, e.labels)
 
     # ---- confidence -------------------------------------------------------------------------
@@ -319,7 +319,7 @@ class Learned(Method):
         if signals.ndim != 2 or signals.shape[1] != self.channels_:
             raise ValueError(f"learned: expected signals (T, {self.channels_}) for "
                              f"placements {self.placements_}, got {signals.shape}")
-        k = self.lag_
+        k = self.lookahead
         signals = _hold_last(signals, k)  # as a stream would be fed to get every frame
         with torch.no_grad():
             feats, _ = self.net_.encode(self._inputs(signals)[None])
@@ -482,7 +482,7 @@ class LearnedStream(Stream):
 
     def __init__(self, model: Learned) -> None:
         self.model = model
-        self.delay_frames = model.lag_
+        self.delay_frames = model.lookahead
         self.seen = 0
         mean = model.y_mean_[None]
         self.rest = PoseIntegrator(model.skeleton_, model.fps_).step(
