@@ -41,3 +41,36 @@ def test_speed_benchmark_writes_records(tmp_path):
 def test_speed_benchmark_rejects_unknown_methods(tmp_path):
     with pytest.raises(KeyError, match="unknown"):
         speed_benchmark(["no-such-method"], tmp_path, None, [400])
+
+
+def test_speed_benchmark_times_stream_variants_on_one_fit(tmp_path):
+    """Specs differing only in stream hyperparameters share the fitted model; each has its
+    own record with the test clip's MPJPE; a full beam streams as the exact step."""
+    from imuloco.methods.mousas2017.method import Mousas2017
+
+    assert Mousas2017.stream_params == ("beam",)
+    specs = ["mousas2017", "mousas2017[beam=100000]", "mousas2017[beam=3]"]
+    records = speed_benchmark(specs, tmp_path, None, [400])
+    assert [r["method"] for r in records] == specs
+    assert len({r["fit_s"] for r in records}) == 1 and len({r["states"] for r in records}) == 1
+    exact, full, narrow = (r["mpjpe_cm"] for r in records)
+    assert exact == pytest.approx(full, abs=1e-3) and narrow > 0
+    assert "mousas2017[beam=3]" in (tmp_path / "speed.md").read_text()
+
+
+def test_speed_benchmark_times_the_old_stream_from_git(tmp_path):
+    import subprocess
+    from pathlib import Path
+
+    import imuloco
+
+    root = Path(imuloco.__file__).resolve().parents[2]
+    try:
+        subprocess.run(["git", "-C", str(root), "cat-file", "-e",
+                        "HEAD:src/imuloco/methods/mousas2017/stream.py"], check=True,
+                       capture_output=True)
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("not a git checkout")
+    records = speed_benchmark(["mousas2017"], tmp_path, None, [400], against="HEAD")
+    assert [r["method"] for r in records] == ["mousas2017", "mousas2017 @ HEAD"]
+    assert records[1]["online_fps"] > 0 and records[1]["mpjpe_cm"] > 0

@@ -16,6 +16,14 @@ Protocol details fixed here:
   renamed (``name~rep2``...) so that its simulated sensor noise differs, and the record says
   ``repeated: true`` with the number of distinct frames.
 - Timings use one BLAS/OpenMP thread (threadpoolctl), like a single core.
+- Methods are registry names, each optionally with hyperparameters (``mousas2017[beam=256]``,
+  :func:`imuloco.methods.registry.parse_method_spec`). Specs of one method that differ only
+  in hyperparameters its class lists in ``stream_params`` (they change the online stream, not
+  the fit) share one fitted model per size; their streams are timed one after the other, in
+  the same minutes, with the test clip's MPJPE (``mpjpe_cm``, streamed from its first frame).
+- ``against=REV`` also times, for each fitted model, the stream class of git commit ``REV``
+  (its module loaded from git, on today's fitted model): the old code in the same run,
+  recorded as ``"<spec> @ REV"``.
 - ``online_fps`` is steps over their total wall time; latencies are per step, in ms, wall
   clock. On a shared machine other processes inflate wall times, so each record also has
   ``online_fps_cpu`` and ``online_cpu_ms_p50`` from this thread's CPU time and the 1-minute
@@ -27,7 +35,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -87,12 +95,14 @@ def _split_test(db: MotionDatabase) -> tuple[MotionDatabase, MotionDatabase]:
     return db.subset(rest), db.subset(test[:1])
 
 
-def time_stream(method, signals: np.ndarray, min_steps: int = MIN_STEPS,
-                warmup: int = WARMUP) -> tuple[np.ndarray, np.ndarray]:
-    """Per-step wall times and CPU times of this thread (s) of streaming ``signals`` (T, C),
-    looped to ``min_steps``. The CPU time leaves out the time other processes hold the core,
-    which on a shared machine is most of a wall-clock outlier."""
-    stream = method.stream()
+def time_stream(make_stream: Callable[[], Any], signals: np.ndarray,
+                min_steps: int = MIN_STEPS, warmup: int = WARMUP
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Per-step wall times and CPU times of this thread (s) of streaming ``signals`` (T, C)
+    through a new ``make_stream()``, looped to ``min_steps``. The CPU time leaves out the time
+    other processes hold the core, which on a shared machine is most of a wall-clock
+    outlier."""
+    stream = make_stream()
     for sample in signals[:warmup]:
         stream.step(sample)
     reps = int(np.ceil(min_steps / len(signals)))
@@ -133,6 +143,29 @@ def _prefix(examples: list[Example], frames: int) -> tuple[list[Example], dict[s
     return out, info
 
 
+def stream_mpjpe(make_stream: Callable[[], Any], test: Example) -> float:
+    """MPJPE (cm) of a new stream over the test clip's signals, from its first frame."""
+    from imuloco.core.motion import Motion
+    from imuloco.evaluate.metrics import mpjpe
+
+    stream = make_stream()
+    out = [stream.step(s) for s in test.signals]
+    motion = Motion(test.motion.skeleton, np.stack([o[0] for o in out]),
+                    np.stack([o[1] for o in out]), test.motion.fps)
+    return mpjpe(test.motion, motion)
+
+
+def old_stream_factory(rev: str, method) -> Callable[[], Any]:
+    """A factory of the stream class of ``method`` as it was at git commit ``rev`` (its
+    module loaded from git; the class built on today's fitted ``method``)."""
+    from imuloco.evaluate.loadspeed import module_at
+
+    cls = type(method.stream())
+    relpath = "src/" + cls.__module__.replace(".", "/") + ".py"
+    old = getattr(module_at(rev, relpath, f"{cls.__module__}_at_{rev}"), cls.__name__)
+    return lambda: old(method)
+
+
 def _fit(name: str, params: dict[str, Any], examples: list[Example], placements: list[str],
          noise: str):
     """A method fitted on already simulated examples (:meth:`Method.fit_set`), so that every
@@ -153,70 +186,101 @@ def speed_benchmark(
     noise: str = "phone",
     seed: int = 0,
     params: dict[str, dict[str, Any]] | None = None,
+    against: str | None = None,
 ) -> list[dict[str, Any]]:
     """Time online reconstruction against database size; writes ``speed.json``/``speed.md``.
 
     Parameters
     ----------
-    methods : registry names of online methods (offline ones get a record with None timings).
+    methods : registry names of online methods, optionally with hyperparameters
+        (``name[key=value;...]``; offline ones get a record with None timings).
     out : output folder.
     data : folder of clips (None: the bundled sample, repeated for the large sizes).
     db_frames : database sizes in frames (default :data:`DEFAULT_SIZES`).
     placements, noise, seed : sensors simulated for training and the test clip.
-    params : hyperparameters per method name.
+    params : hyperparameters per method spec (added to the spec's own).
+    against : a git commit whose stream classes are timed too (see the module docstring).
 
     The largest database is simulated once; each size takes its first frames (clips in the
     fixed order of :func:`build_database`, the last one cut).
 
-    Returns the records: ``method``, ``db_frames``, ``online_fps``, ``online_latency_ms_p50``,
-    ``online_latency_ms_p99``, plus ``requested_frames``, ``clips``, ``repeated``,
-    ``distinct_frames``, ``fit_s``, ``steps``, ``online_fps_cpu``, ``online_cpu_ms_p50``,
-    ``load_avg`` and ``states`` (the method's state count when it has one).
+    Returns the records, by method spec then size: ``method``, ``db_frames``,
+    ``online_fps``, ``online_latency_ms_p50``, ``online_latency_ms_p99``, plus
+    ``requested_frames``, ``clips``, ``repeated``, ``distinct_frames``, ``fit_s``, ``steps``,
+    ``online_fps_cpu``, ``online_cpu_ms_p50``, ``load_avg``, ``mpjpe_cm`` and ``states``
+    (the method's state count when it has one).
     """
     from imuloco.evaluate.bench import load_data
     from imuloco.methods import method_class
+    from imuloco.methods.registry import parse_method_spec
 
-    for m in methods:  # fail before any work on an unknown or uninstalled method
-        method_class(m)
+    specs = {m: parse_method_spec(m) for m in methods}
+    for name, _ in specs.values():  # fail before any work on an unknown or uninstalled method
+        method_class(name)
     sizes = list(db_frames or DEFAULT_SIZES)
     placements = list(placements)
     db, test_db = _split_test(load_data(data))
     test = synthesize(test_db, placements, noise, seed + TEST_SEED_OFFSET)[0]
     big, _ = build_database(db, max(sizes), seed)
     examples = synthesize(big, placements, noise, seed)
-    records = []
+    records: dict[str, list[dict[str, Any]]] = {}
     with threadpool_limits(limits=1):
-        for name in methods:
-            for size in sizes:
-                sub, info = _prefix(examples, size)
-                rec: dict[str, Any] = {"method": name, "requested_frames": size, **info}
-                t0 = time.perf_counter()
-                method = _fit(name, (params or {}).get(name, {}), sub, placements, noise)
-                rec["fit_s"] = round(time.perf_counter() - t0, 2)
+        for size in sizes:
+            sub, info = _prefix(examples, size)
+            fitted: dict[str, tuple[Any, dict[str, Any]]] = {}
+            for spec, (name, spec_params) in specs.items():
+                cls = method_class(name)
+                p = {**spec_params, **(params or {}).get(spec, {})}
+                online = {k: v for k, v in p.items() if k in cls.stream_params}
+                key = json.dumps([name, {k: v for k, v in p.items() if k not in online}],
+                                 sort_keys=True, default=str)
+                first = key not in fitted
+                if first:
+                    t0 = time.perf_counter()
+                    method = _fit(name, {k: v for k, v in p.items() if k not in online}, sub,
+                                  placements, noise)
+                    fitted[key] = method, {"fit_s": round(time.perf_counter() - t0, 2),
+                                           "defaults": method.get_params()}
+                method, facts = fitted[key]
+                method.set_params(**({k: facts["defaults"][k] for k in cls.stream_params}
+                                     | online))
+                rec: dict[str, Any] = {"method": spec, "requested_frames": size, **info,
+                                       "fit_s": facts["fit_s"]}
                 lower = getattr(method, "lower_", None)
                 rec["states"] = int(lower.num_states) if lower is not None else None
-                if method.supports_online:
-                    load = os.getloadavg()[0]
-                    dt, cpu = time_stream(method, test.signals)
-                    ms, cpu_ms = dt * 1e3, cpu * 1e3
-                    rec.update(online_fps=float(len(dt) / dt.sum()),
-                               online_latency_ms_p50=float(np.percentile(ms, 50)),
-                               online_latency_ms_p99=float(np.percentile(ms, 99)),
-                               online_fps_cpu=float(len(cpu) / cpu.sum()),
-                               online_cpu_ms_p50=float(np.percentile(cpu_ms, 50)),
-                               steps=len(dt), load_avg=round(load, 2),
-                               cpu_count=os.cpu_count())
-                else:
-                    rec.update(online_fps=None, online_latency_ms_p50=None,
-                               online_latency_ms_p99=None, online_fps_cpu=None,
-                               online_cpu_ms_p50=None, steps=0)
-                records.append(rec)
-                del method
+                runs = [(spec, method.stream)]
+                if against and first and method.supports_online:
+                    runs.append((f"{spec} @ {against}", old_stream_factory(against, method)))
+                for label, make in runs:
+                    r = dict(rec, method=label)
+                    r.update(_timed(make, test) if method.supports_online else _offline())
+                    records.setdefault(label, []).append(r)
+            del fitted
+    flat = [r for recs in records.values() for r in recs]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "speed.json").write_text(json.dumps(records, indent=1) + "\n")
-    (out / "speed.md").write_text(speed_table(records, data) + "\n")
-    return records
+    (out / "speed.json").write_text(json.dumps(flat, indent=1) + "\n")
+    (out / "speed.md").write_text(speed_table(flat, data) + "\n")
+    return flat
+
+
+def _timed(make_stream: Callable[[], Any], test: Example) -> dict[str, Any]:
+    """The timing fields of a record (see :func:`speed_benchmark`)."""
+    load = os.getloadavg()[0]
+    dt, cpu = time_stream(make_stream, test.signals)
+    ms, cpu_ms = dt * 1e3, cpu * 1e3
+    return {"online_fps": float(len(dt) / dt.sum()),
+            "online_latency_ms_p50": float(np.percentile(ms, 50)),
+            "online_latency_ms_p99": float(np.percentile(ms, 99)),
+            "online_fps_cpu": float(len(cpu) / cpu.sum()),
+            "online_cpu_ms_p50": float(np.percentile(cpu_ms, 50)),
+            "steps": len(dt), "load_avg": round(load, 2), "cpu_count": os.cpu_count(),
+            "mpjpe_cm": round(stream_mpjpe(make_stream, test), 4)}
+
+
+def _offline() -> dict[str, Any]:
+    return {"online_fps": None, "online_latency_ms_p50": None, "online_latency_ms_p99": None,
+            "online_fps_cpu": None, "online_cpu_ms_p50": None, "steps": 0, "mpjpe_cm": None}
 
 
 def speed_table(records: list[dict[str, Any]], data: Path | None = None) -> str:
@@ -227,14 +291,15 @@ def speed_table(records: list[dict[str, Any]], data: Path | None = None) -> str:
     source = "bundled sample" if data is None else Path(data).name
     lines = [f"# Online speed against database size ({source}, one thread)", "",
              ("| method | db frames | states | fps | latency p50 ms | latency p99 ms | fps (CPU) "
-             "| CPU ms p50 | load | fit s | repeated clips |"),
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+             "| CPU ms p50 | MPJPE cm (test clip) | load | fit s | repeated clips |"),
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in records:
         lines.append(
             f"| {r['method']} | {r['db_frames']} | {f(r.get('states'), 'd')} "
             f"| {f(r['online_fps'], '.0f')} | {f(r['online_latency_ms_p50'], '.3f')} "
             f"| {f(r['online_latency_ms_p99'], '.3f')} | {f(r.get('online_fps_cpu'), '.0f')} "
-            f"| {f(r.get('online_cpu_ms_p50'), '.3f')} | {f(r.get('load_avg'), '.1f')} "
+            f"| {f(r.get('online_cpu_ms_p50'), '.3f')} | {f(r.get('mpjpe_cm'), '.2f')} "
+            f"| {f(r.get('load_avg'), '.1f')} "
             f"| {f(r.get('fit_s'), '.1f')} "
             f"| {'yes (' + str(r['distinct_frames']) + ' distinct)' if r.get('repeated') else 'no'} |")
     return "\n".join(lines)
