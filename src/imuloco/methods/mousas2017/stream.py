@@ -4,9 +4,10 @@ Each step:
 
 1. emissions ``b_i(y_t)`` of all frame states (one matrix-vector product, :mod:`.model`);
 2. the forward step of both levels (:mod:`.forward`; the lower level's optionally pruned to
-   a beam of segments, :mod:`.beam`, which then also gives eq. 8's emission): the upper level (one chain per phase
-   over its registered frames, emission eq. 8) gives ``p(S_h | y_1..t)`` and the most probable
-   phase; the lower level (one chain per segment, emission eq. 9) gives ``a_t(i, S_h)``;
+   a beam of segments, :mod:`.beam`, which then also gives eq. 8's emission): the upper
+   level (one chain per phase over its registered frames, emission eq. 8) gives
+   ``p(S_h | y_1..t)`` and the most probable phase; the lower level (one chain per segment,
+   emission eq. 9) gives ``a_t(i, S_h)``;
 3. reactive interpolation: the K most probable segments of that phase, by their summed forward
    probability, with weights ``a_k`` that sum to 1 (eq. 10-12), and inside each segment its
    frame states weighted by their forward probability. The pose is eq. 13: the forward-weighted
