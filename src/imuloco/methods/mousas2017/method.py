@@ -76,7 +76,8 @@ class Mousas2017(Method):
         (eq. 9's sigma; 1: the y-marginal of the joint Gaussian of eq. 2).
     beam : the online forward variable is kept on this many segments, those of largest
         probability (:mod:`.beam`); 0: the exact forward step over every frame state. Model
-        files written before the beam load with 0.
+        files written before the beam load with 0. On the shared data no width was both
+        faster than the exact step and as accurate (docs/results/mousas2017/speed.md).
     """
 
     summary = "hierarchical multivariate HMM + reactive interpolation (Mousas 2017), online"
