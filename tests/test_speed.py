@@ -41,3 +41,28 @@ def test_speed_benchmark_writes_records(tmp_path):
 def test_speed_benchmark_rejects_unknown_methods(tmp_path):
     with pytest.raises(KeyError, match="unknown"):
         speed_benchmark(["no-such-method"], tmp_path, None, [400])
+
+
+def test_offline_methods_are_timed_and_scored(tmp_path):
+    records = speed_benchmark(["mean"], tmp_path, None, [400])
+    r = records[0]
+    assert r["offline_fps"] > 0 and r["offline_fps_cpu"] > 0
+    # the mean pose is far from a walking clip, and MPJPE is positive and finite
+    assert 1.0 < r["test_mpjpe_cm"] < 50.0
+
+
+def test_against_a_commit_fits_that_commits_code(tmp_path):
+    """``against`` runs the method's module as it was at a commit beside today's, on the
+    same database and test clip: at HEAD both give the same reconstruction."""
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    if subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"],
+                      capture_output=True).returncode != 0:
+        pytest.skip("needs a git checkout")
+    records = speed_benchmark(["ridge"], tmp_path, None, [400], against="HEAD")
+    assert [r["method"] for r in records] == ["ridge", "ridge@HEAD"]
+    assert records[0]["test_mpjpe_cm"] == pytest.approx(records[1]["test_mpjpe_cm"], abs=1e-9)
+    with pytest.raises(ValueError, match="no-such-rev"):
+        speed_benchmark(["ridge"], tmp_path, None, [400], against="no-such-rev")

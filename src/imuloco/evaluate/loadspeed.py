@@ -52,7 +52,7 @@ def numpy_parse(path: Path) -> int:
     return len(np.loadtxt(io.StringIO(block), comments=None, ndmin=2))
 
 
-def _module_at(rev: str, relpath: str, name: str) -> types.ModuleType:
+def module_at(rev: str, relpath: str, name: str) -> types.ModuleType:
     """The module ``relpath`` of the repository at commit ``rev`` (for the comparison only)."""
     root = Path(__file__).resolve().parents[3]
     try:
@@ -69,8 +69,8 @@ def _module_at(rev: str, relpath: str, name: str) -> types.ModuleType:
 
 def old_reader(rev: str) -> Callable[[Path], Any]:
     """``read_bvh`` of commit ``rev``, with that commit's rotation functions."""
-    rotations = _module_at(rev, "src/imuloco/ops/rotations.py", "imuloco_old_rotations")
-    bvh = _module_at(rev, "src/imuloco/io/bvh.py", "imuloco_old_bvh")
+    rotations = module_at(rev, "src/imuloco/ops/rotations.py", "imuloco_old_rotations")
+    bvh = module_at(rev, "src/imuloco/io/bvh.py", "imuloco_old_bvh")
     for name in ("from_euler", "to_euler", "qmul", "qrot", "IDENTITY"):
         if name in bvh.__dict__ and hasattr(rotations, name):
             setattr(bvh, name, getattr(rotations, name))

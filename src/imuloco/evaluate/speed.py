@@ -15,6 +15,13 @@ Protocol details fixed here:
 - When the data hold fewer frames than a size asks for, clips are repeated; each copy is
   renamed (``name~rep2``...) so that its simulated sensor noise differs, and the record says
   ``repeated: true`` with the number of distinct frames.
+- Every fitted method also reconstructs the test clip offline (:meth:`Method.reconstruct_signals`,
+  timed once, wall and CPU: ``offline_fps``, ``offline_fps_cpu``) and the record has that
+  reconstruction's MPJPE (``test_mpjpe_cm``, heading-aligned at the first frame as in
+  :mod:`imuloco.evaluate.bench`): the same clip for every method, size and revision.
+- ``against``: each method is also fitted and timed as its module was at that git commit
+  (the module file from git, on today's package; record ``method`` ``NAME@REV``), right after
+  today's, on the same database and test clip: a speed-up against the old code in one run.
 - Timings use one BLAS/OpenMP thread (threadpoolctl), like a single core.
 - ``online_fps`` is steps over their total wall time; latencies are per step, in ms, wall
   clock. On a shared machine other processes inflate wall times, so each record also has
@@ -133,15 +140,42 @@ def _prefix(examples: list[Example], frames: int) -> tuple[list[Example], dict[s
     return out, info
 
 
-def _fit(name: str, params: dict[str, Any], examples: list[Example], placements: list[str],
+def method_at(name: str, rev: str) -> type:
+    """The class of method ``name`` as it was at git commit ``rev``: its module's file at that
+    commit run on today's package (a source checkout is needed), named ``NAME@REV``."""
+    from imuloco.evaluate.loadspeed import module_at
+    from imuloco.methods import method_class
+
+    cls = method_class(name)
+    module = module_at(rev, "src/" + cls.__module__.replace(".", "/") + ".py",
+                       f"imuloco_at_{rev}_{cls.__module__.replace('.', '_')}")
+    old = getattr(module, cls.__qualname__)
+    old.name = f"{name}@{rev}"  # the entry point names today's class only
+    return old
+
+
+def _fit(cls: type, params: dict[str, Any], examples: list[Example], placements: list[str],
          noise: str):
-    """A method fitted on already simulated examples (:meth:`Method.fit_set`), so that every
-    size and method shares one simulation."""
-    from imuloco.methods import get_method
+    """A method of class ``cls`` fitted on already simulated examples
+    (:meth:`Method.fit_set`), so that every size and method shares one simulation."""
     from imuloco.methods.training import TrainingSet
 
-    return get_method(name, **params).fit_set(TrainingSet.from_examples(examples, placements,
-                                                                        noise))
+    return cls(**params).fit_set(TrainingSet.from_examples(examples, placements, noise))
+
+
+def time_offline(method, test: Example) -> dict[str, Any]:
+    """``offline_fps`` (wall), ``offline_fps_cpu`` (this thread's CPU time) of one
+    :meth:`reconstruct_signals` of the test example, and its ``test_mpjpe_cm``."""
+    from imuloco.evaluate import metrics
+
+    t0, c0 = time.perf_counter(), time.thread_time()
+    motion = method.reconstruct_signals(test.signals)
+    wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
+    motion = metrics.align_heading(motion, test.motion, 0)
+    n = len(test.signals)
+    return {"offline_fps": n / wall if wall > 0 else None,
+            "offline_fps_cpu": n / cpu if cpu > 0 else None,
+            "test_mpjpe_cm": float(metrics.evaluate(test.motion, motion)["mpjpe_cm"])}
 
 
 def speed_benchmark(
@@ -153,6 +187,7 @@ def speed_benchmark(
     noise: str = "phone",
     seed: int = 0,
     params: dict[str, dict[str, Any]] | None = None,
+    against: str | None = None,
 ) -> list[dict[str, Any]]:
     """Time online reconstruction against database size; writes ``speed.json``/``speed.md``.
 
@@ -164,6 +199,7 @@ def speed_benchmark(
     db_frames : database sizes in frames (default :data:`DEFAULT_SIZES`).
     placements, noise, seed : sensors simulated for training and the test clip.
     params : hyperparameters per method name.
+    against : a git commit: also time each method's code at that commit (``NAME@REV``).
 
     The largest database is simulated once; each size takes its first frames (clips in the
     fixed order of :func:`build_database`, the last one cut).
@@ -171,13 +207,17 @@ def speed_benchmark(
     Returns the records: ``method``, ``db_frames``, ``online_fps``, ``online_latency_ms_p50``,
     ``online_latency_ms_p99``, plus ``requested_frames``, ``clips``, ``repeated``,
     ``distinct_frames``, ``fit_s``, ``steps``, ``online_fps_cpu``, ``online_cpu_ms_p50``,
-    ``load_avg`` and ``states`` (the method's state count when it has one).
+    ``load_avg``, ``states`` (the method's state count when it has one), ``offline_fps``,
+    ``offline_fps_cpu`` and ``test_mpjpe_cm``.
     """
     from imuloco.evaluate.bench import load_data
     from imuloco.methods import method_class
 
-    for m in methods:  # fail before any work on an unknown or uninstalled method
-        method_class(m)
+    classes = []  # fail before any work on an unknown or uninstalled method or commit
+    for m in methods:
+        classes.append((m, m, method_class(m)))
+        if against:
+            classes.append((m, f"{m}@{against}", method_at(m, against)))
     sizes = list(db_frames or DEFAULT_SIZES)
     placements = list(placements)
     db, test_db = _split_test(load_data(data))
@@ -186,12 +226,12 @@ def speed_benchmark(
     examples = synthesize(big, placements, noise, seed)
     records = []
     with threadpool_limits(limits=1):
-        for name in methods:
+        for name, label, cls in classes:
             for size in sizes:
                 sub, info = _prefix(examples, size)
-                rec: dict[str, Any] = {"method": name, "requested_frames": size, **info}
+                rec: dict[str, Any] = {"method": label, "requested_frames": size, **info}
                 t0 = time.perf_counter()
-                method = _fit(name, (params or {}).get(name, {}), sub, placements, noise)
+                method = _fit(cls, (params or {}).get(name, {}), sub, placements, noise)
                 rec["fit_s"] = round(time.perf_counter() - t0, 2)
                 lower = getattr(method, "lower_", None)
                 rec["states"] = int(lower.num_states) if lower is not None else None
@@ -209,7 +249,9 @@ def speed_benchmark(
                 else:
                     rec.update(online_fps=None, online_latency_ms_p50=None,
                                online_latency_ms_p99=None, online_fps_cpu=None,
-                               online_cpu_ms_p50=None, steps=0)
+                               online_cpu_ms_p50=None, steps=0,
+                               load_avg=round(os.getloadavg()[0], 2))
+                rec.update(time_offline(method, test))
                 records.append(rec)
                 del method
     out = Path(out)
@@ -227,14 +269,17 @@ def speed_table(records: list[dict[str, Any]], data: Path | None = None) -> str:
     source = "bundled sample" if data is None else Path(data).name
     lines = [f"# Online speed against database size ({source}, one thread)", "",
              ("| method | db frames | states | fps | latency p50 ms | latency p99 ms | fps (CPU) "
-             "| CPU ms p50 | load | fit s | repeated clips |"),
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+             "| CPU ms p50 | offline fps | offline fps (CPU) | test MPJPE cm | load | fit s "
+             "| repeated clips |"),
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in records:
         lines.append(
             f"| {r['method']} | {r['db_frames']} | {f(r.get('states'), 'd')} "
             f"| {f(r['online_fps'], '.0f')} | {f(r['online_latency_ms_p50'], '.3f')} "
             f"| {f(r['online_latency_ms_p99'], '.3f')} | {f(r.get('online_fps_cpu'), '.0f')} "
-            f"| {f(r.get('online_cpu_ms_p50'), '.3f')} | {f(r.get('load_avg'), '.1f')} "
+            f"| {f(r.get('online_cpu_ms_p50'), '.3f')} | {f(r.get('offline_fps'), '.1f')} "
+            f"| {f(r.get('offline_fps_cpu'), '.1f')} | {f(r.get('test_mpjpe_cm'), '.4f')} "
+            f"| {f(r.get('load_avg'), '.1f')} "
             f"| {f(r.get('fit_s'), '.1f')} "
             f"| {'yes (' + str(r['distinct_frames']) + ' distinct)' if r.get('repeated') else 'no'} |")
     return "\n".join(lines)
