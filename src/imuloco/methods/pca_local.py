@@ -198,32 +198,39 @@ class PCALocal(Method):
         return ps, ori, origin, th
 
     def _solve_frame(self, q1: np.ndarray, q2: np.ndarray, control: np.ndarray,
-                     root_prev: np.ndarray, theta: float) -> np.ndarray:
+                     root_prev: np.ndarray, theta: float, h: float = 1e-4
+                     ) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
         """The pose vector (D,) minimizing prior + smoothness + control (sec. 5.2) after the
-        poses q1 (t-1) and q2 (t-2); control : (S, 3) sensor positions."""
+        poses q1 (t-1) and q2 (t-2), and its :meth:`_kinematics` (one candidate);
+        control : (S, 3) sensor positions."""
         mu, comp, sd = self._local_model(q1)
-
         basis = sd[:, None] * comp                       # (d, D): v = mu + w @ basis
         target = 2 * q1 - q2 - mu                        # smoothness: v - 2 q1 + q2 = 0
+        # the prior and smoothness terms are linear in w: their Jacobian is fixed
+        linear = np.vstack([np.eye(len(sd)), basis.T / self.sigma_smooth])
+        seen: dict[bytes, tuple] = {}
 
-        def sensors(w: np.ndarray) -> np.ndarray:        # (C, d) -> control residuals (C, 3 S)
-            ps = self._kinematics(mu + w @ basis, root_prev, theta)[0]
-            return (ps - control).reshape(len(w), -1) / self.sigma_control
+        def control_term(w: np.ndarray) -> tuple:
+            # the control residuals at w and their forward differences, from one batch of
+            # candidate poses (one kinematics call): the solver asks for the Jacobian at the
+            # points it accepts, so each is computed with the residuals it follows
+            key = w.tobytes()
+            if key not in seen:
+                kin = self._kinematics(mu + np.vstack([w, w + h * np.eye(len(w))]) @ basis,
+                                       root_prev, theta)
+                rr = (kin[0] - control).reshape(len(w) + 1, -1) / self.sigma_control
+                seen[key] = (rr[0], ((rr[1:] - rr[0]) / h).T, tuple(k[:1] for k in kin))
+            return seen[key]
 
         def residuals(w: np.ndarray) -> np.ndarray:
             return np.concatenate([
                 w,                                       # prior: N(0, sd^2)
                 (w @ basis - target) / self.sigma_smooth,  # smoothness
-                sensors(w[None])[0],                     # control
+                control_term(w)[0],                      # control
             ])
 
-        # the prior and smoothness terms are linear in w: their Jacobian is fixed
-        linear = np.vstack([np.eye(len(sd)), basis.T / self.sigma_smooth])
-
-        def jac(w: np.ndarray, h: float = 1e-4) -> np.ndarray:
-            # the control term's forward differences as one batch of candidate poses (one FK)
-            rr = sensors(np.vstack([w, w + h * np.eye(len(w))]))
-            return np.vstack([linear, ((rr[1:] - rr[0]) / h).T])
+        def jac(w: np.ndarray) -> np.ndarray:
+            return np.vstack([linear, control_term(w)[1]])
 
         w0 = ((q1 - mu) @ comp.T) / sd
         # MINPACK's Levenberg-Marquardt (lmder) through leastsq: least_squares(method="lm")
@@ -231,7 +238,7 @@ class PCALocal(Method):
         # full_output only keeps leastsq from warning when max_nfev ends the search
         w = leastsq(residuals, w0, Dfun=jac, full_output=True, ftol=1e-8, xtol=1e-8,
                     gtol=1e-8, maxfev=self.max_nfev)[0]
-        return mu + (w * sd) @ comp
+        return mu + w @ basis, control_term(w)[2]
 
     # ---- reconstruction ---------------------------------------------------------------------
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
@@ -253,8 +260,7 @@ class PCALocal(Method):
             q2 = vecs[f - 2] if f >= 2 else q1
             acc = (r1 @ facc[f][:, :, None])[..., 0] + GRAVITY  # world acceleration, (S, 3)
             control = 2 * p1 - p2 + acc * dt * dt
-            vecs[f] = self._solve_frame(q1, q2, control, root_prev, theta)
-            pos, ori, root, th = self._kinematics(vecs[f:f + 1], root_prev, theta)
+            vecs[f], (pos, ori, root, th) = self._solve_frame(q1, q2, control, root_prev, theta)
             theta, root_prev = float(th[0]), root[0]
             p2, p1, r1 = p1, pos[0], ori[0]
         return pose.decode(vecs, self.skeleton_, self.fps_, start=np.zeros(3))
