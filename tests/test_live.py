@@ -531,6 +531,37 @@ def test_limits_close_the_connection_with_a_code_and_a_reason(fitted, caplog):
     assert len(closing) == 5  # one line per connection a limit closed (1009 is websockets')
 
 
+def test_a_phone_closed_for_a_limit_frees_its_place_at_once(fitted, phone):
+    """A phone that broke a limit and does not read (its closing handshake pending) does not
+    keep the next phone out: the next one streams at once and viewers see its poses."""
+    pytest.importorskip("websockets")
+    from websockets.asyncio.client import connect
+
+    from imuloco.app.live.server import Limits
+
+    times, acc, gyro = phone
+    rows = np.concatenate([times[:, None], acc[:, 0], gyro[:, 0]], axis=1)
+
+    async def main():
+        async with _serve(fitted, limits=Limits(messages_per_s=1.0)) as (server, base), \
+                connect(base + "/ws/view") as view, connect(base + "/ws/phone") as rude:
+            for i in range(50):  # never reads what the server says
+                await rude.send(_rows([0.01 * i]))
+            for _ in range(300):  # the place is free well before websockets' 10 s
+                if server.phone is None:
+                    break
+                await asyncio.sleep(0.01)
+            assert server.phone is None
+            async with connect(base + "/ws/phone", max_size=None) as polite:
+                await polite.send(json.dumps({"rows": rows[:400].tolist()}))
+                kinds = set()
+                while "pose" not in kinds:
+                    kinds.add(json.loads(await asyncio.wait_for(view.recv(), 20))["type"])
+                assert server.phone is not None
+
+    asyncio.run(main())
+
+
 def test_rows_closer_than_the_rate_limit_do_not_grow_the_servers_buffers(fitted):
     pytest.importorskip("websockets")
     from websockets.asyncio.client import connect

@@ -8,6 +8,8 @@ import pytest
 from imuloco.methods import load_model, pose
 from imuloco.methods.pca_local import PCALocal
 from imuloco.methods.training import synthesize
+from imuloco.ops.rotations import to_matrix
+from imuloco.sensors.simulate import attached_trajectories
 
 
 @pytest.fixture(scope="module")
@@ -15,17 +17,22 @@ def fitted(sample_db):
     return PCALocal(max_nfev=3).fit(sample_db.where(content="walk"), ["left_ankle", "left_wrist"])
 
 
-def test_one_step_decode_matches_pose_decode(fitted, sample_db):
-    """The per-frame root/heading update is pose.decode's, one frame at a time."""
+def test_kinematics_is_pose_decode_then_the_attached_sensors(fitted, sample_db):
+    """The solver's one-frame, chain-only kinematics give pose.decode's root and the sensor
+    positions and orientations of the full decoded pose, frame by frame."""
+    rng = np.random.default_rng(0)
     motion = sample_db.clips[-1].slice(0, 12)
-    vec = pose.encode(motion)
-    ref = pose.decode(vec, motion.skeleton, motion.fps)
-    root, theta = ref.root[0], 0.0
-    for f in range(1, len(vec)):
-        rot, new_root, th = fitted._step(vec[f:f + 1], root, theta)
-        assert np.allclose(new_root[0], ref.root[f], atol=1e-9)
-        assert np.allclose(np.abs(np.sum(rot[0] * ref.rotations[f], axis=-1)), 1.0, atol=1e-9)
+    vec = pose.encode(motion) + rng.normal(0, 0.05, (12, 1))  # off the database, not unit 6-D
+    ref = pose.decode(vec, motion.skeleton, motion.fps, start=np.zeros(3))
+    fitted._index()
+    pos_ref, ori_ref = attached_trajectories(ref, fitted._anat)
+    root, theta = ref.root[0], 0.0  # decode's first frame stands at start, heading 0
+    for f in range(1, 12):
+        ps, ori, new_root, th = fitted._kinematics(vec[f:f + 1], root, theta)
         root, theta = new_root[0], float(th[0])
+        np.testing.assert_allclose(root, ref.root[f], atol=1e-9)
+        np.testing.assert_allclose(ps[0], pos_ref[f], atol=1e-9)
+        np.testing.assert_allclose(ori[0], to_matrix(ori_ref[f]), atol=1e-9)
 
 
 def test_local_pca_reproduces_a_database_pose(fitted):
@@ -56,16 +63,6 @@ def test_save_load_round_trip(fitted, sample_db, tmp_path):
     assert np.allclose(a.rotations, b.rotations, atol=1e-6)
 
 
-def test_solver_sensor_positions_are_the_posed_skeletons(fitted, sample_db):
-    """The solver's chain-only kinematics give the sensor positions of the full pose."""
-    rng = np.random.default_rng(0)
-    vec = pose.encode(sample_db.clips[-1].slice(0, 20)) + rng.normal(0, 0.1, (20, 1))
-    root, theta = np.array([0.3, 0.9, -1.2]), 0.7
-    rot, new_root, _ = fitted._step(vec, root, theta)
-    expected, _ = fitted._sensors(rot, new_root)
-    np.testing.assert_allclose(fitted._sensor_positions(vec, root, theta), expected, atol=1e-12)
-
-
 def test_local_model_is_the_neighbours_principal_axes(fitted):
     q = fitted.poses_[100].astype(np.float64)
     mu, comp, sd = fitted._local_model(q)
@@ -90,3 +87,22 @@ def test_nearest_rows_are_the_exact_neighbours():
         assert set(rows.nearest(q, 25)) == set(exact[:25])
         assert rows.nearest(q, 1)[0] == exact[0]
     assert sorted(rows.nearest(x[0], 900)) == list(range(500))
+
+
+def test_nearest_rows_along_a_path_are_exact():
+    """Queries that follow a path, with jumps, get the exact neighbours whether the kept rows
+    of an earlier query answer them or a full search does."""
+    from imuloco.methods.pca_local import _Rows
+
+    rng = np.random.default_rng(2)
+    x = np.cumsum(rng.normal(0, 0.2, (3000, 12)), axis=0) + 50.0  # a curve, like poses
+    rows = _Rows(x, reach=100)
+    path = np.cumsum(rng.normal(0, 0.05, (300, 12)), axis=0) + x[1500]
+    path[150:] += 3.0  # a jump: the kept rows no longer suffice
+    kept = 0
+    for q in path:
+        before = rows._kept
+        got = rows.nearest(q, 20)
+        kept += rows._kept is before
+        assert list(got) == sorted(np.argsort(np.linalg.norm(x - q, axis=1))[:20])
+    assert 0 < kept < len(path)  # both ways were exercised

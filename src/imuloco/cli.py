@@ -288,7 +288,7 @@ def _folders(values: tuple[str, ...]) -> list[Path] | None:
                    "numpy parse, reader, cold and warm cache; writes load.json and load.md.")
 @click.option("--against", default=None, metavar="REV",
               help="With --load: also time the BVH reader of this git commit; with --speed: "
-                   "the stream classes of this commit on the same fitted models.")
+                   "also each method's code at this commit, in the same run.")
 @_reading_options
 def bench(method_names: str | None, split_name: str, noise: str, placement: str,
           data_items: tuple[str, ...], train_items: tuple[str, ...],
@@ -334,10 +334,11 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
     names = _csv(method_names)
     data = _folders(data_items)
     if speed:
-        from imuloco.evaluate.speed import speed_benchmark
+        from imuloco.evaluate.speed import speed_benchmark, speed_table
 
         frames = [int(v) for v in _csv(db_frames)] or None
-        speed_benchmark(names, out, data[0] if data else None, frames, against=against)
+        click.echo(speed_table(speed_benchmark(names, out, data[0] if data else None, frames,
+                                               against=against), data[0] if data else None))
         return
     from imuloco.evaluate.bench import run_bench
     from imuloco.evaluate.report import COLUMNS, table

@@ -15,15 +15,21 @@ Protocol details fixed here:
 - When the data hold fewer frames than a size asks for, clips are repeated; each copy is
   renamed (``name~rep2``...) so that its simulated sensor noise differs, and the record says
   ``repeated: true`` with the number of distinct frames.
-- Timings use one BLAS/OpenMP thread (threadpoolctl), like a single core.
+- Every fitted method also reconstructs the test clip offline (:meth:`Method.reconstruct_signals`
+  of its signals looped to :data:`MIN_STEPS` frames, after an untimed one of :data:`WARMUP`
+  frames; wall and CPU: ``offline_fps``, ``offline_fps_cpu``) and the record has the MPJPE of
+  the clip's own reconstruction (``test_mpjpe_cm``, heading-aligned at the first frame as in
+  :mod:`imuloco.evaluate.bench`): the same clip for every method, size and revision.
+- ``against``: each method is also fitted and timed as its module was at that git commit
+  (the module file from git, on today's package; for a method that is a package of modules,
+  such as ``mousas2017``, the names its module takes from that package at that commit too;
+  record ``method`` ``NAME@REV``), right after today's, on the same database and test clip: a
+  speed-up against the old code in one run.
 - Methods are registry names, each optionally with hyperparameters (``mousas2017[beam=256]``,
-  :func:`imuloco.methods.registry.parse_method_spec`). Specs of one method that differ only
-  in hyperparameters its class lists in ``stream_params`` (they change the online stream, not
-  the fit) share one fitted model per size; their streams are timed one after the other, in
-  the same minutes, with the test clip's MPJPE (``mpjpe_cm``, streamed from its first frame).
-- ``against=REV`` also times, for each fitted model, the stream class of git commit ``REV``
-  (its module loaded from git, on today's fitted model): the old code in the same run,
-  recorded as ``"<spec> @ REV"``.
+  :func:`imuloco.methods.registry.parse_method_spec`). Specs of one method that differ only in
+  hyperparameters its class lists in ``stream_params`` (they change the online stream, not the
+  fit) share one fitted model per size and are timed one after the other.
+- Timings use one BLAS/OpenMP thread (threadpoolctl), like a single core.
 - ``online_fps`` is steps over their total wall time; latencies are per step, in ms, wall
   clock. On a shared machine other processes inflate wall times, so each record also has
   ``online_fps_cpu`` and ``online_cpu_ms_p50`` from this thread's CPU time and the 1-minute
@@ -35,7 +41,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -95,14 +101,12 @@ def _split_test(db: MotionDatabase) -> tuple[MotionDatabase, MotionDatabase]:
     return db.subset(rest), db.subset(test[:1])
 
 
-def time_stream(make_stream: Callable[[], Any], signals: np.ndarray,
-                min_steps: int = MIN_STEPS, warmup: int = WARMUP
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-step wall times and CPU times of this thread (s) of streaming ``signals`` (T, C)
-    through a new ``make_stream()``, looped to ``min_steps``. The CPU time leaves out the time
-    other processes hold the core, which on a shared machine is most of a wall-clock
-    outlier."""
-    stream = make_stream()
+def time_stream(method, signals: np.ndarray, min_steps: int = MIN_STEPS,
+                warmup: int = WARMUP) -> tuple[np.ndarray, np.ndarray]:
+    """Per-step wall times and CPU times of this thread (s) of streaming ``signals`` (T, C),
+    looped to ``min_steps``. The CPU time leaves out the time other processes hold the core,
+    which on a shared machine is most of a wall-clock outlier."""
+    stream = method.stream()
     for sample in signals[:warmup]:
         stream.step(sample)
     reps = int(np.ceil(min_steps / len(signals)))
@@ -143,38 +147,72 @@ def _prefix(examples: list[Example], frames: int) -> tuple[list[Example], dict[s
     return out, info
 
 
-def stream_mpjpe(make_stream: Callable[[], Any], test: Example) -> float:
-    """MPJPE (cm) of a new stream over the test clip's signals, from its first frame."""
-    from imuloco.core.motion import Motion
-    from imuloco.evaluate.metrics import mpjpe
-
-    stream = make_stream()
-    out = [stream.step(s) for s in test.signals]
-    motion = Motion(test.motion.skeleton, np.stack([o[0] for o in out]),
-                    np.stack([o[1] for o in out]), test.motion.fps)
-    return mpjpe(test.motion, motion)
-
-
-def old_stream_factory(rev: str, method) -> Callable[[], Any]:
-    """A factory of the stream class of ``method`` as it was at git commit ``rev`` (its
-    module loaded from git; the class built on today's fitted ``method``)."""
+def _module_at(rev: str, module: str):
     from imuloco.evaluate.loadspeed import module_at
 
-    cls = type(method.stream())
-    relpath = "src/" + cls.__module__.replace(".", "/") + ".py"
-    old = getattr(module_at(rev, relpath, f"{cls.__module__}_at_{rev}"), cls.__name__)
-    return lambda: old(method)
+    return module_at(rev, "src/" + module.replace(".", "/") + ".py",
+                     f"imuloco_at_{rev}_{module.replace('.', '_')}")
 
 
-def _fit(name: str, params: dict[str, Any], examples: list[Example], placements: list[str],
+def method_at(name: str, rev: str) -> type:
+    """The class of method ``name`` as it was at git commit ``rev``: its module's file at that
+    commit run on today's package (a source checkout is needed), named ``NAME@REV``. When the
+    method is a package (``imuloco.methods.mousas2017``), what its module takes from the
+    package's other modules (stream, forward step, model) is taken from them at ``rev``."""
+    from imuloco.methods import method_class
+
+    cls = method_class(name)
+    module = _module_at(rev, cls.__module__)
+    package = cls.__module__.rpartition(".")[0]
+    if package != "imuloco.methods":
+        siblings: dict[str, Any] = {}
+        for key, obj in list(vars(module).items()):
+            src = getattr(obj, "__module__", None)
+            if isinstance(src, str) and src.startswith(package + ".") \
+                    and src != cls.__module__:
+                if src not in siblings:
+                    siblings[src] = _module_at(rev, src)
+                if hasattr(siblings[src], key):
+                    setattr(module, key, getattr(siblings[src], key))
+    old = getattr(module, cls.__qualname__)
+    old.name = f"{name}@{rev}"  # the entry point names today's class only
+    return old
+
+
+def _fit(cls: type, params: dict[str, Any], examples: list[Example], placements: list[str],
          noise: str):
-    """A method fitted on already simulated examples (:meth:`Method.fit_set`), so that every
-    size and method shares one simulation."""
-    from imuloco.methods import get_method
+    """A method of class ``cls`` fitted on already simulated examples
+    (:meth:`Method.fit_set`), so that every size and method shares one simulation."""
     from imuloco.methods.training import TrainingSet
 
-    return get_method(name, **params).fit_set(TrainingSet.from_examples(examples, placements,
-                                                                        noise))
+    return cls(**params).fit_set(TrainingSet.from_examples(examples, placements, noise))
+
+
+def time_offline(method, test: Example, min_frames: int = MIN_STEPS, warmup: int = WARMUP
+                 ) -> dict[str, Any]:
+    """``offline_fps`` (wall) and ``offline_fps_cpu`` (this thread's CPU time) of one
+    :meth:`reconstruct_signals` of the test example's signals, looped to ``min_frames``,
+    after an untimed one of its first ``warmup`` frames (which builds what a method builds on
+    first use); and ``test_mpjpe_cm``, the MPJPE of the test example's reconstruction."""
+    from imuloco.evaluate import metrics
+
+    method.reconstruct_signals(test.signals[:warmup])
+    rows = np.concatenate([test.signals] * int(np.ceil(min_frames / len(test.signals))))
+    t0, c0 = time.perf_counter(), time.thread_time()
+    method.reconstruct_signals(rows)
+    wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
+    motion = metrics.align_heading(method.reconstruct_signals(test.signals), test.motion, 0)
+    return {"offline_fps": len(rows) / wall if wall > 0 else None,
+            "offline_fps_cpu": len(rows) / cpu if cpu > 0 else None,
+            "offline_frames": len(rows),
+            "test_mpjpe_cm": float(metrics.evaluate(test.motion, motion)["mpjpe_cm"])}
+
+
+def _fit_key(run: tuple) -> str:
+    """Runs with the same key share one fitted model: same class, same fit hyperparameters."""
+    _, _, cls, fit_p, _ = run
+    return json.dumps([f"{cls.__module__}.{cls.__qualname__}", fit_p], sort_keys=True,
+                      default=str)
 
 
 def speed_benchmark(
@@ -192,95 +230,96 @@ def speed_benchmark(
 
     Parameters
     ----------
-    methods : registry names of online methods, optionally with hyperparameters
-        (``name[key=value;...]``; offline ones get a record with None timings).
+    methods : registry names of methods, optionally with hyperparameters
+        (``name[key=value;...]``; offline ones get a record with None online timings).
     out : output folder.
     data : folder of clips (None: the bundled sample, repeated for the large sizes).
     db_frames : database sizes in frames (default :data:`DEFAULT_SIZES`).
     placements, noise, seed : sensors simulated for training and the test clip.
     params : hyperparameters per method spec (added to the spec's own).
-    against : a git commit whose stream classes are timed too (see the module docstring).
+    against : a git commit: also time each method's code at that commit (``NAME@REV``).
 
     The largest database is simulated once; each size takes its first frames (clips in the
     fixed order of :func:`build_database`, the last one cut).
 
-    Returns the records, by method spec then size: ``method``, ``db_frames``,
-    ``online_fps``, ``online_latency_ms_p50``, ``online_latency_ms_p99``, plus
-    ``requested_frames``, ``clips``, ``repeated``, ``distinct_frames``, ``fit_s``, ``steps``,
-    ``online_fps_cpu``, ``online_cpu_ms_p50``, ``load_avg``, ``mpjpe_cm`` and ``states``
-    (the method's state count when it has one).
+    Returns the records: ``method``, ``db_frames``, ``online_fps``, ``online_latency_ms_p50``,
+    ``online_latency_ms_p99``, plus ``requested_frames``, ``clips``, ``repeated``,
+    ``distinct_frames``, ``fit_s``, ``steps``, ``online_fps_cpu``, ``online_cpu_ms_p50``,
+    ``load_avg``, ``states`` (the method's state count when it has one), ``offline_fps``,
+    ``offline_fps_cpu`` and ``test_mpjpe_cm``.
     """
     from imuloco.evaluate.bench import load_data
     from imuloco.methods import method_class
     from imuloco.methods.registry import parse_method_spec
 
-    specs = {m: parse_method_spec(m) for m in methods}
-    for name, _ in specs.values():  # fail before any work on an unknown or uninstalled method
-        method_class(name)
+    # (spec, label, class, fit params, stream params); fail before any work on an unknown or
+    # uninstalled method or commit
+    runs = []
+    for spec in methods:
+        name, p = parse_method_spec(spec)
+        cls = method_class(name)
+        p = {**p, **(params or {}).get(spec, {})}
+        online = {k: v for k, v in p.items() if k in cls.stream_params}
+        fit_p = {k: v for k, v in p.items() if k not in online}
+        runs.append((spec, spec, cls, fit_p, online))
+        old_spec = spec if not online else name + (
+            f"[{';'.join(f'{k}={v}' for k, v in fit_p.items())}]" if fit_p else "")
+        if against and not any(r[1] == f"{old_spec}@{against}" for r in runs):
+            # the old code once per fitted model, without the stream hyperparameters (it
+            # may not have them)
+            runs.append((spec, f"{old_spec}@{against}", method_at(name, against), fit_p, {}))
     sizes = list(db_frames or DEFAULT_SIZES)
     placements = list(placements)
     db, test_db = _split_test(load_data(data))
     test = synthesize(test_db, placements, noise, seed + TEST_SEED_OFFSET)[0]
     big, _ = build_database(db, max(sizes), seed)
     examples = synthesize(big, placements, noise, seed)
-    records: dict[str, list[dict[str, Any]]] = {}
+    records = []
     with threadpool_limits(limits=1):
+        fitted: dict[str, tuple[Any, float, dict[str, Any]]] = {}
+        order = sorted(range(len(runs)), key=lambda i: _fit_key(runs[i]))  # shared fits adjacent
         for size in sizes:
             sub, info = _prefix(examples, size)
-            fitted: dict[str, tuple[Any, dict[str, Any]]] = {}
-            for spec, (name, spec_params) in specs.items():
-                cls = method_class(name)
-                p = {**spec_params, **(params or {}).get(spec, {})}
-                online = {k: v for k, v in p.items() if k in cls.stream_params}
-                key = json.dumps([name, {k: v for k, v in p.items() if k not in online}],
-                                 sort_keys=True, default=str)
-                first = key not in fitted
-                if first:
+            for i in order:
+                spec, label, cls, fit_p, online = runs[i]
+                key = _fit_key(runs[i])
+                if key not in fitted:
+                    fitted.clear()  # one fitted model held at a time
                     t0 = time.perf_counter()
-                    method = _fit(name, {k: v for k, v in p.items() if k not in online}, sub,
-                                  placements, noise)
-                    fitted[key] = method, {"fit_s": round(time.perf_counter() - t0, 2),
-                                           "defaults": method.get_params()}
-                method, facts = fitted[key]
-                method.set_params(**({k: facts["defaults"][k] for k in cls.stream_params}
-                                     | online))
-                rec: dict[str, Any] = {"method": spec, "requested_frames": size, **info,
-                                       "fit_s": facts["fit_s"]}
+                    method = _fit(cls, fit_p, sub, placements, noise)
+                    fitted[key] = method, round(time.perf_counter() - t0, 2), \
+                        method.get_params()
+                method, fit_s, defaults = fitted[key]
+                method.set_params(**({k: defaults[k] for k in cls.stream_params} | online))
+                rec: dict[str, Any] = {"method": label, "requested_frames": size, **info,
+                                       "fit_s": fit_s}
                 lower = getattr(method, "lower_", None)
                 rec["states"] = int(lower.num_states) if lower is not None else None
-                runs = [(spec, method.stream)]
-                if against and first and method.supports_online:
-                    runs.append((f"{spec} @ {against}", old_stream_factory(against, method)))
-                for label, make in runs:
-                    r = dict(rec, method=label)
-                    r.update(_timed(make, test) if method.supports_online else _offline())
-                    records.setdefault(label, []).append(r)
-            del fitted
-    flat = [r for recs in records.values() for r in recs]
+                if method.supports_online:
+                    load = os.getloadavg()[0]
+                    dt, cpu = time_stream(method, test.signals)
+                    ms, cpu_ms = dt * 1e3, cpu * 1e3
+                    rec.update(online_fps=float(len(dt) / dt.sum()),
+                               online_latency_ms_p50=float(np.percentile(ms, 50)),
+                               online_latency_ms_p99=float(np.percentile(ms, 99)),
+                               online_fps_cpu=float(len(cpu) / cpu.sum()),
+                               online_cpu_ms_p50=float(np.percentile(cpu_ms, 50)),
+                               steps=len(dt), load_avg=round(load, 2),
+                               cpu_count=os.cpu_count())
+                else:
+                    rec.update(online_fps=None, online_latency_ms_p50=None,
+                               online_latency_ms_p99=None, online_fps_cpu=None,
+                               online_cpu_ms_p50=None, steps=0,
+                               load_avg=round(os.getloadavg()[0], 2))
+                rec.update(time_offline(method, test))
+                records.append((i, size, rec))
+            fitted.clear()
+    records = [r for _, _, r in sorted(records, key=lambda t: (t[0], sizes.index(t[1])))]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "speed.json").write_text(json.dumps(flat, indent=1) + "\n")
-    (out / "speed.md").write_text(speed_table(flat, data) + "\n")
-    return flat
-
-
-def _timed(make_stream: Callable[[], Any], test: Example) -> dict[str, Any]:
-    """The timing fields of a record (see :func:`speed_benchmark`)."""
-    load = os.getloadavg()[0]
-    dt, cpu = time_stream(make_stream, test.signals)
-    ms, cpu_ms = dt * 1e3, cpu * 1e3
-    return {"online_fps": float(len(dt) / dt.sum()),
-            "online_latency_ms_p50": float(np.percentile(ms, 50)),
-            "online_latency_ms_p99": float(np.percentile(ms, 99)),
-            "online_fps_cpu": float(len(cpu) / cpu.sum()),
-            "online_cpu_ms_p50": float(np.percentile(cpu_ms, 50)),
-            "steps": len(dt), "load_avg": round(load, 2), "cpu_count": os.cpu_count(),
-            "mpjpe_cm": round(stream_mpjpe(make_stream, test), 4)}
-
-
-def _offline() -> dict[str, Any]:
-    return {"online_fps": None, "online_latency_ms_p50": None, "online_latency_ms_p99": None,
-            "online_fps_cpu": None, "online_cpu_ms_p50": None, "steps": 0, "mpjpe_cm": None}
+    (out / "speed.json").write_text(json.dumps(records, indent=1) + "\n")
+    (out / "speed.md").write_text(speed_table(records, data) + "\n")
+    return records
 
 
 def speed_table(records: list[dict[str, Any]], data: Path | None = None) -> str:
@@ -289,16 +328,18 @@ def speed_table(records: list[dict[str, Any]], data: Path | None = None) -> str:
         return "-" if v is None else format(v, fmt)
 
     source = "bundled sample" if data is None else Path(data).name
-    lines = [f"# Online speed against database size ({source}, one thread)", "",
+    lines = [f"# Speed against database size ({source}, one thread)", "",
              ("| method | db frames | states | fps | latency p50 ms | latency p99 ms | fps (CPU) "
-             "| CPU ms p50 | MPJPE cm (test clip) | load | fit s | repeated clips |"),
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+             "| CPU ms p50 | offline fps | offline fps (CPU) | test MPJPE cm | load | fit s "
+             "| repeated clips |"),
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in records:
         lines.append(
             f"| {r['method']} | {r['db_frames']} | {f(r.get('states'), 'd')} "
             f"| {f(r['online_fps'], '.0f')} | {f(r['online_latency_ms_p50'], '.3f')} "
             f"| {f(r['online_latency_ms_p99'], '.3f')} | {f(r.get('online_fps_cpu'), '.0f')} "
-            f"| {f(r.get('online_cpu_ms_p50'), '.3f')} | {f(r.get('mpjpe_cm'), '.2f')} "
+            f"| {f(r.get('online_cpu_ms_p50'), '.3f')} | {f(r.get('offline_fps'), '.1f')} "
+            f"| {f(r.get('offline_fps_cpu'), '.1f')} | {f(r.get('test_mpjpe_cm'), '.4f')} "
             f"| {f(r.get('load_avg'), '.1f')} "
             f"| {f(r.get('fit_s'), '.1f')} "
             f"| {'yes (' + str(r['distinct_frames']) + ' distinct)' if r.get('repeated') else 'no'} |")

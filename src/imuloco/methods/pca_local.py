@@ -25,33 +25,64 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import leastsq
 
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
 from imuloco.methods.base import Method
 from imuloco.methods.training import TrainingSet
-from imuloco.ops.rotations import about_y, from_6d, qmul, qrot
+from imuloco.ops.rotations import from_6d, to_matrix
 from imuloco.sensors.placement import anatomical_frame, get_placement
-from imuloco.sensors.simulate import GRAVITY, attached_trajectories
+from imuloco.sensors.simulate import GRAVITY
 
 
 class _Rows:
-    """Exact k nearest rows of ``x`` (N, D) to a query (D,), Euclidean, by brute force:
-    ``|x|^2 - 2 x q`` in one matrix-vector product, then a partial sort. Measured on the 74,863
-    poses (130-D) of bandai-namco-2, one thread: 9.4 ms a 50-neighbour query, against 17.8 for
-    scikit-learn's NearestNeighbors and 24.7 for scipy's KDTree (trees do not prune in 130
-    dimensions; scikit-learn's per-call checks add about a millisecond to every query)."""
+    """Exact k nearest rows of ``x`` (N, D) to a query (D,), Euclidean.
 
-    def __init__(self, x: np.ndarray) -> None:
+    A full query is one matrix-vector product (``|x|^2 - 2 x q``) and a partial sort. The
+    queries of a reconstruction follow a path (each is the previous frame's pose), so a full
+    query also keeps the ``reach`` rows nearest to its point ``a`` and the distance ``R`` from
+    ``a`` to the nearest row left out. Every row left out is then at least ``R - |q - a|`` from
+    a later query ``q`` (triangle inequality): when the k-th nearest kept row is closer than
+    that, the kept rows' answer is the exact one, found among ``reach`` rows instead of N;
+    otherwise the query is a full one. The answer never depends on which queries came before.
+
+    Hand-written because no library index reuses a previous query's neighbourhood, and the
+    library trees do not prune here: on the 60,344 scaled poses (130-D, 47 principal axes for
+    95 % of the variance) of bandai-namco-2's ``random-clips`` training set, one thread, a
+    50-neighbour query took 20.5 ms with scikit-learn's KDTree or BallTree (leaf size 10 or
+    40) against 8.3 ms for the full product; 86-91 % of a reconstruction's queries are
+    answered from the kept rows with ``reach`` 500-1000."""
+
+    def __init__(self, x: np.ndarray, reach: int = 1000) -> None:
         self.x = np.asarray(x, dtype=np.float64)
         self.norms = np.einsum("ij,ij->i", self.x, self.x)
+        self.reach = reach
+        self._kept: np.ndarray | None = None  # indices of the rows nearest to self._anchor
+        self._kept_x, self._kept_norms = self.x[:0], self.norms[:0]
+        self._anchor = np.zeros(self.x.shape[1])
+        self._radius = 0.0
 
     def nearest(self, q: np.ndarray, k: int) -> np.ndarray:
-        """Indices (min(k, N),) of the rows nearest to q (D,), in no particular order."""
-        d = self.norms - 2.0 * (self.x @ q)
-        k = min(k, len(d))
-        return np.argpartition(d, k - 1)[:k] if k < len(d) else np.arange(len(d))
+        """Indices (min(k, N),) of the rows nearest to q (D,), ascending."""
+        n = len(self.x)
+        if k >= n:
+            return np.arange(n)
+        if self._kept is not None and k < len(self._kept):
+            d2 = self._kept_norms - 2.0 * (self._kept_x @ q)  # less |q|^2, as below
+            part = np.argpartition(d2, k - 1)[:k]
+            if np.sqrt(max(d2[part].max() + q @ q, 0.0)) < (
+                    self._radius - np.linalg.norm(q - self._anchor)):
+                return np.sort(self._kept[part])
+        d2 = self.norms - 2.0 * (self.x @ q)  # squared distances less |q|^2
+        m = min(max(self.reach, k), n - 1)
+        kept = np.argpartition(d2, m)[: m + 1]
+        order = np.argsort(d2[kept])
+        self._kept, self._anchor = kept[order[:m]], np.array(q, dtype=np.float64)
+        self._kept_x, self._kept_norms = self.x[self._kept], self.norms[self._kept]
+        # the nearest row left out, less a margin for the expansion's rounding
+        self._radius = np.sqrt(max(d2[kept[order[m]]] + q @ q, 0.0)) * (1 - 1e-9) - 1e-9
+        return np.sort(self._kept[:k])
 
 
 class PCALocal(Method):
@@ -107,7 +138,12 @@ class PCALocal(Method):
                 while k >= 0 and k not in chain:
                     chain.add(k)
                     k = int(parents[k])
-            self._chain = sorted(chain)
+            self._chain = sorted(chain)  # parents[k] < k: parents first
+            at = {k: i for i, k in enumerate(self._chain)}
+            self._cols = np.concatenate([np.arange(6 * k, 6 * k + 6) for k in self._chain])
+            self._links = [(at[int(parents[k])], self.skeleton_.offsets[k])
+                           for k in self._chain[1:]]
+            self._ends = [(at[k], off, to_matrix(r)) for k, off, r in self._anat]
         return self._nn
 
     def _local_model(self, query: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -127,85 +163,82 @@ class PCALocal(Method):
         s = np.sqrt(ev[:d])
         return mu, (u[:, :d].T @ x) / s[:, None], np.sqrt(var[:d]) + 1e-6
 
-    def _step(self, vec: np.ndarray, root: np.ndarray, theta: float
-              ) -> tuple[np.ndarray, np.ndarray, float]:
-        """One frame of :func:`imuloco.methods.pose.decode` for many candidate vectors:
-        vec (C, D) after a frame at ``root`` (3,) and heading ``theta`` -> local rotations
-        (C, J, 4), root (C, 3), heading (C,)."""
-        j = self.skeleton_.num_joints
-        rot = from_6d(vec[:, : 6 * j].reshape(len(vec), j, 6))
-        th = theta + vec[:, 6 * j + 3] / self.fps_
-        yaw = about_y(th)
-        rot[:, 0] = qmul(yaw, rot[:, 0])
-        vel = np.zeros((len(vec), 3))
-        vel[:, [0, 2]] = vec[:, 6 * j + 1: 6 * j + 3]
-        new_root = root + qrot(yaw, vel) / self.fps_
-        new_root[:, 1] = vec[:, 6 * j]
-        return rot, new_root, th
-
-    def _sensors(self, rot: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Sensor positions (C, S, 3) and orientations (C, S, 4) of poses."""
-        m = Motion(self.skeleton_, rot, root, self.fps_)
-        return attached_trajectories(m, self._anat)
-
-    def _sensor_positions(self, vec: np.ndarray, root: np.ndarray, theta: float) -> np.ndarray:
-        """Sensor positions (C, S, 3) of the poses :meth:`_step` makes of vec (C, D) after a
-        frame at ``root`` (3,) and heading ``theta``: the solver's inner loop, so only the
-        joints on the sensors' chains, in rotation matrices (Gram-Schmidt of the 6-D
-        rotations, as :func:`imuloco.ops.rotations.from_6d`), without quaternions."""
-        sk, j, chain = self.skeleton_, self.skeleton_.num_joints, self._chain
-        six = vec[:, : 6 * j].reshape(len(vec), j, 6)[:, chain]
-        a = six[..., :3] / np.sqrt(np.sum(six[..., :3] ** 2, axis=-1, keepdims=True))
-        b = six[..., 3:] - np.sum(a * six[..., 3:], axis=-1, keepdims=True) * a
-        b /= np.sqrt(np.sum(b * b, axis=-1, keepdims=True))
-        local = np.empty(six.shape[:-1] + (3, 3))  # (C, K, 3, 3), columns a, b, a x b
-        local[..., 0], local[..., 1] = a, b
+    def _kinematics(self, vec: np.ndarray, root: np.ndarray, theta: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One frame of :func:`imuloco.methods.pose.decode` for many candidate vectors vec
+        (C, D) after a frame at ``root`` (3,) and heading ``theta``, followed by
+        :func:`imuloco.sensors.simulate.attached_trajectories`: sensor positions (C, S, 3),
+        sensor-to-world rotation matrices (C, S, 3, 3), root (C, 3) and heading (C,). The
+        solver's inner loop, so only the joints on the sensors' chains, in rotation matrices
+        (Gram-Schmidt of the 6-D rotations, as :func:`imuloco.ops.rotations.from_6d`)."""
+        j, c = self.skeleton_.num_joints, len(vec)
+        six = vec[:, self._cols].reshape(c, -1, 2, 3)  # (C, K, 2, 3) on the chains
+        local = np.empty(six.shape[:2] + (3, 3))  # (C, K, 3, 3), columns a, b, a x b
+        a = local[..., 0] = six[:, :, 0] / np.sqrt(
+            np.einsum("ckx,ckx->ck", six[:, :, 0], six[:, :, 0]))[..., None]
+        b = six[:, :, 1] - np.einsum("ckx,ckx->ck", a, six[:, :, 1])[..., None] * a
+        b = local[..., 1] = b / np.sqrt(np.einsum("ckx,ckx->ck", b, b))[..., None]
         for i, (u, v) in enumerate(((1, 2), (2, 0), (0, 1))):  # np.cross costs more here
             local[..., i, 2] = a[..., u] * b[..., v] - a[..., v] * b[..., u]
         th = theta + vec[:, 6 * j + 3] / self.fps_
-        c, s = np.cos(th), np.sin(th)
-        yaw = np.zeros((len(vec), 3, 3))
-        yaw[:, 0, 0], yaw[:, 0, 2], yaw[:, 1, 1], yaw[:, 2, 0], yaw[:, 2, 2] = c, s, 1.0, -s, c
-        vel = np.zeros((len(vec), 3))
-        vel[:, [0, 2]] = vec[:, 6 * j + 1: 6 * j + 3]
-        origin = root + (yaw @ vel[:, :, None])[..., 0] / self.fps_
-        origin[:, 1] = vec[:, 6 * j]
-        glob: dict[int, np.ndarray] = {}
-        pos: dict[int, np.ndarray] = {}
-        for i, k in enumerate(chain):
-            p = int(sk.parents[k])
-            if p < 0:
-                glob[k], pos[k] = yaw @ local[:, i], origin
-            else:
-                glob[k] = glob[p] @ local[:, i]
-                pos[k] = pos[p] + glob[p] @ sk.offsets[k]
-        return np.stack([pos[k] + glob[k] @ off for k, off, _ in self._anat], axis=1)
+        cos, sin = np.cos(th), np.sin(th)
+        vx, vz = vec[:, 6 * j + 1] / self.fps_, vec[:, 6 * j + 2] / self.fps_
+        origin = np.empty((c, 3))
+        origin[:, 0], origin[:, 1] = root[0] + cos * vx + sin * vz, vec[:, 6 * j]
+        origin[:, 2] = root[2] - sin * vx + cos * vz
+        yaw = np.zeros((c, 3, 3))
+        yaw[:, 0, 0], yaw[:, 0, 2], yaw[:, 1, 1], yaw[:, 2, 0], yaw[:, 2, 2] = cos, sin, 1, -sin, cos
+        glob, pos = [yaw @ local[:, 0]], [origin]
+        for i, (p, off) in enumerate(self._links, start=1):  # parents first
+            pos.append(pos[p] + glob[p] @ off)
+            glob.append(glob[p] @ local[:, i])
+        ps, ori = np.empty((c, len(self._ends), 3)), np.empty((c, len(self._ends), 3, 3))
+        for s, (i, off, rot) in enumerate(self._ends):
+            ps[:, s], ori[:, s] = pos[i] + glob[i] @ off, glob[i] @ rot
+        return ps, ori, origin, th
 
     def _solve_frame(self, q1: np.ndarray, q2: np.ndarray, control: np.ndarray,
-                     root_prev: np.ndarray, theta: float) -> np.ndarray:
+                     root_prev: np.ndarray, theta: float, h: float = 1e-4
+                     ) -> tuple[np.ndarray, tuple[np.ndarray, ...]]:
         """The pose vector (D,) minimizing prior + smoothness + control (sec. 5.2) after the
-        poses q1 (t-1) and q2 (t-2); control : (S, 3) sensor positions."""
+        poses q1 (t-1) and q2 (t-2), and its :meth:`_kinematics` (one candidate);
+        control : (S, 3) sensor positions."""
         mu, comp, sd = self._local_model(q1)
+        basis = sd[:, None] * comp                       # (d, D): v = mu + w @ basis
+        target = 2 * q1 - q2 - mu                        # smoothness: v - 2 q1 + q2 = 0
+        # the prior and smoothness terms are linear in w: their Jacobian is fixed
+        linear = np.vstack([np.eye(len(sd)), basis.T / self.sigma_smooth])
+        seen: dict[bytes, tuple] = {}
+
+        def control_term(w: np.ndarray) -> tuple:
+            # the control residuals at w and their forward differences, from one batch of
+            # candidate poses (one kinematics call): the solver asks for the Jacobian at the
+            # points it accepts, so each is computed with the residuals it follows
+            key = w.tobytes()
+            if key not in seen:
+                kin = self._kinematics(mu + np.vstack([w, w + h * np.eye(len(w))]) @ basis,
+                                       root_prev, theta)
+                rr = (kin[0] - control).reshape(len(w) + 1, -1) / self.sigma_control
+                seen[key] = (rr[0], ((rr[1:] - rr[0]) / h).T, tuple(k[:1] for k in kin))
+            return seen[key]
 
         def residuals(w: np.ndarray) -> np.ndarray:
-            w = np.atleast_2d(w)
-            v = mu + (w * sd) @ comp
-            ps = self._sensor_positions(v, root_prev, theta)
             return np.concatenate([
-                w,                                                        # prior: N(0, sd^2)
-                (v - 2 * q1 + q2) / self.sigma_smooth,                    # smoothness
-                (ps - control).reshape(len(w), -1) / self.sigma_control,  # control
-            ], axis=1)
+                w,                                       # prior: N(0, sd^2)
+                (w @ basis - target) / self.sigma_smooth,  # smoothness
+                control_term(w)[0],                      # control
+            ])
 
-        def jac(w: np.ndarray, h: float = 1e-4) -> np.ndarray:
-            # forward differences as one batch of candidate poses (one FK)
-            rr = residuals(np.vstack([w, w + h * np.eye(len(w))]))
-            return ((rr[1:] - rr[0]) / h).T
+        def jac(w: np.ndarray) -> np.ndarray:
+            return np.vstack([linear, control_term(w)[1]])
 
         w0 = ((q1 - mu) @ comp.T) / sd
-        res = least_squares(lambda w: residuals(w)[0], w0, jac=jac, method="trf",
-                            max_nfev=self.max_nfev)
-        return mu + (res.x * sd) @ comp
+        # MINPACK's Levenberg-Marquardt (lmder) through leastsq: least_squares(method="lm")
+        # makes the same call and then one more Jacobian for its report, unused here;
+        # full_output only keeps leastsq from warning when max_nfev ends the search
+        w = leastsq(residuals, w0, Dfun=jac, full_output=True, ftol=1e-8, xtol=1e-8,
+                    gtol=1e-8, maxfev=self.max_nfev)[0]
+        return mu + w @ basis, control_term(w)[2]
 
     # ---- reconstruction ---------------------------------------------------------------------
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
@@ -216,9 +249,8 @@ class PCALocal(Method):
         first = self._index()[1].nearest(signals[0] / self.signal_scale_, 1)
         vecs = np.empty((t, self.poses_.shape[1]))
         vecs[0] = self.poses_[first[0]]
-        rot, root, th = self._step(vecs[:1], np.zeros(3), 0.0)
+        pos, ori, root, th = self._kinematics(vecs[:1], np.zeros(3), 0.0)
         theta = float(th[0])
-        pos, ori = self._sensors(rot, root)
         p1, p2, r1 = pos[0], pos[0], ori[0]
         root_prev = root[0]
         facc = signals.reshape(t, -1, 6)[:, :, :3]
@@ -226,12 +258,10 @@ class PCALocal(Method):
         for f in range(1, t):
             q1 = vecs[f - 1]
             q2 = vecs[f - 2] if f >= 2 else q1
-            acc = qrot(r1, facc[f]) + GRAVITY          # world acceleration, (S, 3)
+            acc = (r1 @ facc[f][:, :, None])[..., 0] + GRAVITY  # world acceleration, (S, 3)
             control = 2 * p1 - p2 + acc * dt * dt
-            vecs[f] = self._solve_frame(q1, q2, control, root_prev, theta)
-            rot, root, th = self._step(vecs[f:f + 1], root_prev, theta)
+            vecs[f], (pos, ori, root, th) = self._solve_frame(q1, q2, control, root_prev, theta)
             theta, root_prev = float(th[0]), root[0]
-            pos, ori = self._sensors(rot, root)
             p2, p1, r1 = p1, pos[0], ori[0]
         return pose.decode(vecs, self.skeleton_, self.fps_, start=np.zeros(3))
 

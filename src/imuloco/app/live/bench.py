@@ -186,17 +186,17 @@ async def _load(port: int, pid: int, rows: np.ndarray, viewers: int, seconds: fl
     poses = [[] for _ in range(viewers)]  # arrival times
     dropped: list[str] = []
     closures: list[str] = []
+    sockets: list = []  # the viewers' connections
     rss: list[tuple[float, float]] = []
     stop = asyncio.Event()
 
     async def viewer(i: int) -> None:
         try:
             async with connect(base + "/ws/view", max_size=None) as ws:
+                sockets.append(ws)
                 async for m in ws:
                     if m.startswith('{"type":"pose"'):
                         poses[i].append(loop.time())
-                    if stop.is_set():
-                        return
         except ConnectionClosed as e:
             dropped.append(f"viewer {i}: {e}")
 
@@ -212,11 +212,15 @@ async def _load(port: int, pid: int, rows: np.ndarray, viewers: int, seconds: fl
         """Streams rows at real time; the abuse (if any) on the same connection, reconnecting
         after each close."""
         start, i = loop.time(), 0
+        readers: list[asyncio.Task] = []
         plan = [(0.35, "1 MiB message"), (0.5, "rows 1e-7 s apart"), (0.65, "high rate"),
                 (0.8, "second phone and a talking viewer")] if abuse else []
         while i < len(rows):
             try:
                 async with connect(base + "/ws/phone", max_size=None) as ws:
+                    # read the server's status messages as the phone page does: unread, they
+                    # fill the client's queue and its closing handshake waits 10 s behind them
+                    readers.append(asyncio.create_task(_drain(ws)))
                     while i < len(rows):
                         now = loop.time() - start
                         j = int(np.searchsorted(rows[:, 0], now, side="right"))
@@ -233,6 +237,7 @@ async def _load(port: int, pid: int, rows: np.ndarray, viewers: int, seconds: fl
             except InvalidStatus as e:
                 closures.append(f"phone refused: {e}")
             await asyncio.sleep(0.1)  # reconnect, as the phone page does
+        await asyncio.gather(*readers)
 
     tasks = [asyncio.create_task(viewer(i)) for i in range(viewers)]
     mem = asyncio.create_task(memory())
@@ -242,6 +247,7 @@ async def _load(port: int, pid: int, rows: np.ndarray, viewers: int, seconds: fl
     end, cpu = loop.time(), _cpu_s(pid) - cpu
     await asyncio.sleep(0.5)
     stop.set()
+    await asyncio.gather(*(ws.close() for ws in sockets))  # viewers leave (1000)
     if tasks:
         await asyncio.wait(tasks, timeout=10)
     for t in tasks:
@@ -261,6 +267,17 @@ async def _load(port: int, pid: int, rows: np.ndarray, viewers: int, seconds: fl
             "growth_mb": max(m for _, m in rss) - max(warm),
             "server_cpu_share": cpu / (end - start),  # of one core, over the phone's run
             "run_s": end - start}
+
+
+async def _drain(ws) -> None:
+    """Read and drop a connection's incoming messages until it closes."""
+    from websockets.exceptions import ConnectionClosed
+
+    try:
+        async for _ in ws:
+            pass
+    except ConnectionClosed:
+        pass
 
 
 async def _abuse(what: str, ws, t: float, base: str, connect) -> None:

@@ -68,6 +68,7 @@ HERE = Path(__file__).parent
 PAGES = {"/": "live.html", "/live": "live.html", "/phone": "phone.html"}
 STATUS_EVERY_S = 0.5  # phone seconds between status messages
 LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
+LIMIT_CLOSE_TIMEOUT_S = 1.0  # closing a connection that broke a limit
 YIELD_EVERY = 32  # messages broadcast between two returns to the event loop
 
 
@@ -327,12 +328,21 @@ class LiveServer:
                 await self._publish(batch)
         except LimitExceeded as e:
             refused = True
+            self._release(ws)  # at once: a phone reconnecting need not wait for the handshake
+            # its unread messages stop this side reading, so its closing reply may never come:
+            # drop the connection after a short wait instead of websockets' default 10 s
+            ws.close_timeout = LIMIT_CLOSE_TIMEOUT_S
             await self._close(ws, "phone", e.code, e.reason)
         except ConnectionClosed:
             pass
         finally:
             if not refused:
                 log.info("phone %s disconnected: %s", _peer(ws), _why_closed(ws))
+            self._release(ws)
+
+    def _release(self, ws: ServerConnection) -> None:
+        """Free the phone slot if ``ws`` still holds it."""
+        if self.phone is ws:
             self.phone = None
             self.set_status("phone disconnected; waiting for a phone")
 
