@@ -3,9 +3,9 @@
 A reconstruction holds every joint's rotation per frame, and its analysis every joint's
 position: 0.45 MB per second of recording in one piece (16 GB for ten hours). Here the
 imported recording (a few MB per hour) is calibrated whole, as in one piece, then reconstructed
-``piece_s`` seconds at a time. Each piece is preceded by ``warmup_s`` seconds of signal that
-the method runs over and whose frames are dropped, so that a method's windows and filters see
-the same input as in one piece, and is turned about the vertical and moved so that it continues
+``piece_s`` seconds at a time. Each piece is preceded and followed by ``warmup_s`` seconds of
+signal that the method runs over and whose frames are dropped, so that a method's windows,
+filters and look-ahead see the same input as in one piece, and is turned about the vertical and moved so that it continues
 the previous piece at the join (the methods integrate the heading and the root's path from
 their own start). For methods with a finite window (the baselines) the result equals the
 one-piece reconstruction to rounding; recurrent methods (``learned``) forget their start
@@ -87,16 +87,18 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
     step, warm = max(1, round(piece_s * fps)), max(1, round(warmup_s * fps))
     last = None
     for start in range(0, frames, step):
-        begin, stop = max(0, start - warm), min(frames, start + step)
-        full = method.reconstruct_signals_full(signals[begin:stop])
+        stop = min(frames, start + step)
+        # the warm-up before and as much signal after: the last frames see their look-ahead
+        begin, end = max(0, start - warm), min(frames, stop + warm)
+        full = method.reconstruct_signals_full(signals[begin:end])
         motion = full.motion
         if pin:
             motion = pin_detected_contacts(motion)
         if last is not None:
             motion = continue_from(motion, start - begin - 1, *last)
-        piece = motion.slice(start - begin, motion.num_frames)
+        piece = motion.slice(start - begin, stop - begin)
         last = (piece.rotations[-1, 0].copy(), piece.root[-1].copy())
-        err, flags = (None if a is None else np.asarray(a)[start - begin:]
+        err, flags = (None if a is None else np.asarray(a)[start - begin:stop - begin]
                       for a in (full.error_m, full.unreliable))
         yield Reconstruction(piece, err, flags, full.note)
 

@@ -1,14 +1,18 @@
 """Gait measured from one sensor's raw signal, by the method that suits where it is worn.
 
-- Foot (``right_foot``, ``left_foot``; on the shoe over the instep): a zero-velocity-update
-  Kalman filter with Rauch-Tung-Striebel smoothing (gaitmap's ``RtsKalman``, its published
-  defaults: ZUPT when the gyroscope's norm stays under 34 deg/s over 50 ms) gives the foot's
-  3-D path; each still period is a stance; consecutive stances bound one stride, whose length
-  is the horizontal distance between the foot's rest positions (Rampp et al. 2015). Initial
-  and terminal contacts come from gaitmap's ``HerzerEventDetection`` (Rampp's gyroscope
-  events refined with the forward acceleration) on strides segmented at the ends of those
-  stances. gaitmap's Barth DTW segmentation and Rampp event detection live in ``gaitmap_mad``
-  (AGPL-3.0), which this MIT package does not depend on; the ZUPT stances need no template.
+- Foot (``right_foot``, ``left_foot``; on the shoe over the instep): the foot swings while
+  the gyroscope norm's 50 ms window maximum exceeds 100 deg/s for at least 0.2 s; between two
+  swings is one stance, and its stillest moment the foot's rest. A zero-velocity-update Kalman
+  filter with Rauch-Tung-Striebel smoothing (gaitmap's ``RtsKalman``) gives the foot's 3-D
+  path, with gaitmap's default ZUPTs (the gyroscope's norm under 34 deg/s over 50 ms) or-ed
+  with one at each stance's stillest moment (its ``StrideEventZuptDetector``): some walkers'
+  feet never get under 34 deg/s (their stance minimum is 40-60 deg/s), and without it their
+  stances went unnoticed and two strides counted as one. A stride's length is the horizontal
+  distance between the foot's rest positions (Rampp et al. 2015). Initial and terminal
+  contacts come from gaitmap's ``HerzerEventDetection`` (Rampp's gyroscope events refined with
+  the forward acceleration) on strides segmented at the swings' starts. gaitmap's Barth DTW
+  segmentation and Rampp event detection live in ``gaitmap_mad`` (AGPL-3.0), which this MIT
+  package does not depend on; the swings need no template.
 - Lower back (``lower_back``, L5): Mobilise-D's algorithms from ``mobgap`` (Iluz gait sequence
   detection, Ionescu initial contacts, Zijlstra's inverted-pendulum step length with Mobilise-D's
   published scaling factor). They need only the vertical acceleration, found from gravity.
@@ -40,6 +44,10 @@ MIN_STRIDES = 2
 # the shortest swing: ~0.3 s even in sprinting (about 40 % of a 0.7 s stride; Novacheck 1998,
 # The biomechanics of running, Gait & Posture 7); 0.2 s leaves a margin
 MIN_SWING_S = 0.2  # fewer and no stride length or cadence is defined
+# The foot swings while the gyroscope norm's 50 ms window maximum exceeds this for at least
+# MIN_SWING_S (small gaps bridged): three times the ZUPT detector's still threshold, far under
+# the foot's mid-swing angular velocity of several hundred deg/s in walking.
+SWING_DPS = 3 * ZUPT_GYRO_DPS
 
 
 @dataclass
@@ -150,8 +158,50 @@ def _gaitmap():
         raise MissingExtraError("foot-sensor gait", f"gaitmap ({e})", "gait") from None
 
 
-FOOT_METHOD = ("gaitmap RtsKalman ZUPT trajectory, stances as strides, "
-               "HerzerEventDetection contacts")
+FOOT_METHOD = ("gaitmap RtsKalman ZUPT trajectory (one ZUPT per stance at least), stances as "
+               "strides, HerzerEventDetection contacts")
+
+
+def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The foot's swings and the stillest moment of each stance around them.
+
+    gyro_dps : ndarray, shape (T, 3), deg/s on a uniform grid at ``rate`` Hz.
+
+    Returns ``starts``, ``stops`` (K,) of the swings (samples, stop exclusive) and ``moments``
+    (K + 1,): the minimum of the gyroscope norm's 50 ms window maximum (the ZUPT detector's
+    measure) before the first swing, between two swings and after the last one.
+    """
+    from scipy.ndimage import maximum_filter1d
+
+    from imuloco.phases.contacts import clean_mask
+
+    window = max(1, round(ZUPT_WINDOW_S * rate))
+    energy = maximum_filter1d(np.linalg.norm(gyro_dps, axis=1), window)
+    swinging = clean_mask(energy > SWING_DPS, window, round(MIN_SWING_S * rate))
+    swinging[[0, -1]] = False  # a stance (however short) before the first and after the last
+    starts, stops = _runs(swinging)
+    bounds = np.concatenate([[0], starts, [len(energy)]])
+    lows = np.concatenate([[0], stops, [len(energy)]])
+    moments = np.array([lo + int(np.argmin(energy[lo:hi])) for lo, hi in
+                        zip(lows[:-1], bounds[1:])], int)
+    return starts, stops, moments
+
+
+def _zupt_detector(mv: np.ndarray):
+    """gaitmap's default ZUPT detector or-ed with one ZUPT at each stance's stillest moment
+    ``mv`` (samples), and the stride list of ``min_vel`` events the latter reads."""
+    import pandas as pd
+    from gaitmap.zupt_detection import (
+        ComboZuptDetector,
+        NormZuptDetector,
+        StrideEventZuptDetector,
+    )
+
+    strides = pd.DataFrame({"s_id": np.arange(max(len(mv) - 1, 0)), "start": mv[:-1],
+                            "end": mv[1:], "min_vel": mv[:-1]}).set_index("s_id")
+    combo = ComboZuptDetector([("norm", NormZuptDetector()), ("stance", StrideEventZuptDetector(
+        half_region_size_s=ZUPT_WINDOW_S / 2))], operation="or")
+    return combo, strides
 
 
 def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = "right",
@@ -192,28 +242,26 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
                 data = align_dataset_to_gravity(data, rate, window_length_s=ZUPT_WINDOW_S,
                                                 static_signal_th=ZUPT_GYRO_DPS)
             except ValueError:
-                return not_measured(placement, FOOT_METHOD, "the foot is never still: no "
-                                    "stance, so no walking")
-        kalman = RtsKalman().estimate(data, sampling_rate_hz=rate)
+                try:  # ... else a foot that is never that still: its stances' stillest
+                    data = align_dataset_to_gravity(data, rate, window_length_s=ZUPT_WINDOW_S,
+                                                    static_signal_th=SWING_DPS)
+                except ValueError:
+                    return not_measured(placement, FOOT_METHOD, "the foot is never still: no "
+                                        "stance, so no walking")
+        starts, _, rest = swings(data[cols[3:]].to_numpy(), rate)
+        if len(starts) < MIN_STRIDES:
+            return not_measured(placement, FOOT_METHOD, f"{len(starts)} swing(s) found: no "
+                                "walking (a foot sensor needs at least 2 strides)")
+        zupt, moments = _zupt_detector(rest)
+        kalman = RtsKalman(zupt_detector=zupt).estimate(data, sampling_rate_hz=rate,
+                                                        stride_event_list=moments)
     pos = kalman.position_.to_numpy()[1:]  # gaitmap prepends the initial state
     ori = kalman.orientation_.to_numpy()[1:]
-    still = np.zeros(len(data), bool)
-    for a, b in kalman.zupts_[["start", "end"]].to_numpy():
-        still[a:b] = True
-    # a motion shorter than any swing (MIN_SWING_S) between two still periods is a jolt
-    # within one stance, not a stride
-    from imuloco.phases.contacts import clean_mask
-
-    starts, stops = _runs(clean_mask(still, round(MIN_SWING_S * rate), 1))
     t = times[0] + np.arange(len(data)) / rate
-    if len(starts) < MIN_STRIDES + 1:
-        return not_measured(placement, FOOT_METHOD, f"{len(starts)} stance(s) found: no "
-                            "walking (a foot sensor needs at least 3 stances for 2 strides)")
     # the sensor's forward axis: stride displacements seen from the sensor at rest, gravity
     # already along its z (a fixed mounting yaw, the median over strides)
     from scipy.spatial.transform import Rotation
 
-    rest = (starts + stops) // 2
     disp = np.diff(pos[rest], axis=0)
     local = Rotation.from_quat(ori[rest[:-1]]).inv().apply(disp)
     keep = np.linalg.norm(disp[:, :2], axis=1) > 0.2  # strides, not shuffles (0.2 m)
@@ -226,9 +274,11 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
     fsf[cols[:3]] = turn.apply(data[cols[:3]].to_numpy())
     fsf[cols[3:]] = turn.apply(data[cols[3:]].to_numpy())
     fbf = (convert_right_foot_to_fbf if foot == "right" else convert_left_foot_to_fbf)(fsf)
-    # segmented strides from the end of one stance (heel off, just before toe off) to the next
-    seg = pd.DataFrame({"s_id": np.arange(len(stops) - 1), "start": stops[:-1],
-                        "end": stops[1:]}).set_index("s_id")
+    # segmented strides from the start of one swing (heel off, just before toe off) to the
+    # next; the last swing's is one typical stride long (its contact counts too)
+    ends = np.append(starts[1:], min(len(data) - 1, starts[-1] + int(np.median(np.diff(starts)))))
+    seg = pd.DataFrame({"s_id": np.arange(len(starts)), "start": starts,
+                        "end": ends}).set_index("s_id")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ev = HerzerEventDetection(enforce_consistency=False, detect_only=("ic", "tc")).detect(
