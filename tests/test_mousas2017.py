@@ -226,10 +226,74 @@ def test_stream_filter_matches_the_offline_forward(fitted):
     topo64 = Topology(topo.phases, topo.counts, topo.lengths, topo.next_phase, topo.a_frame,
                       topo.a_phase)
     alpha, _ = forward(topo64, logb)
-    st = model.stream()
+    st = model.stream(beam=0)
     for t, sample in enumerate(sig):
         st.step(sample)
         np.testing.assert_allclose(st.alpha, alpha[t], atol=2e-5, err_msg=f"step {t}")
+
+
+def test_full_beam_is_the_exact_forward_step(fitted):
+    """A beam at least as wide as the number of segments prunes nothing: its forward
+    variable and poses are the exact step's (float64 against float32), missing samples too."""
+    model, _, test = fitted
+    sig = test.signals[:60].copy()
+    sig[30:40] = np.nan
+    width = int(model.lower_.counts.sum())
+    exact, beam = model.stream(beam=0), model.stream(beam=width)
+    for t, sample in enumerate(sig):
+        r0, p0 = exact.step(sample)
+        r1, p1 = beam.step(sample)
+        np.testing.assert_allclose(beam.state_posterior(), exact.state_posterior(),
+                                   rtol=1e-4, atol=1e-7, err_msg=f"step {t}")
+        np.testing.assert_allclose(np.abs((r0 * r1).sum(-1)), 1.0, atol=1e-6)
+        np.testing.assert_allclose(p1, p0, atol=1e-6)
+        assert beam.phase == exact.phase
+
+
+@pytest.mark.parametrize("width", [3, 12])
+def test_beam_step_is_the_exact_step_pruned(fitted, width):
+    """Each beam step is the exact forward step (transitions of :meth:`Topology.predict`,
+    emissions, floors) applied to the beam's previous forward variable, then cut to the
+    ``width`` segments of largest mass and renormalised: no segment that belongs in the beam
+    is missed, also among those entering from outside it."""
+    from imuloco.methods.mousas2017 import stream as stream_mod
+    from imuloco.methods.mousas2017.beam import SegmentBeam
+
+    model, _, test = fitted
+    topo = model.lower_
+    # unequal transition probabilities, so that a mix-up of self/next/skip or phases shows
+    topo64 = Topology(topo.phases, topo.counts, topo.lengths, topo.next_phase, A_FRAME,
+                      A_PHASE)
+    st = model.stream(beam=width)
+    st._beam = tables = SegmentBeam(topo64, model.states_, width, stream_mod.EMISSION_FLOOR,
+                                    stream_mod.ALPHA_FLOOR)
+    sig = test.signals[:40].copy()
+    sig[20:23] = np.nan
+    st.step(sig[0])
+    for t in range(1, len(sig)):
+        prev = st.state_posterior()
+        st.step(sig[t])
+        pred = topo64.predict(prev)
+        if not np.isnan(sig[t]).any():
+            ll = model.states_.log_emission_batch(sig[t][None])[0]
+            # the beam's emissions are relative to the best state it computes (the kept
+            # segments and every first frame); the floor is relative to the same
+            cand = np.unique(np.concatenate([tables.states[tables.seg].ravel(),
+                                             tables.states[:, 0]]))
+            cand = cand[cand < topo.num_states]
+            pred = pred * (np.exp(ll - ll[cand].max()) + stream_mod.EMISSION_FLOOR)
+        mass = np.append(pred, 0.0)[tables.states].sum(1)           # per segment
+        keep = tables.seg
+        out = np.setdiff1d(np.arange(mass.size), keep)
+        assert keep.size == width and np.unique(keep).size == width
+        # the kept segments are those of largest mass (ties, as at a missing sample, either way)
+        assert mass[keep].min() >= mass[out].max() * (1 - 1e-9), f"step {t}"
+        dense = np.zeros(topo.num_states + 1)
+        dense[tables.states[keep]] = np.append(pred, 0.0)[tables.states[keep]]
+        dense = dense[:-1] / dense.sum()
+        dense[tables.states[keep][tables.valid[keep]]] += stream_mod.ALPHA_FLOOR
+        np.testing.assert_allclose(st.state_posterior(), dense, rtol=1e-5, atol=1e-12,
+                                   err_msg=f"step {t}")
 
 
 def test_exp_clamp_changes_no_bit(fitted, monkeypatch):
@@ -246,7 +310,7 @@ def test_exp_clamp_changes_no_bit(fitted, monkeypatch):
     runs = []
     for clamp in (stream_mod.EXP_CLAMP, -np.inf):
         monkeypatch.setattr(stream_mod, "EXP_CLAMP", clamp)
-        st = model.stream()
+        st = model.stream(beam=0)
         alphas = []
         for x in sig:
             st.step(x)

@@ -4,6 +4,9 @@ For each folder, every ``*.bvh`` is read five ways, each over the whole folder:
 
 - ``numpy``: the reference, a plain numpy text parse of the same files (``numpy.loadtxt`` of
   each MOTION block, nothing else);
+- ``arrow``: the same blocks parsed by pyarrow's CSV reader (one-space delimiter, float64
+  columns declared, one thread), when pyarrow is installed: whether another library's text
+  parser would beat numpy's on these files;
 - ``old``: the reader of an earlier commit (``--against REV``), loaded from git with the
   rotation functions of that commit, on today's Motion and Skeleton;
 - ``reader``: today's :func:`imuloco.io.bvh.read_bvh` with no cache;
@@ -20,6 +23,7 @@ times), with the 1-minute load average when measured.
 
 from __future__ import annotations
 
+import importlib.util
 import io
 import json
 import os
@@ -40,7 +44,7 @@ from imuloco.errors import FormatError
 from imuloco.io.atomic import atomic_write
 from imuloco.io.bvh import read_bvh
 
-WAYS = ("numpy", "old", "reader", "cold", "warm")
+WAYS = ("numpy", "arrow", "old", "reader", "cold", "warm")
 _MOTION = re.compile(r"^\s*MOTION\s*$", re.MULTILINE)
 
 
@@ -50,6 +54,29 @@ def numpy_parse(path: Path) -> int:
     text = path.read_text(encoding="latin-1")
     block = text[_MOTION.search(text).end():].lstrip().split("\n", 2)[2]
     return len(np.loadtxt(io.StringIO(block), comments=None, ndmin=2))
+
+
+def arrow_parse(path: Path) -> int:
+    """The MOTION block (as :func:`numpy_parse` cuts it) read by ``pyarrow.csv.read_csv``;
+    returns the frame count."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    text = path.read_text(encoding="latin-1")
+    block = text[_MOTION.search(text).end():].lstrip().split("\n", 2)[2]
+    # fields between single spaces (a trailing space makes an empty last column, read as null)
+    width = len(block[:block.find("\n")].rstrip("\r").split(" "))
+    names = [f"c{i}" for i in range(width)]
+    try:
+        return pcsv.read_csv(
+            pa.BufferReader(block.encode("latin-1")),
+            read_options=pcsv.ReadOptions(column_names=names, use_threads=False),
+            parse_options=pcsv.ParseOptions(delimiter=" "),
+            convert_options=pcsv.ConvertOptions(
+                column_types=dict.fromkeys(names, pa.float64())),
+        ).num_rows
+    except pa.ArrowInvalid as e:  # counted as refused by the bench
+        raise FormatError(path, None, f"pyarrow's CSV reader: {e}") from None
 
 
 def module_at(rev: str, relpath: str, name: str) -> types.ModuleType:
@@ -100,6 +127,7 @@ def load_benchmark(folders: Sequence[str | Path], out: str | Path | None = None,
     from imuloco.io.cache import read_motion_cached
 
     old = old_reader(against) if against else None
+    arrow = importlib.util.find_spec("pyarrow") is not None
     records = []
     for folder in map(Path, folders):
         files = sorted(folder.glob("*.bvh"))
@@ -113,11 +141,13 @@ def load_benchmark(folders: Sequence[str | Path], out: str | Path | None = None,
             saved = os.environ.get("IMULOCO_CACHE")
             os.environ["IMULOCO_CACHE"] = tmp
             try:
-                ways: dict[str, Callable[[Path], Any]] = {
-                    "numpy": numpy_parse, "reader": read_bvh,
-                    "cold": read_motion_cached, "warm": read_motion_cached}
+                ways: dict[str, Callable[[Path], Any]] = {"numpy": numpy_parse}
+                if arrow:
+                    ways["arrow"] = arrow_parse
                 if old is not None:
-                    ways = {"numpy": numpy_parse, "old": old} | ways
+                    ways["old"] = old
+                ways |= {"reader": read_bvh, "cold": read_motion_cached,
+                         "warm": read_motion_cached}
                 for way, read in ways.items():
                     wall, cpu, refused = _timed(files, read, f"{folder.name} {way}", progress)
                     rec[f"{way}_s"], rec[f"{way}_cpu_s"] = round(wall, 3), round(cpu, 3)
@@ -159,12 +189,15 @@ def table(records: list[dict[str, Any]], against: str | None = None) -> str:
     head = ["folder", "clips", "frames"] + [
         f"{'old (' + against[:7] + ')' if w == 'old' and against else w} s (frames/s)"
         for w in ways]
-    head += ["reader speed / numpy's", "warm / cold speed"] + (
+    head += (["arrow speed / numpy's"] if "arrow" in ways else []) + [
+        "reader speed / numpy's", "warm / cold speed"] + (
         ["reader speed / old's", "old refused"] if "old" in ways else [])
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in records:
         row = [r["folder"], str(r["clips"]), f"{r['frames']:,}"]
         row += [f"{r[w + '_s']:.1f} ({r[w + '_fps']:,})" for w in ways]
+        if "arrow" in ways:
+            row.append(f"{r['arrow_fps'] / r['numpy_fps']:.2f}x")
         row += [f"{r['reader_fps'] / r['numpy_fps']:.2f}x",
                 f"{r['warm_fps'] / r['cold_fps']:.0f}x"]
         if "old" in ways:

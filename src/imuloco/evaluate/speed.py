@@ -21,8 +21,14 @@ Protocol details fixed here:
   the clip's own reconstruction (``test_mpjpe_cm``, heading-aligned at the first frame as in
   :mod:`imuloco.evaluate.bench`): the same clip for every method, size and revision.
 - ``against``: each method is also fitted and timed as its module was at that git commit
-  (the module file from git, on today's package; record ``method`` ``NAME@REV``), right after
-  today's, on the same database and test clip: a speed-up against the old code in one run.
+  (the module file from git, on today's package; for a method that is a package of modules,
+  such as ``mousas2017``, the names its module takes from that package at that commit too;
+  record ``method`` ``NAME@REV``), right after today's, on the same database and test clip: a
+  speed-up against the old code in one run.
+- Methods are registry names, each optionally with hyperparameters (``mousas2017[beam=256]``,
+  :func:`imuloco.methods.registry.parse_method_spec`). Specs of one method that differ only in
+  hyperparameters its class lists in ``stream_params`` (they change the online stream, not the
+  fit) share one fitted model per size and are timed one after the other.
 - Timings use one BLAS/OpenMP thread (threadpoolctl), like a single core.
 - ``online_fps`` is steps over their total wall time; latencies are per step, in ms, wall
   clock. On a shared machine other processes inflate wall times, so each record also has
@@ -141,15 +147,33 @@ def _prefix(examples: list[Example], frames: int) -> tuple[list[Example], dict[s
     return out, info
 
 
+def _module_at(rev: str, module: str):
+    from imuloco.evaluate.loadspeed import module_at
+
+    return module_at(rev, "src/" + module.replace(".", "/") + ".py",
+                     f"imuloco_at_{rev}_{module.replace('.', '_')}")
+
+
 def method_at(name: str, rev: str) -> type:
     """The class of method ``name`` as it was at git commit ``rev``: its module's file at that
-    commit run on today's package (a source checkout is needed), named ``NAME@REV``."""
-    from imuloco.evaluate.loadspeed import module_at
+    commit run on today's package (a source checkout is needed), named ``NAME@REV``. When the
+    method is a package (``imuloco.methods.mousas2017``), what its module takes from the
+    package's other modules (stream, forward step, model) is taken from them at ``rev``."""
     from imuloco.methods import method_class
 
     cls = method_class(name)
-    module = module_at(rev, "src/" + cls.__module__.replace(".", "/") + ".py",
-                       f"imuloco_at_{rev}_{cls.__module__.replace('.', '_')}")
+    module = _module_at(rev, cls.__module__)
+    package = cls.__module__.rpartition(".")[0]
+    if package != "imuloco.methods":
+        siblings: dict[str, Any] = {}
+        for key, obj in list(vars(module).items()):
+            src = getattr(obj, "__module__", None)
+            if isinstance(src, str) and src.startswith(package + ".") \
+                    and src != cls.__module__:
+                if src not in siblings:
+                    siblings[src] = _module_at(rev, src)
+                if hasattr(siblings[src], key):
+                    setattr(module, key, getattr(siblings[src], key))
     old = getattr(module, cls.__qualname__)
     old.name = f"{name}@{rev}"  # the entry point names today's class only
     return old
@@ -184,6 +208,13 @@ def time_offline(method, test: Example, min_frames: int = MIN_STEPS, warmup: int
             "test_mpjpe_cm": float(metrics.evaluate(test.motion, motion)["mpjpe_cm"])}
 
 
+def _fit_key(run: tuple) -> str:
+    """Runs with the same key share one fitted model: same class, same fit hyperparameters."""
+    _, _, cls, fit_p, _ = run
+    return json.dumps([f"{cls.__module__}.{cls.__qualname__}", fit_p], sort_keys=True,
+                      default=str)
+
+
 def speed_benchmark(
     methods: Sequence[str],
     out: Path,
@@ -199,12 +230,13 @@ def speed_benchmark(
 
     Parameters
     ----------
-    methods : registry names of online methods (offline ones get a record with None timings).
+    methods : registry names of methods, optionally with hyperparameters
+        (``name[key=value;...]``; offline ones get a record with None online timings).
     out : output folder.
     data : folder of clips (None: the bundled sample, repeated for the large sizes).
     db_frames : database sizes in frames (default :data:`DEFAULT_SIZES`).
     placements, noise, seed : sensors simulated for training and the test clip.
-    params : hyperparameters per method name.
+    params : hyperparameters per method spec (added to the spec's own).
     against : a git commit: also time each method's code at that commit (``NAME@REV``).
 
     The largest database is simulated once; each size takes its first frames (clips in the
@@ -218,12 +250,24 @@ def speed_benchmark(
     """
     from imuloco.evaluate.bench import load_data
     from imuloco.methods import method_class
+    from imuloco.methods.registry import parse_method_spec
 
-    classes = []  # fail before any work on an unknown or uninstalled method or commit
-    for m in methods:
-        classes.append((m, m, method_class(m)))
-        if against:
-            classes.append((m, f"{m}@{against}", method_at(m, against)))
+    # (spec, label, class, fit params, stream params); fail before any work on an unknown or
+    # uninstalled method or commit
+    runs = []
+    for spec in methods:
+        name, p = parse_method_spec(spec)
+        cls = method_class(name)
+        p = {**p, **(params or {}).get(spec, {})}
+        online = {k: v for k, v in p.items() if k in cls.stream_params}
+        fit_p = {k: v for k, v in p.items() if k not in online}
+        runs.append((spec, spec, cls, fit_p, online))
+        old_spec = spec if not online else name + (
+            f"[{';'.join(f'{k}={v}' for k, v in fit_p.items())}]" if fit_p else "")
+        if against and not any(r[1] == f"{old_spec}@{against}" for r in runs):
+            # the old code once per fitted model, without the stream hyperparameters (it
+            # may not have them)
+            runs.append((spec, f"{old_spec}@{against}", method_at(name, against), fit_p, {}))
     sizes = list(db_frames or DEFAULT_SIZES)
     placements = list(placements)
     db, test_db = _split_test(load_data(data))
@@ -232,13 +276,23 @@ def speed_benchmark(
     examples = synthesize(big, placements, noise, seed)
     records = []
     with threadpool_limits(limits=1):
-        for name, label, cls in classes:
-            for size in sizes:
-                sub, info = _prefix(examples, size)
-                rec: dict[str, Any] = {"method": label, "requested_frames": size, **info}
-                t0 = time.perf_counter()
-                method = _fit(cls, (params or {}).get(name, {}), sub, placements, noise)
-                rec["fit_s"] = round(time.perf_counter() - t0, 2)
+        fitted: dict[str, tuple[Any, float, dict[str, Any]]] = {}
+        order = sorted(range(len(runs)), key=lambda i: _fit_key(runs[i]))  # shared fits adjacent
+        for size in sizes:
+            sub, info = _prefix(examples, size)
+            for i in order:
+                spec, label, cls, fit_p, online = runs[i]
+                key = _fit_key(runs[i])
+                if key not in fitted:
+                    fitted.clear()  # one fitted model held at a time
+                    t0 = time.perf_counter()
+                    method = _fit(cls, fit_p, sub, placements, noise)
+                    fitted[key] = method, round(time.perf_counter() - t0, 2), \
+                        method.get_params()
+                method, fit_s, defaults = fitted[key]
+                method.set_params(**({k: defaults[k] for k in cls.stream_params} | online))
+                rec: dict[str, Any] = {"method": label, "requested_frames": size, **info,
+                                       "fit_s": fit_s}
                 lower = getattr(method, "lower_", None)
                 rec["states"] = int(lower.num_states) if lower is not None else None
                 if method.supports_online:
@@ -258,8 +312,9 @@ def speed_benchmark(
                                online_cpu_ms_p50=None, steps=0,
                                load_avg=round(os.getloadavg()[0], 2))
                 rec.update(time_offline(method, test))
-                records.append(rec)
-                del method
+                records.append((i, size, rec))
+            fitted.clear()
+    records = [r for _, _, r in sorted(records, key=lambda t: (t[0], sizes.index(t[1])))]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "speed.json").write_text(json.dumps(records, indent=1) + "\n")

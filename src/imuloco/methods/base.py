@@ -124,6 +124,9 @@ class Method(ABC):
     # hyperparameters added after model files were written, with the value that reproduces
     # those files' behaviour (not the new default) when their header lacks them
     legacy_params: ClassVar[dict[str, Any]] = {}
+    # hyperparameters that change only the online stream (read when a stream starts), not what
+    # fit learns: a fitted model serves every value of them (the speed bench times them on one)
+    stream_params: ClassVar[tuple[str, ...]] = ()
     # hyperparameters removed from the method, with the one value the current code reproduces
     # (None: any, it no longer matters): old files that carry it load without it, files with
     # another value are refused (retrain them)

@@ -4,7 +4,7 @@ interpolation (Mousas, Sensors 2017, 17, 2589)."""
 from __future__ import annotations
 
 import itertools
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -74,6 +74,10 @@ class Mousas2017(Method):
     foot_cleanup : pin the feet in predicted contact (sec. 6, after Kim et al. 2009).
     sigma_scale : emission standard deviations relative to the frame-state covariance's
         (eq. 9's sigma; 1: the y-marginal of the joint Gaussian of eq. 2).
+    beam : the online forward variable is kept on this many segments, those of largest
+        probability (:mod:`.beam`); 0: the exact forward step over every frame state. Model
+        files written before the beam load with 0. On the shared data no width was both
+        faster than the exact step and as accurate (docs/results/mousas2017/speed.md).
     """
 
     summary = "hierarchical multivariate HMM + reactive interpolation (Mousas 2017), online"
@@ -83,6 +87,8 @@ class Mousas2017(Method):
     # missing: the forward pass then only propagates its transitions there (sec. 5.2, device
     # dropout)
     gaps_missing = True
+    legacy_params: ClassVar[dict[str, Any]] = {"beam": 0}
+    stream_params: ClassVar[tuple[str, ...]] = ("beam",)
 
     def __init__(
         self,
@@ -99,6 +105,7 @@ class Mousas2017(Method):
         max_segment_s: float = 0.5,      # sec. 4.2 (speed-based segmentation)
         foot_cleanup: bool = True,       # sec. 6
         sigma_scale: float = 1.0,        # eq. 9 (sigma not given)
+        beam: int = 0,                   # sec. 6's forward algorithm, pruned (0: exact)
     ) -> None:
         self.K = K
         self.a_self_phase = a_self_phase
@@ -113,6 +120,7 @@ class Mousas2017(Method):
         self.max_segment_s = max_segment_s
         self.foot_cleanup = foot_cleanup
         self.sigma_scale = sigma_scale
+        self.beam = beam
 
     # ---- learning ---------------------------------------------------------------------------
     def learn(self, data: TrainingSet, progress: bool = False) -> None:
@@ -120,6 +128,8 @@ class Mousas2017(Method):
             raise ValueError(f"mousas2017: blend must be in (0, 1], got {self.blend}")
         if self.K < 1:
             raise ValueError(f"mousas2017: K must be >= 1, got {self.K}")
+        if self.beam < 0:
+            raise ValueError(f"mousas2017: beam must be >= 0 (0: exact), got {self.beam}")
         examples = data.examples
         max_len = max(2, round(self.max_segment_s * data.fps))
         segs: list[Segment] = []
@@ -174,16 +184,17 @@ class Mousas2017(Method):
         return self.foot_cleanup
 
     # ---- reconstruction ---------------------------------------------------------------------
-    def stream(self, pin: bool | None = None) -> MousasStream:
-        """A fresh online session; ``pin`` overrides ``foot_cleanup``."""
-        return MousasStream(self, self.foot_cleanup if pin is None else pin)
+    def stream(self, pin: bool | None = None, beam: int | None = None) -> MousasStream:
+        """A fresh online session; ``pin`` overrides ``foot_cleanup``, ``beam`` the model's
+        ``beam``."""
+        return MousasStream(self, self.foot_cleanup if pin is None else pin, beam)
 
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
         """Run the online stream over every frame (rows of NaN: missing samples), then pin the
         feet with :func:`imuloco.methods.postprocess.pin_feet` on the predicted contacts."""
         signals = np.asarray(signals, dtype=np.float64)
         n = len(signals)
-        st = MousasStream(self, pin=False)
+        st = MousasStream(self, pin=False)  # beam: the model's
         rot = np.empty((n, self.skeleton_.num_joints, 4))
         root = np.empty((n, 3))
         contacts = np.empty((n, 2))

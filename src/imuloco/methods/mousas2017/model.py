@@ -67,17 +67,19 @@ class FrameStates:
         self._lin_aug = np.vstack([self.lin, self.const[None, :]]).astype(np.float32)
         self._y_aug = np.ones(self.lin.shape[0] + 1, dtype=np.float32)
 
+    def quad(self, y: np.ndarray) -> np.ndarray:
+        """``y' P_g y / 2`` of every group, shape (G,) float32. y : (dy,) one sensor frame."""
+        g, dy = self.prec.shape[:2]
+        return ((self.prec.reshape(g * dy, dy) @ y).reshape(g, dy) @ (0.5 * y)).astype(
+            np.float32)
+
     def log_emission(self, y: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """log b_i(y) for every state, shape (N,) float32. y : (dy,) one sensor frame.
         out : optional preallocated (N,) float32 buffer (returned)."""
-        g, dy = self.prec.shape[:2]
-        quad = ((self.prec.reshape(g * dy, dy) @ y).reshape(g, dy) @ (0.5 * y)).astype(
-            np.float32)
         self._y_aug[:-1] = y
         ll = np.matmul(self._y_aug, self._lin_aug, out=out)
-        for g0, st, big_h, length in self.blocks:
-            ll[st: st + big_h * length].reshape(length, big_h)[...] -= \
-                quad[g0: g0 + length, None]
+        # a group's states are one run (``group`` is sorted), so quad per state is a repeat
+        ll -= np.repeat(self.quad(y), self.group_count)
         return ll
 
     def log_emission_batch(self, y: np.ndarray) -> np.ndarray:

@@ -3,9 +3,11 @@
 Each step:
 
 1. emissions ``b_i(y_t)`` of all frame states (one matrix-vector product, :mod:`.model`);
-2. the forward step of both levels (:mod:`.forward`): the upper level (one chain per phase
-   over its registered frames, emission eq. 8) gives ``p(S_h | y_1..t)`` and the most probable
-   phase; the lower level (one chain per segment, emission eq. 9) gives ``a_t(i, S_h)``;
+2. the forward step of both levels (:mod:`.forward`; the lower level's optionally pruned to
+   a beam of segments, :mod:`.beam`, which then also gives eq. 8's emission): the upper
+   level (one chain per phase over its registered frames, emission eq. 8) gives
+   ``p(S_h | y_1..t)`` and the most probable phase; the lower level (one chain per segment,
+   emission eq. 9) gives ``a_t(i, S_h)``;
 3. reactive interpolation: the K most probable segments of that phase, by their summed forward
    probability, with weights ``a_k`` that sum to 1 (eq. 10-12), and inside each segment its
    frame states weighted by their forward probability. The pose is eq. 13: the forward-weighted
@@ -28,27 +30,35 @@ recover when samples return) and the pose is the interpolated means without the 
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 
 from imuloco.methods.base import Stream
+from imuloco.methods.mousas2017.beam import SegmentBeam
 from imuloco.methods.postprocess import FootPinner
+
+# These helpers run once per frame on a few dozen joints, where numpy's cost per call
+# dominates: sums over a last axis of 3 are products with ones (a reduction over a short last
+# axis costs several times a small matrix product), index lists are prebuilt arrays.
+_ONES3 = np.ones(3)
+_CROSS = (np.array([1, 2, 0, 2, 0, 1]), np.array([2, 0, 1, 1, 2, 0]))
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a x b for (..., 3) arrays; inline because np.cross is slow on small arrays (both
     products of the formula in one multiply of 6 components)."""
-    p = a[..., [1, 2, 0, 2, 0, 1]] * b[..., [2, 0, 1, 1, 2, 0]]
+    p = a[..., _CROSS[0]] * b[..., _CROSS[1]]
     return p[..., :3] - p[..., 3:]
 
 
 def matrix_from_6d(d: np.ndarray) -> np.ndarray:
     """6-D rotations (..., 6) -> matrices (..., 3, 3), the Gram-Schmidt of
     :func:`imuloco.ops.rotations.from_6d` (its columns are the 6-D vector's two halves)."""
-    a = d[..., :3] / np.sqrt((d[..., :3] ** 2).sum(-1))[..., None]
-    b = d[..., 3:] - (a * d[..., 3:]).sum(-1)[..., None] * a
-    b /= np.sqrt((b * b).sum(-1))[..., None]
+    a = d[..., :3] / np.sqrt(np.square(d[..., :3]) @ _ONES3)[..., None]
+    b = d[..., 3:] - ((a * d[..., 3:]) @ _ONES3)[..., None] * a
+    b /= np.sqrt(np.square(b) @ _ONES3)[..., None]
     out = np.empty(d.shape[:-1] + (3, 3))
     out[..., 0], out[..., 1], out[..., 2] = a, b, _cross(a, b)
     return out
@@ -57,7 +67,7 @@ def matrix_from_6d(d: np.ndarray) -> np.ndarray:
 def matrix_exp(r: np.ndarray) -> np.ndarray:
     """Rotation vectors (..., 3) -> matrices (..., 3, 3) (Rodrigues,
     ``I + sin(a)/a K + 2 (sin(a/2)/a)^2 K^2``: no cancellation for small angles a)."""
-    a = np.sqrt((r * r).sum(-1))[..., None, None] + 1e-300
+    a = np.sqrt(np.square(r) @ _ONES3)[..., None, None] + 1e-300
     k = (r @ _SKEW_MAP).reshape(r.shape[:-1] + (3, 3))
     h = np.sin(0.5 * a) / a
     return _EYE3 + (np.sin(a) / a) * k + (2.0 * h * h) * (k @ k)
@@ -89,6 +99,7 @@ def _shepperd_map() -> tuple[np.ndarray, np.ndarray]:
 
 
 _SHEPPERD = _shepperd_map()
+_ONES4 = np.ones(4)
 
 
 def matrix_to_quat(m: np.ndarray) -> np.ndarray:
@@ -98,13 +109,8 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     k = (m.reshape(-1, 9) @ _SHEPPERD[0] + _SHEPPERD[1]).reshape(-1, 4, 4)
     best = np.argmax(k.reshape(-1, 16)[:, ::5], axis=1)
     q = k[np.arange(len(k)), best]
-    q /= np.sqrt((q * q).sum(-1, keepdims=True))
+    q /= np.sqrt(np.square(q) @ _ONES4)[..., None]
     return q.reshape(lead + (4,))
-
-
-def _yaw_matrix(theta: float) -> np.ndarray:
-    c, s = np.cos(theta), np.sin(theta)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 # Floors that keep every float32 in the forward pass a normal number. Subnormal floats
@@ -116,7 +122,7 @@ def _yaw_matrix(theta: float) -> np.ndarray:
 # maxima: np.maximum is about six times slower than np.add on float32.
 EMISSION_FLOOR = float(np.exp(-40.0))
 ALPHA_FLOOR = 1e-18
-EXP_CLAMP = -60.0  # log emissions below max - 60 are clamped before exp (see _filter)
+EXP_CLAMP = -60.0  # log emissions below max - 60 are clamped before exp (see _filter_exact)
 _EXP_CLAMP_BITS = np.float32(EXP_CLAMP).view(np.uint32)
 
 
@@ -124,11 +130,14 @@ class MousasStream(Stream):
     """One online session of a fitted :class:`Mousas2017` (see the module docstring).
 
     pin : apply the foot-skate clean-up step by step.
+    beam : segments the lower level's forward variable keeps (:mod:`.beam`); 0 is the exact
+        forward step over every frame state (None: the model's ``beam``).
     """
 
-    def __init__(self, model, pin: bool = True) -> None:
+    def __init__(self, model, pin: bool = True, beam: int | None = None) -> None:
         self.m = model
         self.pin = pin
+        self.beam = int(getattr(model, "beam", 0) if beam is None else beam)
         self.lower = model.lower_
         self.upper = model.upper_
         self.fs = model.states_
@@ -136,19 +145,25 @@ class MousasStream(Stream):
         self.j = sk.num_joints
         self.lay = model.layout_
         self.alpha: np.ndarray | None = None
-        n = self.lower.num_states
+        self._beam = SegmentBeam(self.lower, self.fs, self.beam, EMISSION_FLOOR,
+                                 ALPHA_FLOOR) if self.beam > 0 else None
+        n = 0 if self._beam is not None else self.lower.num_states
         self._b = np.empty(n, dtype=np.float32)
         self._work = np.empty(n, dtype=np.float32)
         self._pred = np.empty(n, dtype=np.float32)
-        self._bu = np.empty(self.fs.group_count.size, dtype=np.float32)
+        self._group_start = np.cumsum(self.fs.group_count) - self.fs.group_count
         # (phase, first group, first state, H, L) of each block
         self._blocks = [(h, g0, st, big_h, length) for (h, *_), (g0, st, big_h, length)
                         in zip(self.lower.blocks, self.fs.blocks)]
         self._a_up = self.upper.dense()
-        # the regression (G, dx, dy) as (dx, G, dy): a run of groups is then one matrix
-        self._reg_t = np.ascontiguousarray(self.fs.reg.transpose(1, 0, 2))
+        # per block: the regression of its groups as one matrix (dx, L dy), and the offsets
+        # of frame j (j H) inside the block
+        reg_t = self.fs.reg.transpose(1, 0, 2)
+        self._reg_blocks = [np.ascontiguousarray(reg_t[:, g0: g0 + length].reshape(
+            reg_t.shape[0], -1)) for _, g0, _, _, length in self._blocks]
+        self._frame_offsets = [np.arange(length)[None, :] * big_h
+                               for _, _, _, big_h, length in self._blocks]
         self._phase_block = {b[0]: i for i, b in enumerate(self._blocks)}
-        self._ones = np.ones(max(b[3] for b in self._blocks), dtype=np.float32)
         self.alpha_up: np.ndarray | None = None
         self.t = 0
         self.q_prev: np.ndarray | None = None
@@ -194,8 +209,23 @@ class MousasStream(Stream):
 
     # ---- inference --------------------------------------------------------------------------
     def _filter(self, y: np.ndarray | None) -> None:
-        """Both levels' forward step, in preallocated float32 buffers (no per-frame
-        allocation of (N,) arrays: at 10^5 states that costs more than the arithmetic)."""
+        """Both levels' forward step: the lower level's exact or in a beam, then the upper
+        level's (small: a dense product)."""
+        bu = self._beam.step(y) if self._beam is not None else self._filter_exact(y)
+        if self.alpha_up is None:
+            self.alpha_up = self.upper.initial() if bu is None else self._norm(
+                self.upper.initial() * bu)
+            return
+        up = self.alpha_up @ self._a_up
+        if bu is not None:
+            up *= bu
+        c = up.sum()
+        self.alpha_up = up / c if c > 0 else self._norm(self.alpha_up @ self._a_up)
+
+    def _filter_exact(self, y: np.ndarray | None) -> np.ndarray | None:
+        """The lower level's exact forward step, in preallocated float32 buffers (no per-frame
+        allocation of (N,) arrays: at 10^5 states that costs more than the arithmetic);
+        returns the upper level's emission (eq. 8), None when the sample is missing."""
         fs, low = self.fs, self.lower
         if y is None:
             b = bu = None
@@ -213,20 +243,15 @@ class MousasStream(Stream):
                 np.minimum(bits, _EXP_CLAMP_BITS, out=bits)
             np.exp(b, out=b)
             b += EMISSION_FLOOR
-            bu = self._bu
-            for _, g0, st, big_h, length in self._blocks:  # eq. 8: mean over the H segments
-                np.matmul(b[st: st + big_h * length].reshape(length, big_h),
-                          self._ones[:big_h], out=bu[g0: g0 + length])
-            bu /= fs.group_count
+            # eq. 8: the mean over the H segments of each group, whose states are one run
+            bu = np.add.reduceat(b, self._group_start) / fs.group_count
         if self.alpha is None:
             self.alpha = low.initial()
             if b is not None:
                 self.alpha *= b
             self.alpha /= self.alpha.sum()
             self.alpha += ALPHA_FLOOR
-            self.alpha_up = self.upper.initial() if bu is None else self._norm(
-                self.upper.initial() * bu)
-            return
+            return bu
         # unscaled: off by the common factor a_self, which the normalisation below removes
         pred = low.predict(self.alpha, out=self._pred, work=self._work, scaled=False)
         if b is None:
@@ -236,11 +261,12 @@ class MousasStream(Stream):
             pred *= b
         np.multiply(pred, 1.0 / c, out=self.alpha)
         self.alpha += ALPHA_FLOOR
-        up = self.alpha_up @ self._a_up  # the upper level is small: a dense product
-        if bu is not None:
-            up *= bu
-        c = up.sum()
-        self.alpha_up = up / c if c > 0 else self._norm(self.alpha_up @ self._a_up)
+        return bu
+
+    def state_posterior(self) -> np.ndarray:
+        """The lower level's forward variable over all frame states (N,) after the last step
+        (zero outside the beam)."""
+        return self._beam.dense() if self._beam is not None else self.alpha.astype(np.float64)
 
     @staticmethod
     def _norm(a: np.ndarray) -> np.ndarray:
@@ -252,31 +278,39 @@ class MousasStream(Stream):
         fs = self.fs
         pp = np.bincount(fs.group_phase, self.alpha_up, minlength=self.upper.num_phases)
         self.phase_posterior = pp
-        order = np.argsort(-pp)
-        for h in order:  # the lower level may hold no mass in that phase: take the next
-            blk_id = self._phase_block.get(int(h))
+        for h in itertools.chain((int(pp.argmax()),), np.argsort(-pp).tolist()):
+            # the lower level may hold no mass in that phase: take the next
+            blk_id = self._phase_block.get(h)
             if blk_id is None:
                 continue
             _, g0, st, big_h, length = self._blocks[blk_id]
-            blk = self.alpha[st: st + big_h * length].reshape(length, big_h)
-            w = blk.sum(axis=0)
-            if w.max() > 0:
+            if self._beam is not None:  # the block's segments in the beam
+                segs, frames = self._beam.block_segments(blk_id)      # (m,), (m, L)
+            else:
+                segs, frames = None, self.alpha[st: st + big_h * length].reshape(
+                    length, big_h).T
+            w = frames.sum(axis=1)
+            if w.size and w.max() > 0:
                 break
-        self.phase = int(h)
-        k = min(self.m.K, big_h)
-        idx = np.argpartition(w, big_h - k)[big_h - k:] if k < big_h else np.arange(big_h)
-        tot = float(w[idx].sum())
-        weights = (blk[:, idx].T / tot if tot > 0 else
+        self.phase = h
+        m = w.size
+        k = min(self.m.K, m)
+        top = np.argpartition(w, m - k)[m - k:] if k < m else np.arange(m)
+        idx = top if segs is None else segs[top]
+        tot = float(w[top].sum())
+        weights = (frames[top] / tot if tot > 0 else
                    np.full((k, length), 1.0 / (k * length))).astype(np.float64)
-        rows = (st + np.arange(length)[None, :] * big_h + idx[:, None]).ravel()  # (K L,)
-        w = weights.ravel()
-        x = w @ fs.mu_x.take(rows, axis=0)
-        mu_y = fs.mu_y.take(rows, axis=0)
-        self.y_bar = w @ mu_y                                               # eq. 10
-        self.variance = weights.sum(0) @ fs.cond_var[g0: g0 + length]      # eq. 12
+        rows = (st + self._frame_offsets[blk_id] + idx[:, None]).ravel()      # (K L,)
+        x = weights.ravel() @ fs.mu_x.take(rows, axis=0)
+        # per frame l: sum_k w_kl mu^Y_kl, one batched product (L, 1, K) @ (L, K, dy)
+        wy = np.matmul(weights.T[:, None, :], fs.mu_y.take(rows, axis=0).reshape(
+            k, length, -1).swapaxes(0, 1))[:, 0]                               # (L, dy)
+        self.y_bar = wy.sum(0)                                              # eq. 10
+        wl = weights.sum(0)                                                 # (L,)
+        self.variance = wl @ fs.cond_var[g0: g0 + length]                   # eq. 12
         if y is not None:                                                   # eq. 6, 11
-            r = np.einsum("kl,kld->ld", weights, y - mu_y.reshape(k, length, -1))
-            x += self._reg_t[:, g0: g0 + length].reshape(x.size, -1) @ r.ravel()
+            r = np.multiply.outer(wl, y) - wy                               # (L, dy)
+            x += self._reg_blocks[blk_id] @ r.ravel()
         return x
 
     # ---- output -----------------------------------------------------------------------------
@@ -291,12 +325,12 @@ class MousasStream(Stream):
             d6 = self.m.blend * d6 + (1.0 - self.m.blend) * pred6
         r = matrix_from_6d(d6)
         self.r_prev = r
-        height, vx, vz, yaw_rate = (float(v) for v in x[lay["root"]])
+        height, vx, vz, yaw_rate = x[lay["root"]].tolist()
         if self.t > 0:
             self.theta += yaw_rate / fps
         c, s = math.cos(self.theta), math.sin(self.theta)
         rm = r.copy()
-        rm[0] = _yaw_matrix(self.theta) @ r[0]
+        rm[0] = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]) @ r[0]  # about +Y
         # root step: the heading-frame velocity turned by the yaw (about +Y), as pose.decode
         sx, sz = ((c * vx + s * vz) / fps, (c * vz - s * vx) / fps) if self.t > 0 else (0.0, 0.0)
         raw = self.root_raw
@@ -305,10 +339,12 @@ class MousasStream(Stream):
         raw[1] = height
         rot = matrix_to_quat(rm)
         if self.q_prev is not None:  # keep quaternion signs continuous over time
-            rot[(rot * self.q_prev).sum(-1) < 0] *= -1.0
+            flip = (rot * self.q_prev) @ _ONES4 < 0
+            if flip.any():
+                rot[flip] *= -1.0
         self.q_prev = rot
-        lo, hi = x[lay["contacts"]]
-        contacts = np.array([min(max(float(lo), 0.0), 1.0), min(max(float(hi), 0.0), 1.0)])
+        lo, hi = x[lay["contacts"]].tolist()
+        contacts = np.array([min(max(lo, 0.0), 1.0), min(max(hi, 0.0), 1.0)])
         self.contacts = contacts
         if not self.pin:
             return rot, raw.copy()
