@@ -45,7 +45,8 @@ class _Rows:
     ``a`` to the nearest row left out. Every row left out is then at least ``R - |q - a|`` from
     a later query ``q`` (triangle inequality): when the k-th nearest kept row is closer than
     that, the kept rows' answer is the exact one, found among ``reach`` rows instead of N;
-    otherwise the query is a full one. The answer never depends on which queries came before.
+    otherwise the query is a full one. The answer never depends on which queries came before
+    (up to ties).
 
     Hand-written because no library index reuses a previous query's neighbourhood, and the
     library trees do not prune here: on the 60,344 scaled poses (130-D, 47 principal axes for
@@ -58,31 +59,32 @@ class _Rows:
         self.x = np.asarray(x, dtype=np.float64)
         self.norms = np.einsum("ij,ij->i", self.x, self.x)
         self.reach = reach
-        self._kept: np.ndarray | None = None  # indices of the rows nearest to self._anchor
-        self._kept_x, self._kept_norms = self.x[:0], self.norms[:0]
-        self._anchor = np.zeros(self.x.shape[1])
-        self._radius = 0.0
+        # the last full query's kept rows: indices, rows, their squared norms, the query's
+        # point and R; one tuple, replaced whole, so that concurrent reconstructions with one
+        # model each read a consistent one
+        self._kept: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float] | None = None
 
     def nearest(self, q: np.ndarray, k: int) -> np.ndarray:
-        """Indices (min(k, N),) of the rows nearest to q (D,), ascending."""
+        """Indices (min(k, N),) of the rows nearest to q (D,), ascending (exact up to ties)."""
         n = len(self.x)
         if k >= n:
             return np.arange(n)
-        if self._kept is not None and k < len(self._kept):
-            d2 = self._kept_norms - 2.0 * (self._kept_x @ q)  # less |q|^2, as below
+        kept = self._kept
+        if kept is not None and k < len(kept[0]):
+            idx, rows, norms, anchor, radius = kept
+            d2 = norms - 2.0 * (rows @ q)  # squared distances less |q|^2, as below
             part = np.argpartition(d2, k - 1)[:k]
-            if np.sqrt(max(d2[part].max() + q @ q, 0.0)) < (
-                    self._radius - np.linalg.norm(q - self._anchor)):
-                return np.sort(self._kept[part])
-        d2 = self.norms - 2.0 * (self.x @ q)  # squared distances less |q|^2
+            if np.sqrt(max(d2[part].max() + q @ q, 0.0)) < radius - np.linalg.norm(q - anchor):
+                return np.sort(idx[part])
+        d2 = self.norms - 2.0 * (self.x @ q)
         m = min(max(self.reach, k), n - 1)
-        kept = np.argpartition(d2, m)[: m + 1]
-        order = np.argsort(d2[kept])
-        self._kept, self._anchor = kept[order[:m]], np.array(q, dtype=np.float64)
-        self._kept_x, self._kept_norms = self.x[self._kept], self.norms[self._kept]
-        # the nearest row left out, less a margin for the expansion's rounding
-        self._radius = np.sqrt(max(d2[kept[order[m]]] + q @ q, 0.0)) * (1 - 1e-9) - 1e-9
-        return np.sort(self._kept[:k])
+        near = np.argpartition(d2, m)[: m + 1]
+        near = near[np.argsort(d2[near])]
+        # R: the nearest row left out, less a margin for the expansion's rounding
+        radius = np.sqrt(max(d2[near[m]] + q @ q, 0.0)) * (1 - 1e-9) - 1e-9
+        idx = near[:m]
+        self._kept = (idx, self.x[idx], self.norms[idx], np.array(q, dtype=np.float64), radius)
+        return np.sort(idx[:k])
 
 
 class PCALocal(Method):
