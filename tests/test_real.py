@@ -185,6 +185,8 @@ def test_real_protocol_on_one_trial_each(real_dir, tmp_path):
     shoe = ours[("pyshoe-vicon", "right_foot")]
     # one trial's figures (Vicon): every stride found, the path within 1 % of the distance
     assert shoe["steps_err_pct"] == 0
+    # cadence as the reference counts it (strides over the trial): the steps' error
+    assert shoe["cadence_err_pct"] == pytest.approx(shoe["steps_err_pct"], abs=1e-9)
     assert shoe["stride_mae_m"] < 0.10 and shoe["path_final_pct"] < 1.0
     assert abs(ours[("ipol-gait", "lower_back")]["cadence_err_pct"]) < 3
 

@@ -132,12 +132,14 @@ def _bout_rows(gait: SensorGait, trial: RealTrial, ref_ic: np.ndarray, per_conta
         ref_len = b.stride_length_m
         ref_speed = b.speed_mps
         if trial.dataset == "pyshoe-vicon":  # foot flat to foot flat, the contacts between
+            # the reference counts strides over the whole trial, pauses included: so does
+            # the estimate (its contacts in the same window), not over its contacts' span
             ref_len = b.distance_m / b.strides
             ref_cad = 120.0 * b.strides / (b.end - b.start)
             ref_speed = b.distance_m / (b.end - b.start)
             inner = gait.initial_contacts[(gait.initial_contacts > b.start) &
                                           (gait.initial_contacts <= b.end)]
-            w["cadence_spm"] = _span_cadence(inner, per_contact)
+            w["cadence_spm"] = 60.0 * per_contact * len(inner) / (b.end - b.start)
             w["speed_mps"] = w["stride_length_m"] * w["cadence_spm"] / 120.0
         out.append({"cadence_ref": ref_cad, "cadence_est": w["cadence_spm"],
                     "stride_ref_m": ref_len, "stride_est_m": w["stride_length_m"],
