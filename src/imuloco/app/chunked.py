@@ -5,9 +5,9 @@ position: 0.45 MB per second of recording in one piece (16 GB for ten hours). He
 imported recording (a few MB per hour) is calibrated whole, as in one piece, then reconstructed
 ``piece_s`` seconds at a time. Each piece is preceded and followed by ``warmup_s`` seconds of
 signal that the method runs over and whose frames are dropped, so that a method's windows,
-filters and look-ahead see the same input as in one piece, and is turned about the vertical and moved so that it continues
-the previous piece at the join (the methods integrate the heading and the root's path from
-their own start). For methods with a finite window (the baselines) the result equals the
+filters and look-ahead see the same input as in one piece, and is turned about the vertical
+and moved so that it continues the previous piece at the join (the methods integrate the
+heading and the root's path from their own start). For methods with a finite window (the baselines) the result equals the
 one-piece reconstruction to rounding; recurrent methods (``learned``) forget their start
 within the warm-up, so pieces differ from one piece by what their state still remembers.
 Gait parameters are computed per piece and combined (:func:`combine`); a method's per-frame

@@ -158,18 +158,18 @@ def _gaitmap():
         raise MissingExtraError("foot-sensor gait", f"gaitmap ({e})", "gait") from None
 
 
-FOOT_METHOD = ("gaitmap RtsKalman ZUPT trajectory (one ZUPT per stance at least), stances as "
-               "strides, HerzerEventDetection contacts")
+FOOT_METHOD = ("gaitmap RtsKalman ZUPT trajectory (one ZUPT per stance at least), strides "
+               "from swing to swing, HerzerEventDetection contacts")
 
 
-def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
     """The foot's swings and the stillest moment of each stance around them.
 
     gyro_dps : ndarray, shape (T, 3), deg/s on a uniform grid at ``rate`` Hz.
 
-    Returns ``starts``, ``stops`` (K,) of the swings (samples, stop exclusive) and ``moments``
-    (K + 1,): the minimum of the gyroscope norm's 50 ms window maximum (the ZUPT detector's
-    measure) before the first swing, between two swings and after the last one.
+    Returns ``starts`` (K,), the samples where the swings start, and ``moments`` (K + 1,):
+    the minimum of the gyroscope norm's 50 ms window maximum (the ZUPT detector's measure)
+    before the first swing, between two swings and after the last one.
     """
     from scipy.ndimage import maximum_filter1d
 
@@ -184,7 +184,7 @@ def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray, n
     lows = np.concatenate([[0], stops, [len(energy)]])
     moments = np.array([lo + int(np.argmin(energy[lo:hi])) for lo, hi in
                         zip(lows[:-1], bounds[1:])], int)
-    return starts, stops, moments
+    return starts, moments
 
 
 def _zupt_detector(mv: np.ndarray):
@@ -235,20 +235,20 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
     data = pd.DataFrame(x, columns=cols)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # gaitmap warns when few still windows are found
-        try:  # gaitmap's defaults find standing (0.7 s under 2.5 deg/s) ...
-            data = align_dataset_to_gravity(data, rate)
-        except ValueError:
-            try:  # ... else the foot-flat moments of the ZUPT detector (50 ms, 34 deg/s)
-                data = align_dataset_to_gravity(data, rate, window_length_s=ZUPT_WINDOW_S,
-                                                static_signal_th=ZUPT_GYRO_DPS)
+        # gravity from gaitmap's defaults (standing: 0.7 s under 2.5 deg/s), else from the
+        # ZUPT detector's foot-flat moments (50 ms under 34 deg/s), else from a foot never
+        # that still: its stances' stillest moments (50 ms under SWING_DPS)
+        for still in ({}, {"window_length_s": ZUPT_WINDOW_S, "static_signal_th": ZUPT_GYRO_DPS},
+                      {"window_length_s": ZUPT_WINDOW_S, "static_signal_th": SWING_DPS}):
+            try:
+                data = align_dataset_to_gravity(data, rate, **still)
+                break
             except ValueError:
-                try:  # ... else a foot that is never that still: its stances' stillest
-                    data = align_dataset_to_gravity(data, rate, window_length_s=ZUPT_WINDOW_S,
-                                                    static_signal_th=SWING_DPS)
-                except ValueError:
-                    return not_measured(placement, FOOT_METHOD, "the foot is never still: no "
-                                        "stance, so no walking")
-        starts, _, rest = swings(data[cols[3:]].to_numpy(), rate)
+                continue
+        else:
+            return not_measured(placement, FOOT_METHOD, "the foot is never still: no stance, "
+                                "so no walking")
+        starts, rest = swings(data[cols[3:]].to_numpy(), rate)
         if len(starts) < MIN_STRIDES:
             return not_measured(placement, FOOT_METHOD, f"{len(starts)} swing(s) found: no "
                                 "walking (a foot sensor needs at least 2 strides)")

@@ -43,7 +43,7 @@ import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -208,11 +208,21 @@ def time_offline(method, test: Example, min_frames: int = MIN_STEPS, warmup: int
             "test_mpjpe_cm": float(metrics.evaluate(test.motion, motion)["mpjpe_cm"])}
 
 
-def _fit_key(run: tuple) -> str:
-    """Runs with the same key share one fitted model: same class, same fit hyperparameters."""
-    _, _, cls, fit_p, _ = run
-    return json.dumps([f"{cls.__module__}.{cls.__qualname__}", fit_p], sort_keys=True,
-                      default=str)
+class _Run(NamedTuple):
+    """One timed variant: its method spec, its record's label, the class, the fit's
+    hyperparameters and the stream's (``stream_params``)."""
+
+    spec: str
+    label: str
+    cls: type
+    fit_p: dict[str, Any]
+    online: dict[str, Any]
+
+    def fit_key(self) -> str:
+        """Runs with the same key share one fitted model: same class, same fit
+        hyperparameters."""
+        return json.dumps([f"{self.cls.__module__}.{self.cls.__qualname__}", self.fit_p],
+                          sort_keys=True, default=str)
 
 
 def speed_benchmark(
@@ -252,22 +262,21 @@ def speed_benchmark(
     from imuloco.methods import method_class
     from imuloco.methods.registry import parse_method_spec
 
-    # (spec, label, class, fit params, stream params); fail before any work on an unknown or
-    # uninstalled method or commit
-    runs = []
+    # fail before any work on an unknown or uninstalled method or commit
+    runs: list[_Run] = []
     for spec in methods:
         name, p = parse_method_spec(spec)
         cls = method_class(name)
         p = {**p, **(params or {}).get(spec, {})}
         online = {k: v for k, v in p.items() if k in cls.stream_params}
         fit_p = {k: v for k, v in p.items() if k not in online}
-        runs.append((spec, spec, cls, fit_p, online))
+        runs.append(_Run(spec, spec, cls, fit_p, online))
         old_spec = spec if not online else name + (
             f"[{';'.join(f'{k}={v}' for k, v in fit_p.items())}]" if fit_p else "")
-        if against and not any(r[1] == f"{old_spec}@{against}" for r in runs):
+        if against and not any(r.label == f"{old_spec}@{against}" for r in runs):
             # the old code once per fitted model, without the stream hyperparameters (it
             # may not have them)
-            runs.append((spec, f"{old_spec}@{against}", method_at(name, against), fit_p, {}))
+            runs.append(_Run(spec, f"{old_spec}@{against}", method_at(name, against), fit_p, {}))
     sizes = list(db_frames or DEFAULT_SIZES)
     placements = list(placements)
     db, test_db = _split_test(load_data(data))
@@ -277,12 +286,12 @@ def speed_benchmark(
     records = []
     with threadpool_limits(limits=1):
         fitted: dict[str, tuple[Any, float, dict[str, Any]]] = {}
-        order = sorted(range(len(runs)), key=lambda i: _fit_key(runs[i]))  # shared fits adjacent
+        order = sorted(range(len(runs)), key=lambda i: runs[i].fit_key())  # shared fits adjacent
         for size in sizes:
             sub, info = _prefix(examples, size)
             for i in order:
                 spec, label, cls, fit_p, online = runs[i]
-                key = _fit_key(runs[i])
+                key = runs[i].fit_key()
                 if key not in fitted:
                     fitted.clear()  # one fitted model held at a time
                     t0 = time.perf_counter()
