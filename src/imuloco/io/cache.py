@@ -5,10 +5,11 @@ Each entry is the Motion a reader returned, stored as an ``.npz`` of plain array
 unicode array; no object arrays, loaded with ``allow_pickle=False``), named by the SHA-256 of
 the file's bytes, the reader's own source code (any change to the readers invalidates every
 entry) and the reading options. Entries are written atomically
-(:func:`imuloco.io.atomic.atomic_write`); one that cannot be read is read again from the motion
-file and rewritten. The folder is ``$IMULOCO_CACHE``, else ``$XDG_CACHE_HOME/imuloco``, else
-``~/.cache/imuloco``; ``IMULOCO_CACHE=off`` turns the cache off. A cache that cannot be written
-(a read-only home) is skipped silently: it only saves time.
+(:func:`imuloco.io.atomic.atomic_write`, not flushed to disk: zip's checksums catch an entry a
+crash left damaged); one that cannot be read is read again from the motion file and rewritten.
+The folder is ``$IMULOCO_CACHE``, else ``$XDG_CACHE_HOME/imuloco``, else ``~/.cache/imuloco``;
+``IMULOCO_CACHE=off`` turns the cache off. A cache that cannot be written (a read-only home) is
+skipped silently: it only saves time.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from imuloco.io.atomic import atomic_write
 from imuloco.io.bvh import cached_body_map
 
 # The code whose output an entry holds (paths in the package).
-_SOURCES = ("io/bvh.py", "io/asf_amc.py", "io/upaxis.py", "io/motionfile.py", "io/cache.py",
+_SOURCES = ("io/bvh.py", "io/numtext.py", "io/asf_amc.py", "io/upaxis.py", "io/motionfile.py", "io/cache.py",
             "ops/rotations.py", "ops/kinematics.py")
 _FORMAT = 1  # of the npz layout (see _store)
 
@@ -120,7 +121,7 @@ def _store(entry: Path, motion: Motion) -> None:
     floats += [np.asarray(sk.end_sites[k], dtype=np.float64).ravel() for k in ends]
     floats += [motion.rotations.ravel(), motion.root.ravel()]
     try:
-        with atomic_write(entry) as f:
+        with atomic_write(entry, durable=False) as f:  # a damaged entry is read again
             np.savez(f, names=np.array(sk.names, dtype=str),
                      ints=np.concatenate([sk.parents, np.array(ends, dtype=np.int64)]),
                      floats=np.concatenate(floats))
