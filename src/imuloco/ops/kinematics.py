@@ -49,31 +49,26 @@ def joint_positions(rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray
 
     rotations : (..., J, 4); root : (..., 3); offsets : (J, 3); parents : (J,) -> (..., K, 3).
     """
-    order, depth = _chains(np.asarray(parents, dtype=np.int64).tobytes(), tuple(joints))
-    parents = np.asarray(parents, dtype=np.int64)
+    order, levels, picks = _chains(np.asarray(parents, dtype=np.int64).tobytes(), tuple(joints))
     local = to_matrix(np.asarray(rotations, dtype=np.float64)[..., order, :])  # (..., N, 3, 3)
     glob = np.empty_like(local)
     pos = np.empty(local.shape[:-1])  # (..., N, 3)
-    slot = np.empty(len(parents), dtype=np.int64)  # joint -> its index in order
-    slot[order] = np.arange(len(order))
-    for level in range(depth.max(initial=-1) + 1):
-        here = np.flatnonzero(depth == level)  # indices into order
-        if level == 0:
-            glob[..., here, :, :] = local[..., here, :, :]
-            pos[..., here, :] = np.asarray(root, dtype=np.float64)[..., None, :]
-            continue
-        up = slot[parents[order[here]]]
+    glob[..., :1, :, :] = local[..., :1, :, :]  # the root
+    pos[..., 0, :] = root
+    for here, up in levels:
         glob[..., here, :, :] = glob[..., up, :, :] @ local[..., here, :, :]
         pos[..., here, :] = pos[..., up, :] + (glob[..., up, :, :]
                                                @ offsets[order[here], :, None])[..., 0]
-    return pos[..., slot[list(joints)], :]
+    return pos[..., picks, :]
 
 
 @functools.lru_cache(maxsize=64)
-def _chains(parents: bytes, joints: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """The joints on the chains from the root to ``joints`` (ascending, so parents first) and
-    each one's depth, of the tree ``parents`` (int64 bytes). Memoised: a folder's clips share
-    one rig."""
+def _chains(parents: bytes, joints: tuple[int, ...]
+            ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    """For :func:`joint_positions` on the tree ``parents`` (int64 bytes): the joints on the
+    chains from the root to ``joints`` (ascending: the root first, parents before children),
+    each tree level below the root as (its joints, their parents) by index into them, and the
+    index of each of ``joints``. Memoised: a folder's clips share one rig."""
     up = np.frombuffer(parents, dtype=np.int64)
     needed: set[int] = set()
     for j in joints:
@@ -81,11 +76,15 @@ def _chains(parents: bytes, joints: tuple[int, ...]) -> tuple[np.ndarray, np.nda
             needed.add(j)
             j = int(up[j])
     order = sorted(needed)
-    depth = {j: 0 if up[j] < 0 else -1 for j in order}
-    for j in order:  # parents come first
-        if up[j] >= 0:
-            depth[j] = depth[int(up[j])] + 1
-    return np.array(order, dtype=np.int64), np.array([depth[j] for j in order], dtype=np.int64)
+    slot = {j: i for i, j in enumerate(order)}
+    depth = {j: 0 for j in order}
+    for j in order[1:]:  # parents come first
+        depth[j] = depth[int(up[j])] + 1
+    levels = []
+    for level in range(1, max(depth.values(), default=0) + 1):
+        here = [slot[j] for j in order if depth[j] == level]
+        levels.append((np.array(here), np.array([slot[int(up[order[i]])] for i in here])))
+    return np.array(order, dtype=np.int64), levels, np.array([slot[j] for j in joints])
 
 
 def point_on_segment(
