@@ -94,6 +94,6 @@ def test_outputs_are_flushed_to_disk_cache_entries_not(tmp_path, monkeypatch):
 
     clip = min(SAMPLE_DIR.glob("*.bvh"))
     first = read_motion_cached(clip)
-    assert len(synced) == 1 and len(list((tmp_path / "cache").glob("*.npz"))) == 1
+    assert len(synced) == 1 and len(list((tmp_path / "cache").glob("*.clip"))) == 1
     again = read_motion_cached(clip)  # from the entry
     assert again.rotations.tobytes() == first.rotations.tobytes()
