@@ -513,8 +513,10 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
     local_rot[:] = IDENTITY
     for order, ks, cols in lay.by_order:
         still = np.all(high[cols] == low[cols], axis=1)  # (K,) joints whose angles never change
-        local_rot[:, ks[~still]] = from_euler(data[:, cols[~still]], order)  # (T, K', 4)
-        local_rot[:, ks[still]] = from_euler(data[0, cols[still]], order)  # (K - K', 4)
+        if not still.all():
+            local_rot[:, ks[~still]] = from_euler(data[:, cols[~still]], order)  # (T, K', 4)
+        if still.any():
+            local_rot[:, ks[still]] = from_euler(data[0, cols[still]], order)  # (K - K', 4)
 
     def path_of(k: int) -> np.ndarray:
         """Joint ``k``'s position in its parent's frame in every frame, (T, 3)."""
