@@ -256,8 +256,9 @@ def parse_bvh(path: Path, text: str) -> tuple[list[_Joint], float, np.ndarray]:
     """The joints, frames per second and channel values (T, C) of a BVH ``text``.
 
     The MOTION block is read in one pass (:func:`imuloco.io.numtext.read_grid`); a block it
-    does not take as a clean (T, C) array of finite numbers (and text with line breaks other than ``\n`` and
-    ``\r\n``) goes to the line-by-line reading, which names the line and field at fault.
+    does not take as a clean (T, C) array of finite numbers (and text with line breaks other
+    than ``\n`` and ``\r\n``) goes to the line-by-line reading, which names the line and
+    field at fault.
     """
     m = None if _odd_breaks(text) else _MOTION.search(text)
     hierarchy = None if m is None else _memo_hierarchy(path, text[:m.start()])
