@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_bvh import TWO_JOINT
 
 from imuloco.data import SAMPLE_DIR
 from imuloco.io import numtext
@@ -114,29 +115,11 @@ def test_shared_clips_read_the_same_with_and_without_arrow(shared_dir: Path, mon
 def test_still_joints_are_converted_once_to_the_same_rotations(tmp_path: Path):
     """A joint whose angles never change gets the rotation of its angles in every frame, as
     the per-frame conversion gives it."""
-    text = """\
-HIERARCHY
-ROOT root
-{
-\tOFFSET 0 0 0
-\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
-\tJOINT still
-\t{
-\t\tOFFSET 0 100 0
-\t\tCHANNELS 3 Zrotation Xrotation Yrotation
-\t\tEnd Site
-\t\t{
-\t\t\tOFFSET 0 50 0
-\t\t}
-\t}
-}
-MOTION
-Frames: 3
-Frame Time: 0.0333333
-0 0 0 10 20 30 12.5 -33.25 171.75
-1 0 0 11 21 31 12.5 -33.25 171.75
-2 0 0 12 22 32 12.5 -33.25 171.75
-"""
+    head = TWO_JOINT.split("MOTION")[0]  # root: 6 channels; child: Zrotation Xrotation Yrotation
+    text = head + ("MOTION\nFrames: 3\nFrame Time: 0.0333333\n"
+                   "0 0 0 10 20 30 12.5 -33.25 171.75\n"
+                   "1 0 0 11 21 31 12.5 -33.25 171.75\n"
+                   "2 0 0 12 22 32 12.5 -33.25 171.75\n")
     path = tmp_path / "still.bvh"
     path.write_text(text)
     m = read_bvh(path, unit="cm", up="y")
