@@ -75,3 +75,25 @@ def test_atomic_path_gives_the_permissions_open_would(tmp_path):
         tmp.write_bytes(b"x")
     modes = [(tmp_path / n).stat().st_mode & 0o777 for n in ("plain.png", "atomic.png")]
     assert modes[0] == modes[1]
+
+
+def test_outputs_are_flushed_to_disk_cache_entries_not(tmp_path, monkeypatch):
+    """User outputs are fsync-ed before the rename; cache entries (checked when read) are not,
+    and are still written whole, atomically."""
+    import os
+
+    from imuloco.io.cache import read_motion_cached
+
+    synced = []
+    monkeypatch.setattr(os, "fsync", lambda fd: synced.append(fd))
+    with atomic_write(tmp_path / "out.txt", "w") as f:
+        f.write("kept")
+    assert len(synced) == 1
+    monkeypatch.setenv("IMULOCO_CACHE", str(tmp_path / "cache"))
+    from imuloco.data import SAMPLE_DIR
+
+    clip = min(SAMPLE_DIR.glob("*.bvh"))
+    first = read_motion_cached(clip)
+    assert len(synced) == 1 and len(list((tmp_path / "cache").glob("*.clip"))) == 1
+    again = read_motion_cached(clip)  # from the entry
+    assert again.rotations.tobytes() == first.rotations.tobytes()

@@ -3,6 +3,7 @@ or foreign entries are never trusted; nothing is pickled."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -39,10 +40,11 @@ def test_second_read_comes_from_the_cache(cache_dir: Path, tmp_path: Path, monke
     clip = tmp_path / CLIP.name
     clip.write_bytes(CLIP.read_bytes())
     first = read_motion_cached(clip)
-    entries = list(cache_dir.glob("*.npz"))
+    entries = list(cache_dir.glob("*.clip"))
     assert len(entries) == 1 and not list(cache_dir.glob("*.tmp"))
-    with np.load(entries[0], allow_pickle=False) as z:  # plain arrays only
-        assert all(z[k].dtype != object for k in z.files)
+    head, payload = entries[0].read_bytes().split(b"\n", 1)  # JSON, then float64: no pickle
+    assert json.loads(head)["names"] == first.skeleton.names
+    assert len(payload) % 8 == 0 and first.rotations.tobytes() in payload
 
     def no_parsing(*a, **k):
         raise AssertionError("parsed again")
@@ -59,28 +61,39 @@ def test_entries_follow_content_options_and_reader(cache_dir: Path, tmp_path: Pa
     clip.write_bytes(CLIP.read_bytes())
     a = read_motion_cached(clip)
     b = read_motion_cached(clip, skip_frames=1)  # other options: another entry
-    assert b.num_frames == a.num_frames - 1 and len(list(cache_dir.glob("*.npz"))) == 2
+    assert b.num_frames == a.num_frames - 1 and len(list(cache_dir.glob("*.clip"))) == 2
     # edited file: another entry, and the edit shows
     clip.write_text(clip.read_text().replace("Frame Time:\t0.0333333", "Frame Time:\t0.04"))
     assert read_motion_cached(clip).fps == 25.0
-    assert len(list(cache_dir.glob("*.npz"))) == 3
+    assert len(list(cache_dir.glob("*.clip"))) == 3
     # another reader version: nothing old is used
     monkeypatch.setattr(cache, "reader_version", lambda: "another reader")
     read_motion_cached(clip)
-    assert len(list(cache_dir.glob("*.npz"))) == 4
+    assert len(list(cache_dir.glob("*.clip"))) == 4
 
 
 def test_damaged_entry_is_read_again(cache_dir: Path, tmp_path: Path):
     clip = tmp_path / "c.bvh"
     clip.write_bytes(CLIP.read_bytes())
     good = read_motion_cached(clip)
-    (entry,) = cache_dir.glob("*.npz")
-    for damage in (b"", b"PK\x03\x04 not a zip", entry.read_bytes()[:500]):
+    (entry,) = cache_dir.glob("*.clip")
+    whole = entry.read_bytes()
+    flipped = bytearray(whole)
+    flipped[-5] ^= 1  # one bit of the root path: the CRC-32 differs
+    head = json.loads(whole.split(b"\n", 1)[0])
+    for damage in (b"", b"PK\x03\x04 not an entry", whole[:500], whole[:-8], whole + b"\0",
+                   bytes(flipped), json.dumps({**head, "frames": -3}).encode() + b"\n",
+                   json.dumps({**head, "end_sites": ["x"]}).encode() + whole.split(b"\n")[1],
+                   b"[1, 2]\n" + whole):
         entry.write_bytes(damage)
         same(read_motion_cached(clip), good)
     # an entry holding a pickled object array is refused, not unpickled
-    np.savez(entry, names=np.array([object()], dtype=object))
+    np.savez(entry.with_suffix(".npz"), names=np.array([object()], dtype=object))
+    entry.with_suffix(".npz").replace(entry)
     same(read_motion_cached(clip), good)
+    again = read_motion_cached(clip)  # rewritten whole, from the cache; writable like a read
+    same(again, good)
+    again.root += 1.0
 
 
 def test_cache_off_and_unwritable(tmp_path: Path, monkeypatch):
@@ -105,7 +118,7 @@ def test_database_uses_the_cache(cache_dir: Path):
     from imuloco.io.database import load_database
 
     db = load_database(SAMPLE_DIR, limit=3, progress=False)
-    assert len(list(cache_dir.glob("*.npz"))) == 3
+    assert len(list(cache_dir.glob("*.clip"))) == 3
     again = load_database(SAMPLE_DIR, limit=3, progress=False)
     for a, b in zip(db.clips, again.clips):
         same(a, b)

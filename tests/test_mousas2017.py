@@ -371,3 +371,146 @@ def test_save_load_round_trip(fitted, tmp_path):
 def test_bad_hyperparameters_are_refused(sample_db):
     with pytest.raises(ValueError, match="blend"):
         get_method("mousas2017", blend=0.0).fit(sample_db.subset([0]), ["right_ankle"])
+    with pytest.raises(ValueError, match="engine"):
+        get_method("mousas2017", engine="cuda").fit(sample_db.subset([0]), ["right_ankle"])
+
+
+# ---- the compiled step (engine numba, the `fast` extra) ------------------------------------
+def _as_float64(model):
+    """A copy of a fitted model whose forward variable and emissions are float64 (the numpy
+    and the compiled step then agree to float64 rounding, not float32's), with unequal
+    transition probabilities (so that a mix-up of self/next/skip or phases shows)."""
+    import copy
+
+    from imuloco.methods.mousas2017.model import FrameStates
+
+    m = copy.copy(model)
+    fs = model.states_
+    m.states_ = FrameStates(**{k: (v.astype(np.float64) if v.dtype == np.float32 else v)
+                               for k, v in fs.arrays().items()})
+    low = model.lower_
+    m.lower_ = Topology(low.phases, low.counts, low.lengths, low.next_phase, A_FRAME, A_PHASE,
+                        dtype=np.float64)
+    return m
+
+
+def _enlarged(model, reps: int, seed: int = 0):
+    """A synthetic model ``reps`` times larger: every segment of every phase repeated with
+    its frames' means moved by noise (a valid model: emissions recomputed from the means)."""
+    import copy
+
+    from imuloco.methods.mousas2017.model import FrameStates
+
+    fs, rng = model.states_, np.random.default_rng(seed)
+    src = []
+    for g0, st, big_h, length in fs.blocks:
+        for j in range(length):
+            src.append(np.tile(st + j * big_h + np.arange(big_h), reps))
+    src = np.concatenate(src)
+    mu_x = fs.mu_x[src] + rng.normal(0, 0.02, (src.size, fs.mu_x.shape[1])).astype(np.float32)
+    mu_y = fs.mu_y[src] + rng.normal(0, 0.3, (src.size, fs.mu_y.shape[1])).astype(np.float32)
+    group = fs.group[src]
+    lin = np.einsum("nde,ne->dn", fs.prec[group], mu_y.astype(np.float64))
+    old = (fs.lin[:, src].astype(np.float64) * fs.mu_y[src].T).sum(0)
+    const = fs.const[src] + 0.5 * old - 0.5 * (lin * mu_y.T).sum(0)
+    m = copy.copy(model)
+    m.states_ = FrameStates(mu_x=mu_x, mu_y=mu_y, group=group, reg=fs.reg,
+                            cond_var=fs.cond_var, prec=fs.prec, lin=lin.astype(np.float32),
+                            const=const.astype(np.float32), group_phase=fs.group_phase,
+                            group_frame=fs.group_frame, group_count=fs.group_count * reps)
+    m.block_count_ = model.block_count_ * reps
+    m._build(model.skeleton_.num_joints)
+    return m
+
+
+def _run(stream, signals):
+    """Per step: forward variable, upper level, phase, interpolated features, pose."""
+    out = []
+    for s in signals:
+        rot, root = stream.step(s)
+        out.append((stream.state_posterior(), stream.alpha_up.copy(), stream.phase,
+                    stream.pose_vector.copy(), stream.y_bar.copy(), stream.variance.copy(),
+                    stream.contacts.copy(), rot, root))
+    return out
+
+
+@pytest.mark.parametrize("reps", [1, 12])
+def test_compiled_step_is_the_numpy_step(fitted, reps):
+    """engine=numba computes the numpy step's forward variables, phase, interpolation and pose:
+    in float64 to 1e-9 (rounding only: sums in another order), on the sample's model and on
+    a synthetic model 12 times larger, with missing samples and the foot clean-up."""
+    model, _, test = fitted
+    model = _as_float64(_enlarged(model, reps) if reps > 1 else model)
+    sig = test.signals[:90].copy()
+    sig[40:48] = np.nan
+    ref = _run(model.stream(engine="numpy"), sig)
+    out = _run(model.stream(engine="numba"), sig)
+    assert model.lower_.num_states > 5000 or reps == 1
+    for t, (a, b) in enumerate(zip(ref, out)):
+        assert a[2] == b[2], f"phase at step {t}"
+        for name, u, v in zip(("alpha", "alpha_up", "-", "x", "y_bar", "variance",
+                               "contacts", "rotations", "root"), a, b):
+            if name != "-":
+                np.testing.assert_allclose(v, u, rtol=1e-9, atol=1e-12,
+                                           err_msg=f"{name} at step {t}")
+
+
+def test_compiled_step_float32_and_the_offline_path(fitted):
+    """The shipped float32 model: both engines agree to float32 rounding, also through
+    reconstruct_signals (which takes the model's engine)."""
+    model, _, test = fitted
+    sig = test.signals[:90].copy()
+    sig[40:48] = np.nan
+    for a, b in zip(_run(model.stream(engine="numpy"), sig),
+                    _run(model.stream(engine="numba"), sig)):
+        assert a[2] == b[2]
+        np.testing.assert_allclose(b[0], a[0], rtol=1e-4, atol=1e-12)
+        np.testing.assert_allclose(b[7], a[7], atol=1e-5)
+        np.testing.assert_allclose(b[8], a[8], atol=1e-5)
+    recs = []
+    for engine in ("numpy", "numba"):
+        model.set_params(engine=engine)
+        recs.append(model.reconstruct_signals(sig))
+    model.set_params(engine="auto")
+    np.testing.assert_allclose(recs[1].rotations, recs[0].rotations, atol=1e-5)
+    np.testing.assert_allclose(recs[1].root, recs[0].root, atol=1e-5)
+
+
+def test_compiled_step_with_a_beam(fitted):
+    """With a beam the forward step is the beam's (numpy) and the pose is compiled: the same
+    output as the numpy engine's."""
+    model, _, test = fitted
+    sig = test.signals[:40]
+    for a, b in zip(_run(model.stream(beam=8, engine="numpy"), sig),
+                    _run(model.stream(beam=8, engine="numba"), sig)):
+        np.testing.assert_allclose(b[7], a[7], atol=1e-9)
+        np.testing.assert_allclose(b[8], a[8], atol=1e-9)
+
+
+def test_engine_without_numba(fitted, monkeypatch):
+    """Without numba: engine=numba is a MissingExtraError naming the extra, auto is numpy."""
+    import sys
+
+    from imuloco.errors import MissingExtraError
+
+    model, _, test = fitted
+    monkeypatch.setitem(sys.modules, "numba", None)  # import numba raises ImportError
+    monkeypatch.delitem(sys.modules, "imuloco.methods.mousas2017.compiled", raising=False)
+    with pytest.raises(MissingExtraError, match=r"imuloco\[fast\]"):
+        model.stream(engine="numba")
+    st = model.stream()
+    assert st.engine == "numpy"
+    ref = model.stream(engine="numpy")
+    for s in test.signals[:5]:
+        np.testing.assert_array_equal(st.step(s)[0], ref.step(s)[0])
+
+
+def test_top_segments_ties_go_to_the_lower_index():
+    from imuloco.methods.mousas2017 import compiled
+    from imuloco.methods.mousas2017.stream import TIE_RTOL, top_segments
+
+    w = np.array([0.1, 0.5, 0.3, 0.3 * (1 + TIE_RTOL / 10), 0.9, 0.3, 0.2, 0.3])
+    for k, want in ((1, [4]), (2, [1, 4]), (3, [1, 2, 4]), (4, [1, 2, 3, 4]),
+                    (5, [1, 2, 3, 4, 5])):
+        assert sorted(top_segments(w, k).tolist()) == want
+        assert sorted(compiled._largest(w, k, TIE_RTOL).tolist()) == want

@@ -45,16 +45,19 @@ def test_speed_benchmark_rejects_unknown_methods(tmp_path):
 
 def test_speed_benchmark_times_stream_variants_on_one_fit(tmp_path):
     """Specs differing only in stream hyperparameters share the fitted model; each has its
-    own record with the test clip's MPJPE; a full beam streams as the exact step."""
+    own record with the test clip's MPJPE; a full beam and the numpy engine stream as the
+    exact (compiled) step."""
     from imuloco.methods.mousas2017.method import Mousas2017
 
-    assert Mousas2017.stream_params == ("beam",)
-    specs = ["mousas2017", "mousas2017[beam=100000]", "mousas2017[beam=3]"]
+    assert Mousas2017.stream_params == ("beam", "engine")
+    specs = ["mousas2017", "mousas2017[beam=100000]", "mousas2017[beam=3]",
+             "mousas2017[engine=numpy]"]
     records = speed_benchmark(specs, tmp_path, None, [400])
     assert [r["method"] for r in records] == specs
     assert len({r["fit_s"] for r in records}) == 1 and len({r["states"] for r in records}) == 1
-    exact, full, narrow = (r["test_mpjpe_cm"] for r in records)
+    exact, full, narrow, numpy_step = (r["test_mpjpe_cm"] for r in records)
     assert exact == pytest.approx(full, abs=1e-3) and narrow > 0
+    assert exact == pytest.approx(numpy_step, abs=1e-6)
     assert "mousas2017[beam=3]" in (tmp_path / "speed.md").read_text()
 
 

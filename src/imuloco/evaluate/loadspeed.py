@@ -8,7 +8,8 @@ For each folder, every ``*.bvh`` is read five ways, each over the whole folder:
   columns declared, one thread), when pyarrow is installed: whether another library's text
   parser would beat numpy's on these files;
 - ``old``: the reader of an earlier commit (``--against REV``), loaded from git with the
-  rotation functions of that commit, on today's Motion and Skeleton;
+  rotation, kinematics, up-axis and number-parsing modules of that commit, on today's Motion
+  and Skeleton;
 - ``reader``: today's :func:`imuloco.io.bvh.read_bvh` with no cache;
 - ``cold``: loading through the clip cache (:mod:`imuloco.io.cache`) into an empty cache
   folder (parse, hash and write each entry);
@@ -18,7 +19,7 @@ Files are read once beforehand so that every way finds them in the page cache. F
 second count the frames of the clips a way read (the old reader refuses some real rigs: the
 table says how many). Times are wall
 clock and this process's CPU time (``*_cpu``; on a shared machine other processes inflate wall
-times), with the 1-minute load average when measured.
+times), with the 1-minute load average when measured; the table shows CPU times.
 """
 
 from __future__ import annotations
@@ -94,14 +95,31 @@ def module_at(rev: str, relpath: str, name: str) -> types.ModuleType:
     return module
 
 
+# The reader's modules, each after those it imports: the old reader runs on all of them as they
+# were at its commit (a module the commit lacks is skipped).
+_READER_MODULES = ("ops/rotations.py", "ops/kinematics.py", "io/upaxis.py", "io/numtext.py",
+                   "io/bvh.py")
+
+
 def old_reader(rev: str) -> Callable[[Path], Any]:
-    """``read_bvh`` of commit ``rev``, with that commit's rotation functions."""
-    rotations = module_at(rev, "src/imuloco/ops/rotations.py", "imuloco_old_rotations")
-    bvh = module_at(rev, "src/imuloco/io/bvh.py", "imuloco_old_bvh")
-    for name in ("from_euler", "to_euler", "qmul", "qrot", "IDENTITY"):
-        if name in bvh.__dict__ and hasattr(rotations, name):
-            setattr(bvh, name, getattr(rotations, name))
-    return bvh.read_bvh
+    """``read_bvh`` of commit ``rev``, with that commit's rotation, kinematics, up-axis and
+    number-parsing functions (today's Motion and Skeleton)."""
+    old: dict[str, types.ModuleType] = {}  # today's module name -> the old module
+    for relpath in _READER_MODULES:
+        current = "imuloco." + relpath.removesuffix(".py").replace("/", ".")
+        try:
+            module = module_at(rev, f"src/imuloco/{relpath}",
+                               "imuloco_old_" + relpath.removesuffix(".py").replace("/", "_"))
+        except ValueError:
+            if relpath == "io/bvh.py":
+                raise
+            continue
+        for attr, value in list(vars(module).items()):  # today's functions -> the old ones
+            source = old.get(getattr(value, "__module__", None) or "")
+            if source is not None and hasattr(source, attr):
+                setattr(module, attr, getattr(source, attr))
+        old[current] = module
+    return old["imuloco.io.bvh"].read_bvh
 
 
 def _timed(files: list[Path], read: Callable[[Path], Any], desc: str, progress: bool
@@ -184,23 +202,28 @@ def _total(records: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def table(records: list[dict[str, Any]], against: str | None = None) -> str:
-    """Markdown: per folder, seconds (and frames/s) of each way, and the ratios that matter."""
+    """Markdown: per folder, this process's CPU seconds (and frames/s) of each way, and the
+    ratios that matter, by CPU time (wall times, inflated on a shared machine, are in the
+    JSON)."""
     ways = [w for w in WAYS if f"{w}_s" in records[0]]
     head = ["folder", "clips", "frames"] + [
-        f"{'old (' + against[:7] + ')' if w == 'old' and against else w} s (frames/s)"
+        f"{'old (' + against[:7] + ')' if w == 'old' and against else w} CPU s (frames/s)"
         for w in ways]
     head += (["arrow speed / numpy's"] if "arrow" in ways else []) + [
         "reader speed / numpy's", "warm / cold speed"] + (
-        ["reader speed / old's", "old refused"] if "old" in ways else [])
+        ["reader speed / old's", "old refused"] if "old" in ways else []) + ["load avg"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in records:
+        def fps(way: str, r: dict[str, Any] = r) -> float:
+            return r[f"{way}_frames"] / max(r[f"{way}_cpu_s"], 1e-9)
+
         row = [r["folder"], str(r["clips"]), f"{r['frames']:,}"]
-        row += [f"{r[w + '_s']:.1f} ({r[w + '_fps']:,})" for w in ways]
+        row += [f"{r[w + '_cpu_s']:.2f} ({fps(w):,.0f})" for w in ways]
         if "arrow" in ways:
-            row.append(f"{r['arrow_fps'] / r['numpy_fps']:.2f}x")
-        row += [f"{r['reader_fps'] / r['numpy_fps']:.2f}x",
-                f"{r['warm_fps'] / r['cold_fps']:.0f}x"]
+            row.append(f"{fps('arrow') / fps('numpy'):.2f}x")
+        row += [f"{fps('reader') / fps('numpy'):.2f}x", f"{fps('warm') / fps('cold'):.1f}x"]
         if "old" in ways:
-            row += [f"{r['reader_fps'] / r['old_fps']:.1f}x", f"{r['old_refused']} clips"]
+            row += [f"{fps('reader') / fps('old'):.2f}x", f"{r['old_refused']} clips"]
+        row.append(f"{r['load_avg']:.1f}")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)

@@ -50,6 +50,7 @@ from threadpoolctl import threadpool_limits
 
 from imuloco.core.motion import MotionDatabase
 from imuloco.evaluate.protocols import in_random_test
+from imuloco.io.atomic import atomic_write
 from imuloco.methods.training import TEST_SEED_OFFSET, Example, synthesize
 
 DEFAULT_SIZES = (500, 1000, 2000, 5000, 10000, 20000, 50000, 100000)
@@ -326,8 +327,10 @@ def speed_benchmark(
     records = [r for _, _, r in sorted(records, key=lambda t: (t[0], sizes.index(t[1])))]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "speed.json").write_text(json.dumps(records, indent=1) + "\n")
-    (out / "speed.md").write_text(speed_table(records, data) + "\n")
+    with atomic_write(out / "speed.json", "w") as f:
+        f.write(json.dumps(records, indent=1) + "\n")
+    with atomic_write(out / "speed.md", "w") as f:
+        f.write(speed_table(records, data) + "\n")
     return records
 
 

@@ -85,15 +85,18 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
 
 @contextmanager
-def atomic_write(path: str | Path, mode: str = "wb") -> Iterator:
+def atomic_write(path: str | Path, mode: str = "wb", durable: bool = True) -> Iterator:
     """Open a temporary file beside ``path`` for writing; rename it to ``path`` on success.
 
     ``mode`` is ``"wb"`` or ``"w"`` (text, UTF-8). On an exception the temporary file is
-    removed and ``path`` is left as it was."""
+    removed and ``path`` is left as it was. ``durable``: flush the file to disk before the
+    rename (False for a cache, whose entries are checked when read and rebuilt if damaged:
+    the flush was a third of the time of writing a cache entry)."""
     if mode not in ("wb", "w"):
         raise ValueError(f"atomic_write: mode must be 'wb' or 'w', not {mode!r}")
     with atomic_path(path) as tmp, open(tmp, mode, **({"encoding": "utf-8"} if mode == "w"
                                                       else {})) as f:
         yield f
         f.flush()
-        os.fsync(f.fileno())
+        if durable:
+            os.fsync(f.fileno())

@@ -27,10 +27,8 @@ from __future__ import annotations
 
 import decimal
 import functools
-import io
 import math
 import re
-import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,7 +40,17 @@ from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
 from imuloco.io.atomic import atomic_write, check_output
-from imuloco.io.upaxis import Z_TO_Y, check_skip, check_up, resolve_up, spread_frames, to_y_up
+from imuloco.io.numtext import read_grid
+from imuloco.io.upaxis import (
+    Z_TO_Y,
+    check_skip,
+    check_up,
+    median,
+    resolve_up,
+    spread_frames,
+    to_y_up,
+)
+from imuloco.ops.kinematics import joint_positions
 from imuloco.ops.rotations import IDENTITY, from_euler, qmul, qrot, to_euler
 
 # Metres per file unit. "cmu": the CMU motion capture unit, (1 / 0.45) inch.
@@ -247,9 +255,10 @@ def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True
 def parse_bvh(path: Path, text: str) -> tuple[list[_Joint], float, np.ndarray]:
     """The joints, frames per second and channel values (T, C) of a BVH ``text``.
 
-    The MOTION block is read in one pass by ``numpy.loadtxt``; a block it does not take as a
-    clean (T, C) array of finite numbers (and text with line breaks other than ``\n`` and
-    ``\r\n``) goes to the line-by-line reading, which names the line and field at fault.
+    The MOTION block is read in one pass (:func:`imuloco.io.numtext.read_grid`); a block it
+    does not take as a clean (T, C) array of finite numbers (and text with line breaks other
+    than ``\n`` and ``\r\n``) goes to the line-by-line reading, which names the line and
+    field at fault.
     """
     m = None if _odd_breaks(text) else _MOTION.search(text)
     hierarchy = None if m is None else _memo_hierarchy(path, text[:m.start()])
@@ -302,16 +311,9 @@ def _parse_motion_fast(path: Path, text: str, start: int, motion_line: int,
     frames_line = motion_line + text.count("\n", start, h.start(1))
     frames = _frame_count(path, frames_line, h.group(1))
     fps = frame_rate(path, motion_line + text.count("\n", start, h.start(2)), h.group(2))
-    width = _width(path, motion_line, joints)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # numpy warns of an empty block: read it line by line
-        try:
-            data = np.loadtxt(io.StringIO(text[h.end():]), dtype=np.float64, comments=None,
-                              ndmin=2)
-        except (ValueError, Warning):
-            return None
-    if data.shape != (frames, width) or not np.all(np.abs(data) <= _MAX_ABS):
-        return None  # NaN fails the comparison too
+    data = read_grid(text[h.end():], frames, _width(path, motion_line, joints))
+    if data is None or not (data.max() <= _MAX_ABS and data.min() >= -_MAX_ABS):
+        return None  # NaN fails the comparisons too
     return fps, data
 
 
@@ -338,7 +340,10 @@ def _offset_is_added(motion: Motion, shift: np.ndarray) -> bool:
     joint nearer the floor (height 0) over up to 64 frames than leaving it out does."""
     if abs(shift[1]) < 1e-6:
         return False
-    lowest = float(np.median(spread_frames(motion, 64).positions()[..., 1].min(axis=1)))
+    sub, sk = spread_frames(motion, 64), motion.skeleton
+    heights = joint_positions(sub.rotations, sub.root, sk.offsets, sk.parents,
+                              list(range(sk.num_joints)))[..., 1]  # (T, J)
+    lowest = float(median(heights.min(axis=1)))
     return abs(lowest + shift[1]) < abs(lowest)
 
 
@@ -429,19 +434,44 @@ def _is_float(s: str) -> bool:
         return False
 
 
-@functools.lru_cache(maxsize=64)
-def _channel_layout(channels: tuple[tuple[str, ...], ...]
-                    ) -> tuple[list[int], list[int], list[int], list[tuple[str, tuple]]]:
-    """Column indices of every position channel (joint, axis, column) and of each Euler
-    order's rotation channels (order, (joints, columns (K, len(order)))) of joints with these
-    ``channels``, so that each is one array operation over all frames and joints. Memoised (a
-    folder's clips share one rig); read only."""
+@dataclass(frozen=True)
+class _Layout:
+    """What a rig's HIERARCHY says about its channel columns, worked out once per rig (a
+    folder's clips share one) so that each use is one array operation over frames and joints.
+
+    pos_joint, pos_axis, pos_col : (P,) joint, axis (0-2) and column of each position channel.
+    pos_slot : (P,) each position channel's joint's row in ``translating``.
+    translating : the joints with position channels, ascending.
+    by_order : (Euler order, joints (K,), columns (K, len(order))) of the rotation channels.
+    offsets : (J, 3) the OFFSET lines; names, parents (J,) as in the file.
+    """
+
+    pos_joint: np.ndarray
+    pos_axis: np.ndarray
+    pos_col: np.ndarray
+    pos_slot: np.ndarray
+    translating: list[int]
+    by_order: list[tuple[str, np.ndarray, np.ndarray]]
+    offsets: np.ndarray
+    names: list[str]
+    parents: np.ndarray
+
+
+_LAYOUTS: dict[int, tuple[list[_Joint], _Layout]] = {}
+
+
+def _layout(joints: list[_Joint]) -> _Layout:
+    """The :class:`_Layout` of ``joints``, memoised by identity (the memoised hierarchies are
+    shared, read only; an entry keeps its joints alive, so an id is never reused for it)."""
+    hit = _LAYOUTS.get(id(joints))
+    if hit is not None and hit[0] is joints:
+        return hit[1]
     pos_joint, pos_axis, pos_col = [], [], []
     by_order: dict[str, tuple[list[int], list[list[int]]]] = {}
     col = 0
-    for k, names in enumerate(channels):
+    for k, j in enumerate(joints):
         rot_cols, order = [], ""
-        for i, c in enumerate(names):
+        for i, c in enumerate(j.channels):
             if c.endswith("position"):
                 pos_joint.append(k)
                 pos_axis.append("XYZ".index(c[0]))
@@ -453,45 +483,75 @@ def _channel_layout(channels: tuple[tuple[str, ...], ...]
             ks, cols = by_order.setdefault(order, ([], []))
             ks.append(k)
             cols.append(rot_cols)
-        col += len(names)
-    return (pos_joint, pos_axis, pos_col,
-            [(order, (np.array(ks), np.array(cols))) for order, (ks, cols) in by_order.items()])
+        col += len(j.channels)
+    translating = sorted(set(pos_joint))
+    layout = _Layout(np.array(pos_joint, dtype=np.int64), np.array(pos_axis, dtype=np.int64),
+                     np.array(pos_col, dtype=np.int64),
+                     np.array([translating.index(k) for k in pos_joint], dtype=np.int64),
+                     translating,
+                     [(order, np.array(ks), np.array(cols)) for order, (ks, cols)
+                      in by_order.items()],
+                     np.array([j.offset for j in joints]).reshape(-1, 3),
+                     [j.name for j in joints], np.array([j.parent for j in joints]))
+    if len(_LAYOUTS) >= 64:
+        _LAYOUTS.clear()
+    _LAYOUTS[id(joints)] = joints, layout
+    return layout
 
 
 def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float,
                   scale: float | None, fold_static_root: bool) -> tuple[Motion, float]:
-    """The Motion of channel values ``data`` (T, C), and the metres per file unit used."""
-    t, n = data.shape[0], len(joints)
-    pos_joint, pos_axis, pos_col, by_order = _channel_layout(tuple(tuple(j.channels)
-                                                                   for j in joints))
-    local_pos = np.repeat(np.array([j.offset for j in joints])[None], t, axis=0)  # (T, J, 3)
-    local_pos[:, pos_joint, pos_axis] = data[:, pos_col]
+    """The Motion of channel values ``data`` (T, C), and the metres per file unit used.
+
+    Only what varies is computed per frame: rotations of joints whose angles never change are
+    converted once, and positions per frame only for the root's chain (the folding); every other
+    joint's position channels must be constant and become its offset."""
+    t, n, lay = data.shape[0], len(joints), _layout(joints)
+    high, low = data.max(axis=0), data.min(axis=0)  # (C,) each channel's extremes
+    offsets = lay.offsets.copy()  # (J, 3), position channels' first values
+    offsets[lay.pos_joint, lay.pos_axis] = data[0, lay.pos_col]
     local_rot = np.empty((t, n, 4))
     local_rot[:] = IDENTITY
-    for order, (ks, cols) in by_order:
-        local_rot[:, ks] = from_euler(data[:, cols], order)  # (T, K, len(order)) angles
+    for order, ks, cols in lay.by_order:
+        # Joints whose angles never change are converted once: their first frame's angles go
+        # after every frame's of the others, in one call (a call's fixed cost is that of about
+        # a thousand angles).
+        still = np.all(high[cols] == low[cols], axis=1)  # (K,)
+        angles = np.concatenate([data[:, cols[~still]].reshape(-1, len(order)),
+                                 data[0, cols[still]]])
+        q = from_euler(angles, order)
+        per_frame = t * np.count_nonzero(~still)
+        local_rot[:, ks[~still]] = q[:per_frame].reshape(t, -1, 4)
+        local_rot[:, ks[still]] = q[per_frame:]
 
-    names = [j.name for j in joints]
-    parents = np.array([j.parent for j in joints])
-    translating = sorted(set(pos_joint))
-    moving = dict(zip(translating, _moving(local_pos[:, translating])))
-    first = 0
+    def path_of(k: int) -> np.ndarray:
+        """Joint ``k``'s position in its parent's frame in every frame, (T, 3)."""
+        out = np.repeat(offsets[k][None], t, axis=0)
+        mine = lay.pos_joint == k
+        out[:, lay.pos_axis[mine]] = data[:, lay.pos_col[mine]]
+        return out
+
+    names, parents, translating = lay.names, lay.parents, lay.translating
+    top, bottom = offsets[translating], offsets[translating]  # (K, 3) extremes over frames
+    top[lay.pos_slot, lay.pos_axis] = high[lay.pos_col]
+    bottom[lay.pos_slot, lay.pos_axis] = low[lay.pos_col]
+    moving = dict(zip(translating, _moving(top, bottom)))
+    first, root, root_rot = 0, path_of(0), local_rot[:, 0]
     while fold_static_root and first + 1 < n:
         # Fold the root into its single child when that child has position channels and
         # either it moves (its translation must be kept: "applied") or the root never moves
         # (a floor marker such as joint_Root); the child's world transform is the root's
         # transform applied to its own.
-        kids = np.flatnonzero(parents == first)
         child = first + 1
-        if len(kids) != 1 or not any(c.endswith("position") for c in joints[child].channels):
+        if (np.count_nonzero(parents == first) != 1
+                or not any(c.endswith("position") for c in joints[child].channels)):
             break
-        static_root = (np.ptp(local_pos[:, first], axis=0).max() == 0.0
-                       and np.ptp(local_rot[:, first], axis=0).max() == 0.0)
+        static_root = (np.ptp(root, axis=0).max() == 0.0
+                       and np.ptp(root_rot, axis=0).max() == 0.0)
         if not (static_root or moving[child]):
             break
-        local_pos[:, child] = local_pos[:, first] + qrot(local_rot[:, first],
-                                                         local_pos[:, child])
-        local_rot[:, child] = qmul(local_rot[:, first], local_rot[:, child])
+        root = root + qrot(root_rot, path_of(child))
+        root_rot = local_rot[:, child] = qmul(root_rot, local_rot[:, child])
         first = child
     for k in translating:
         if k > first and moving[k]:
@@ -499,7 +559,7 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
                               "channels below the root's chain of single children; expected "
                               "constant ones there (a Motion translates its root only)")
 
-    offsets = local_pos[0, first:].copy()
+    offsets = offsets[first:]
     offsets[0] = 0.0
     sk_parents = np.where(parents[first:] >= 0, parents[first:] - first, -1)
     parts = cached_body_map(tuple(names[first:]))
@@ -509,16 +569,15 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
                  if j.end_site is not None and k >= first}
     try:
         skeleton = Skeleton(names[first:], sk_parents, offsets * scale, end_sites, dict(parts))
-        motion = Motion(skeleton, local_rot[:, first:], local_pos[:, first] * scale, fps,
-                        path.stem)
+        motion = Motion(skeleton, local_rot[:, first:], root * scale, fps, path.stem)
     except ValueError as e:  # each value was checked finite and below 1e9: not expected
         raise FormatError(path, None, f"{e}; expected plausible values") from None
     return motion, scale
 
 
-def _moving(pos: np.ndarray) -> np.ndarray:
-    """Whether each joint's per-frame positions (T, K, 3) vary by more than float noise: (K,)."""
-    high, low = pos.max(axis=0), pos.min(axis=0)  # (K, 3)
+def _moving(high: np.ndarray, low: np.ndarray) -> np.ndarray:
+    """Whether each joint's position, between ``high`` and ``low`` (K, 3) over the frames,
+    varies by more than float noise: (K,)."""
     size = np.maximum(1.0, np.maximum(high, -low).max(axis=-1, initial=0.0))
     return (high - low).max(axis=-1, initial=0.0) > 1e-6 * size
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from imuloco.ops.rotations import from_matrix, qrot, to_matrix
@@ -42,27 +44,47 @@ def fk(
 def joint_positions(rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray,
                     parents: np.ndarray, joints: list[int]) -> np.ndarray:
     """World positions of a few ``joints`` only, from the chains that lead to them: cheaper
-    than :func:`fk` when they are few (the readers' up-axis check).
+    than :func:`fk` when they are few (the readers' up-axis and floor checks). The chains'
+    joints are taken a tree level at a time (one matrix product for all joints at a depth).
 
     rotations : (..., J, 4); root : (..., 3); offsets : (J, 3); parents : (J,) -> (..., K, 3).
     """
+    order, levels, picks = _chains(np.asarray(parents, dtype=np.int64).tobytes(), tuple(joints))
+    local = to_matrix(np.asarray(rotations, dtype=np.float64)[..., order, :])  # (..., N, 3, 3)
+    glob = np.empty_like(local)
+    pos = np.empty(local.shape[:-1])  # (..., N, 3)
+    glob[..., :1, :, :] = local[..., :1, :, :]  # the root
+    pos[..., 0, :] = root
+    for here, up in levels:
+        glob[..., here, :, :] = glob[..., up, :, :] @ local[..., here, :, :]
+        pos[..., here, :] = pos[..., up, :] + (glob[..., up, :, :]
+                                               @ offsets[order[here], :, None])[..., 0]
+    return pos[..., picks, :]
+
+
+@functools.lru_cache(maxsize=64)
+def _chains(parents: bytes, joints: tuple[int, ...]
+            ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    """For :func:`joint_positions` on the tree ``parents`` (int64 bytes): the joints on the
+    chains from the root to ``joints`` (ascending: the root first, parents before children),
+    each tree level below the root as (its joints, their parents) by index into them, and the
+    index of each of ``joints``. Memoised: a folder's clips share one rig."""
+    up = np.frombuffer(parents, dtype=np.int64)
     needed: set[int] = set()
     for j in joints:
         while j >= 0 and j not in needed:
             needed.add(j)
-            j = int(parents[j])
-    order = sorted(needed)  # parents before children
-    local = to_matrix(np.asarray(rotations, dtype=np.float64)[..., order, :])
-    glob: dict[int, np.ndarray] = {}
-    pos: dict[int, np.ndarray] = {}
-    for i, j in enumerate(order):
-        p = int(parents[j])
-        if p < 0:
-            glob[j], pos[j] = local[..., i, :, :], np.asarray(root, dtype=np.float64)
-        else:
-            glob[j] = glob[p] @ local[..., i, :, :]
-            pos[j] = pos[p] + glob[p] @ offsets[j]
-    return np.stack([pos[j] for j in joints], axis=-2)
+            j = int(up[j])
+    order = sorted(needed)
+    slot = {j: i for i, j in enumerate(order)}
+    depth = {j: 0 for j in order}
+    for j in order[1:]:  # parents come first
+        depth[j] = depth[int(up[j])] + 1
+    levels = []
+    for level in range(1, max(depth.values(), default=0) + 1):
+        here = [slot[j] for j in order if depth[j] == level]
+        levels.append((np.array(here), np.array([slot[int(up[order[i]])] for i in here])))
+    return np.array(order, dtype=np.int64), levels, np.array([slot[j] for j in joints])
 
 
 def point_on_segment(

@@ -119,9 +119,7 @@ class Topology:
             paper's equal probabilities the shifts are then plain additions (no multiply
             passes, no temporary).
         """
-        fs, fn, fk = self.a_frame
-        scale = fs if (fs > 0 and not scaled) else 1.0
-        fs, fn, fk = fs / scale, fn / scale, fk / scale
+        fs, fn, fk, scale = self.frame_weights(scaled)
         # mass that moves past the last frame ends the segment: the sums of every block's last
         # and second-to-last frame runs, all in one reduceat
         runs = np.add.reduceat(alpha, self._run_index)
@@ -154,6 +152,13 @@ class Topology:
                 dst = pred[st + 2 * big_h: end]
                 np.add(dst, weighted(alpha[st: end - 2 * big_h], fk), out=dst)
         return pred
+
+    def frame_weights(self, scaled: bool = True) -> tuple[float, float, float, float]:
+        """The frame level's (self, next, skip) of :meth:`predict` and the factor they were
+        divided by: 1, or ``a_self`` when ``scaled`` is False and it is > 0."""
+        fs, fn, fk = self.a_frame
+        scale = fs if (fs > 0 and not scaled) else 1.0
+        return fs / scale, fn / scale, fk / scale, scale
 
     def dense(self) -> np.ndarray:
         """The full transition matrix (N, N), ``A[i, j] = P(j | i)`` (for tests, small N)."""

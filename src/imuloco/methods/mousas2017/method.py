@@ -24,7 +24,7 @@ from imuloco.methods.mousas2017.registration import (
     register_phase,
     segment_clip,
 )
-from imuloco.methods.mousas2017.stream import MousasStream
+from imuloco.methods.mousas2017.stream import MousasStream, resolve_engine
 from imuloco.methods.postprocess import pin_feet
 from imuloco.methods.training import TrainingSet
 
@@ -78,6 +78,9 @@ class Mousas2017(Method):
         probability (:mod:`.beam`); 0: the exact forward step over every frame state. Model
         files written before the beam load with 0. On the shared data no width was both
         faster than the exact step and as accurate (docs/results/mousas2017/speed.md).
+    engine : how the online step runs: ``numba`` compiled kernels (the ``fast`` extra),
+        ``numpy`` calls, or ``auto`` (numba when installed); the same step either way, to
+        float rounding (:mod:`.compiled`). Model files written before it load with ``auto``.
     """
 
     summary = "hierarchical multivariate HMM + reactive interpolation (Mousas 2017), online"
@@ -87,8 +90,8 @@ class Mousas2017(Method):
     # missing: the forward pass then only propagates its transitions there (sec. 5.2, device
     # dropout)
     gaps_missing = True
-    legacy_params: ClassVar[dict[str, Any]] = {"beam": 0}
-    stream_params: ClassVar[tuple[str, ...]] = ("beam",)
+    legacy_params: ClassVar[dict[str, Any]] = {"beam": 0, "engine": "auto"}
+    stream_params: ClassVar[tuple[str, ...]] = ("beam", "engine")
 
     def __init__(
         self,
@@ -106,6 +109,7 @@ class Mousas2017(Method):
         foot_cleanup: bool = True,       # sec. 6
         sigma_scale: float = 1.0,        # eq. 9 (sigma not given)
         beam: int = 0,                   # sec. 6's forward algorithm, pruned (0: exact)
+        engine: str = "auto",            # compiled (numba) or numpy step, same results
     ) -> None:
         self.K = K
         self.a_self_phase = a_self_phase
@@ -121,6 +125,7 @@ class Mousas2017(Method):
         self.foot_cleanup = foot_cleanup
         self.sigma_scale = sigma_scale
         self.beam = beam
+        self.engine = engine
 
     # ---- learning ---------------------------------------------------------------------------
     def learn(self, data: TrainingSet, progress: bool = False) -> None:
@@ -130,6 +135,7 @@ class Mousas2017(Method):
             raise ValueError(f"mousas2017: K must be >= 1, got {self.K}")
         if self.beam < 0:
             raise ValueError(f"mousas2017: beam must be >= 0 (0: exact), got {self.beam}")
+        resolve_engine(self.engine)
         examples = data.examples
         max_len = max(2, round(self.max_segment_s * data.fps))
         segs: list[Segment] = []
@@ -184,10 +190,11 @@ class Mousas2017(Method):
         return self.foot_cleanup
 
     # ---- reconstruction ---------------------------------------------------------------------
-    def stream(self, pin: bool | None = None, beam: int | None = None) -> MousasStream:
-        """A fresh online session; ``pin`` overrides ``foot_cleanup``, ``beam`` the model's
-        ``beam``."""
-        return MousasStream(self, self.foot_cleanup if pin is None else pin, beam)
+    def stream(self, pin: bool | None = None, beam: int | None = None,
+               engine: str | None = None) -> MousasStream:
+        """A fresh online session; ``pin`` overrides ``foot_cleanup``, ``beam`` and ``engine``
+        the model's."""
+        return MousasStream(self, self.foot_cleanup if pin is None else pin, beam, engine)
 
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
         """Run the online stream over every frame (rows of NaN: missing samples), then pin the

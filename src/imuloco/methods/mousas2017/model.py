@@ -63,19 +63,21 @@ class FrameStates:
             big_h, length = int(self.group_count[g[0]]), int(g.size)
             self.blocks.append((int(g[0]), st, big_h, length))
             st += big_h * length
-        # the constant as one more row of the product: y_aug = [y, 1] (saves a pass)
-        self._lin_aug = np.vstack([self.lin, self.const[None, :]]).astype(np.float32)
-        self._y_aug = np.ones(self.lin.shape[0] + 1, dtype=np.float32)
+        # the constant as one more row of the product: y_aug = [y, 1] (saves a pass); in lin's
+        # precision (float32 in a fitted model)
+        self._lin_aug = np.vstack([self.lin, self.const[None, :]]).astype(self.lin.dtype)
+        self._y_aug = np.ones(self.lin.shape[0] + 1, dtype=self.lin.dtype)
 
     def quad(self, y: np.ndarray) -> np.ndarray:
-        """``y' P_g y / 2`` of every group, shape (G,) float32. y : (dy,) one sensor frame."""
+        """``y' P_g y / 2`` of every group, shape (G,) in lin's dtype (float32 in a fitted
+        model). y : (dy,) one sensor frame."""
         g, dy = self.prec.shape[:2]
         return ((self.prec.reshape(g * dy, dy) @ y).reshape(g, dy) @ (0.5 * y)).astype(
-            np.float32)
+            self.lin.dtype)
 
     def log_emission(self, y: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """log b_i(y) for every state, shape (N,) float32. y : (dy,) one sensor frame.
-        out : optional preallocated (N,) float32 buffer (returned)."""
+        """log b_i(y) for every state, shape (N,) in lin's dtype. y : (dy,) one sensor frame.
+        out : optional preallocated (N,) buffer of that dtype (returned)."""
         self._y_aug[:-1] = y
         ll = np.matmul(self._y_aug, self._lin_aug, out=out)
         # a group's states are one run (``group`` is sorted), so quad per state is a repeat

@@ -1,0 +1,389 @@
+"""Compiled kernels of the online stream's exact step (numba, the ``fast`` extra).
+
+The numpy step of :mod:`.stream` makes about 150 numpy calls a frame on arrays of a few dozen
+joints and 15 passes over the N frame states; each call costs microseconds on its own. These
+kernels do the same arithmetic in a few compiled loops, called once a frame each:
+
+- :func:`emission`: eq. 9's quadratic term per group subtracted from ``y_aug @ lin_aug`` (that
+  product stays numpy's, one BLAS call), the maximum subtracted, the clamp of
+  :data:`.stream.EXP_CLAMP`; ``exp`` stays numpy's too;
+- :func:`forward`: the emission floor, eq. 8's mean per group, one transition of
+  :meth:`.forward.Topology.predict` (unscaled), the product with the emission, the
+  normalisation and the forward floor: two passes over the states;
+- :func:`interpolate`: the upper level's dense step, the phase posterior and eq. 10-13;
+- :func:`pose`: velocity-based blending, Gram-Schmidt, root decoding, quaternions and the legs'
+  forward kinematics for the foot clean-up.
+
+Element operations are those of the numpy step in the forward variable's precision (float32
+in a fitted model); sums accumulate in float64, where numpy's float32 reductions (BLAS dot,
+``reduceat``) round in another order. So a float32 forward variable agrees with the numpy
+step's to float32 rounding and a float64 one to about 1e-15 (tests/test_mousas2017.py).
+Hand-written because this step is the method's own (see :mod:`.forward`); numba only compiles
+it. Importing this module needs numba (:func:`.stream.compiled_kernels` says which extra);
+each kernel is compiled on first use and cached on disk (numba's ``cache=True``: beside this
+file, or in the user's cache directory when the installation is read-only), so the compile
+cost is paid once per machine, not per stream.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# error_model="numpy": a division by zero gives inf, as numpy's, not an exception check per
+# division
+_jit = njit(cache=True, nogil=True, error_model="numpy")
+# sums over the states in any order (vectorised); element operations stay as written
+_jit_sums = njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc"})
+# and a maximum in any order (no NaN: the emission's inputs are finite)
+_jit_max = njit(cache=True, nogil=True, error_model="numpy",
+                fastmath={"reassoc", "nnan", "nsz"})
+
+
+# ---- the lower level's forward step --------------------------------------------------------
+@_jit_max
+def emission(b, y, prec, quad, group_start, group_count, clamp):
+    """In place: ``b`` (N,) holds ``m_i . y + c_i`` (:meth:`.model.FrameStates.log_emission`
+    before its quadratic term); subtracts each group's ``y' P_g y / 2``, then the maximum, and
+    raises values below ``clamp`` to it. y : (dy,) float64; prec : (G, dy, dy); quad : (G,)
+    scratch of b's dtype."""
+    num_g, dy = prec.shape[0], prec.shape[1]
+    for g in range(num_g):
+        q = 0.0
+        for d in range(dy):
+            s = 0.0
+            for e in range(dy):
+                s += prec[g, d, e] * y[e]
+            q += s * (0.5 * y[d])
+        quad[g] = q
+    top = b[0] - quad[0]
+    for g in range(num_g):
+        q32 = quad[g]
+        run = b[group_start[g]: group_start[g] + group_count[g]]
+        for i in range(run.size):
+            v = run[i] - q32
+            run[i] = v
+            top = max(top, v)
+    for i in range(b.size):
+        v = b[i] - top
+        b[i] = max(v, clamp)
+
+
+@_jit
+def _vm(v, m):
+    """v @ m for a small matrix m (numba's @ calls BLAS, slow at this size)."""
+    out = np.zeros(m.shape[1])
+    for i in range(m.shape[0]):
+        for j in range(m.shape[1]):
+            out[j] += v[i] * m[i, j]
+    return out
+
+
+@_jit_sums
+def forward(alpha, pred, b, has_b, blocks, block_phase, phase_trans, weights, bu,
+            emission_floor, alpha_floor, scratch):
+    """One exact forward step of the lower level, in place, as the numpy step's
+    ``_filter_exact`` after its first frame.
+
+    alpha : (N,) the forward variable, replaced by the new one; pred : (N,) scratch;
+    b : (N,) ``exp(log b_i - max)`` (its floor is added here), ignored unless ``has_b``;
+    blocks : (B, 4) int, (first state, H, L, first group) of each phase block;
+    block_phase : (B,) int; phase_trans : (P, P) the topology's ``phase_trans``;
+    weights : (4,) float64 of the transition without its common factor ``a_self`` (self,
+    next, skip, next + skip; :meth:`.forward.Topology.predict`, ``scaled=False``);
+    bu : (G,) float64, set to the upper level's emission (eq. 8); scratch : (1,) of alpha's
+    dtype (casts Python-float constants to it, as numpy does).
+    """
+    a_self, a_next, a_skip = weights[0], weights[1], weights[2]
+    scratch[0] = a_self
+    ws = scratch[0]
+    scratch[0] = a_next
+    wn = scratch[0]
+    scratch[0] = a_skip
+    wk = scratch[0]
+    num_b, num_p = blocks.shape[0], phase_trans.shape[0]
+    # mass that moves past the last frame ends a segment: the upper level's entries
+    out_phase = np.zeros(num_p)
+    for k in range(num_b):
+        st, big_h, length = blocks[k, 0], blocks[k, 1], blocks[k, 2]
+        last = st + (length - 1) * big_h
+        s_last = 0.0
+        for i in range(last, last + big_h):
+            s_last += alpha[i]
+        s_prev = 0.0
+        if length >= 2:
+            for i in range(last - big_h, last):
+                s_prev += alpha[i]
+        out_phase[block_phase[k]] = s_last * weights[3] + s_prev * a_skip
+    entry = _vm(out_phase, phase_trans)
+    c = 0.0
+    for k in range(num_b):
+        st, big_h, length, g0 = blocks[k, 0], blocks[k, 1], blocks[k, 2], blocks[k, 3]
+        scratch[0] = entry[block_phase[k]] / big_h
+        e = scratch[0]
+        for j in range(length):
+            # views of one frame run and the runs before it: loops over 0..H with indices the
+            # compiler knows are >= 0 (no negative-index wrap-around check), so they vectorise
+            lo = st + j * big_h
+            out, a0 = pred[lo: lo + big_h], alpha[lo: lo + big_h]
+            if j == 0:  # pi: each segment's first frame alike
+                for i in range(big_h):
+                    out[i] = a0[i] * ws + e
+            elif j == 1 or a_skip == 0.0:  # the next frame
+                a1 = alpha[lo - big_h: lo]
+                for i in range(big_h):
+                    out[i] = a0[i] * ws + a1[i] * wn
+            else:  # and the skip
+                a1, a2 = alpha[lo - big_h: lo], alpha[lo - 2 * big_h: lo - big_h]
+                for i in range(big_h):
+                    out[i] = a0[i] * ws + a1[i] * wn + a2[i] * wk
+            if has_b:
+                bj = b[lo: lo + big_h]
+                total = 0.0
+                for i in range(big_h):
+                    bi = bj[i] + emission_floor
+                    total += bi
+                    p = out[i] * bi
+                    out[i] = p
+                    c += p
+                bu[g0 + j] = total / big_h
+            else:
+                for i in range(big_h):
+                    c += out[i]
+    scratch[0] = 1.0 / c
+    inv = scratch[0]
+    for i in range(alpha.size):
+        alpha[i] = pred[i] * inv + alpha_floor
+
+
+# ---- eq. 10-13 -------------------------------------------------------------------------------
+@_jit
+def interpolate(alpha, alpha_up, a_up, bu, has_y, step_up, group_phase, phase_block, blocks,
+                top_k, tie_rtol, mu_x, mu_y, reg, cond_var, y, pp, x, y_bar, variance):
+    """The upper level's step (dense, G states; when ``step_up``), then eq. 10-13 in the most
+    probable phase that holds lower-level mass, as the numpy step's ``_filter`` (upper part)
+    and ``_interpolate``. In place: ``alpha_up`` (G,), ``pp`` (P,) the phase posterior, ``x``
+    (dx,) the interpolated features, ``y_bar`` (dy,), ``variance`` (dx,). Returns the phase.
+
+    alpha : (N,) the lower level's forward variable; a_up : (G, G); bu : (G,) eq. 8;
+    has_y : a sample (y, bu) is given, else only transitions and means; phase_block : (P,)
+    block of each phase, -1 for none; blocks : as :func:`forward`; mu_x : (N, dx);
+    mu_y : (N, dy); reg : (G, dx, dy); cond_var : (G, dx); y : (dy,) the sample;
+    top_k, tie_rtol : K and the ties of :func:`.stream.top_segments`.
+    """
+    if step_up:
+        up = _vm(alpha_up, a_up)
+        c = 0.0
+        if has_y:
+            up2 = up * bu
+            c = up2.sum()
+        if c > 0:
+            alpha_up[:] = up2 / c
+        else:
+            c = up.sum()
+            if c > 0:
+                alpha_up[:] = up / c
+            else:
+                alpha_up[:] = 1.0 / alpha_up.size
+    pp[:] = 0.0
+    for g in range(alpha_up.size):
+        pp[group_phase[g]] += alpha_up[g]
+    # the most probable phase whose block holds mass
+    order = np.argsort(-pp, kind="mergesort")
+    blk, w = -1, np.zeros(0)
+    phase = int(order[0])
+    for h in order:
+        k = phase_block[h]
+        if k < 0:
+            continue
+        st, big_h, length = blocks[k, 0], blocks[k, 1], blocks[k, 2]
+        w = np.zeros(big_h)
+        for j in range(length):
+            for s in range(big_h):
+                w[s] += alpha[st + j * big_h + s]
+        blk, phase = k, int(h)
+        if w.max() > 0:
+            break
+    st, big_h, length, g0 = blocks[blk, 0], blocks[blk, 1], blocks[blk, 2], blocks[blk, 3]
+    k = min(top_k, big_h)
+    top = _largest(w, k, tie_rtol)
+    tot = 0.0
+    for s in top:
+        tot += w[s]
+    dx, dy = mu_x.shape[1], mu_y.shape[1]
+    x[:] = 0.0
+    y_bar[:] = 0.0
+    variance[:] = 0.0
+    wl = np.zeros(length)
+    wy = np.zeros((length, dy))
+    for s in top:
+        for j in range(length):
+            row = st + j * big_h + s
+            wt = alpha[row] / tot if tot > 0 else 1.0 / (k * length)
+            wl[j] += wt
+            for d in range(dx):
+                x[d] += wt * mu_x[row, d]
+            for d in range(dy):
+                wy[j, d] += wt * mu_y[row, d]
+    for j in range(length):
+        for d in range(dy):
+            y_bar[d] += wy[j, d]                                            # eq. 10
+        for d in range(dx):
+            variance[d] += wl[j] * cond_var[g0 + j, d]                     # eq. 12
+        if has_y:                                                           # eq. 6, 11
+            for d in range(dy):
+                r = wl[j] * y[d] - wy[j, d]
+                for e in range(dx):
+                    x[e] += reg[g0 + j, e, d] * r
+    return phase
+
+
+@_jit
+def _largest(w, k, tie_rtol):
+    """Indices of the k largest entries of w (n,), k <= n, as :func:`.stream.top_segments`:
+    those above the k-th largest by more than ``tie_rtol`` (relative), then the lowest indices
+    among the ties. O(n k) (k is small: K = 5)."""
+    top = np.empty(k, dtype=np.int64)
+    m = 0
+    for s in range(w.size):  # the k largest, by insertion
+        if m < k:
+            pos = m
+            m += 1
+        elif w[s] > w[top[k - 1]]:
+            pos = k - 1
+        else:
+            continue
+        while pos > 0 and w[top[pos - 1]] < w[s]:
+            top[pos] = top[pos - 1]
+            pos -= 1
+        top[pos] = s
+    if k == w.size:
+        return top
+    thr = w[top[k - 1]]
+    lo, hi = thr * (1.0 - tie_rtol), thr * (1.0 + tie_rtol)
+    m = 0
+    for s in range(w.size):
+        if w[s] > hi:
+            top[m] = s
+            m += 1
+    for s in range(w.size):
+        if m == k:
+            break
+        if lo <= w[s] <= hi:
+            top[m] = s
+            m += 1
+    return top
+
+
+# ---- the pose ------------------------------------------------------------------------------
+@_jit
+def _from_6d(d6, out):
+    """6-D rotations (J, 6) -> matrices (J, 3, 3) in ``out``, as :func:`.stream.matrix_from_6d`."""
+    for i in range(d6.shape[0]):
+        n = np.sqrt(d6[i, 0] ** 2 + d6[i, 1] ** 2 + d6[i, 2] ** 2)
+        a0, a1, a2 = d6[i, 0] / n, d6[i, 1] / n, d6[i, 2] / n
+        dot = a0 * d6[i, 3] + a1 * d6[i, 4] + a2 * d6[i, 5]
+        b0, b1, b2 = d6[i, 3] - dot * a0, d6[i, 4] - dot * a1, d6[i, 5] - dot * a2
+        n = np.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
+        b0, b1, b2 = b0 / n, b1 / n, b2 / n
+        out[i, 0, 0], out[i, 1, 0], out[i, 2, 0] = a0, a1, a2
+        out[i, 0, 1], out[i, 1, 1], out[i, 2, 1] = b0, b1, b2
+        out[i, 0, 2] = a1 * b2 - a2 * b1
+        out[i, 1, 2] = a2 * b0 - a0 * b2
+        out[i, 2, 2] = a0 * b1 - a1 * b0
+
+
+@_jit
+def _mm3(a, b, out):
+    """out = a @ b for 3 x 3 matrices (numba's @ calls BLAS, slow at this size)."""
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
+
+
+@_jit
+def _exp_map(r0, r1, r2, k, kk, out):
+    """A rotation vector -> its matrix in ``out`` (3, 3), as :func:`.stream.matrix_exp`;
+    k, kk : (3, 3) scratch."""
+    a = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2) + 1e-300
+    s, h = np.sin(a) / a, np.sin(0.5 * a) / a
+    h2 = 2.0 * h * h
+    k[0, 0], k[0, 1], k[0, 2] = 0.0, -r2, r1
+    k[1, 0], k[1, 1], k[1, 2] = r2, 0.0, -r0
+    k[2, 0], k[2, 1], k[2, 2] = -r1, r0, 0.0
+    _mm3(k, k, kk)
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = (1.0 if i == j else 0.0) + s * k[i, j] + h2 * kk[i, j]
+
+
+@_jit
+def pose(x, num_joints, blend, fps, t, state, r_prev, q_prev, shepperd, shepperd_c, chains,
+         chain_offsets, rot, rm, contacts, feet):
+    """Eq. 13's pose vector ``x`` (dx,) to the frame's output, as the numpy step's ``_pose``.
+
+    state : (5,) float64 in place: heading theta, the raw root (3), and 1 once ``r_prev``
+    and ``q_prev`` hold a previous frame; r_prev : (J, 3, 3), q_prev : (J, 4) in place;
+    shepperd, shepperd_c : :data:`.stream._SHEPPERD`; chains : (2, D) joints from below the
+    root to each ankle; chain_offsets : (2, D, 3) (no rows: no chains, ``feet`` untouched).
+    Out: rot (J, 4) quaternions x, y, z, w; rm (J, 3, 3) local matrices with the root's
+    global; contacts (2,); feet (2, 3) ankles relative to the root, world axes.
+    """
+    j6 = 6 * num_joints
+    d6 = x[:j6].copy().reshape(num_joints, 6)
+    has_prev = state[4] > 0
+    e, p, k, kk = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    if has_prev and blend < 1.0:
+        for i in range(num_joints):
+            o = j6 + 4 + 3 * i
+            _exp_map(x[o] / fps, x[o + 1] / fps, x[o + 2] / fps, k, kk, e)
+            _mm3(r_prev[i], e, p)
+            for c in range(3):
+                d6[i, c] = blend * d6[i, c] + (1.0 - blend) * p[c, 0]
+                d6[i, 3 + c] = blend * d6[i, 3 + c] + (1.0 - blend) * p[c, 1]
+    _from_6d(d6, rm)
+    r_prev[:] = rm
+    height, vx, vz, yaw_rate = x[j6], x[j6 + 1], x[j6 + 2], x[j6 + 3]
+    if t > 0:
+        state[0] += yaw_rate / fps
+    c, s = np.cos(state[0]), np.sin(state[0])
+    for j in range(3):  # the root's about +Y
+        rm[0, 0, j] = c * r_prev[0, 0, j] + s * r_prev[0, 2, j]
+        rm[0, 2, j] = -s * r_prev[0, 0, j] + c * r_prev[0, 2, j]
+    if t > 0:
+        state[1] += (c * vx + s * vz) / fps
+        state[3] += (c * vz - s * vx) / fps
+    state[2] = height
+    kq = np.empty(16)
+    for i in range(num_joints):  # Shepperd: K = m C + c, its row of largest diagonal entry
+        for m in range(16):
+            v = shepperd_c[m]
+            for n in range(9):
+                v += rm[i, n // 3, n % 3] * shepperd[n, m]
+            kq[m] = v
+        best = 0
+        for m in range(1, 4):
+            if kq[5 * m] > kq[5 * best]:
+                best = m
+        n = np.sqrt(kq[4 * best] ** 2 + kq[4 * best + 1] ** 2 + kq[4 * best + 2] ** 2
+                    + kq[4 * best + 3] ** 2)
+        for m in range(4):
+            rot[i, m] = kq[4 * best + m] / n
+        if has_prev and (rot[i, 0] * q_prev[i, 0] + rot[i, 1] * q_prev[i, 1]
+                         + rot[i, 2] * q_prev[i, 2] + rot[i, 3] * q_prev[i, 3]) < 0:
+            for m in range(4):
+                rot[i, m] = -rot[i, m]
+    q_prev[:] = rot
+    state[4] = 1.0
+    lo, hi = x[j6 + 4 + 3 * num_joints], x[j6 + 5 + 3 * num_joints]
+    contacts[0], contacts[1] = min(max(lo, 0.0), 1.0), min(max(hi, 0.0), 1.0)
+    for f in range(chains.shape[0]):  # the legs' kinematics: pos += G off_j; G = G R_j
+        e[:] = rm[0]
+        for j in range(3):
+            feet[f, j] = 0.0
+        for d in range(chains.shape[1]):
+            off = chain_offsets[f, d]
+            for j in range(3):
+                feet[f, j] += e[j, 0] * off[0] + e[j, 1] * off[1] + e[j, 2] * off[2]
+            _mm3(e, rm[chains[f, d]], p)
+            e[:] = p
