@@ -8,8 +8,8 @@ brought into the shank's anatomical frame by imuloco's own sensor-to-segment cal
 low-passed (4th-order Butterworth, zero phase) at 3, 8 and 20 Hz. Prints a Markdown table of
 the real signals' standard deviation per anatomical axis (m/s², rad/s) and the ratio real over
 virtual for each motion set, then how much the virtual acceleration's spread (8 Hz band,
-norm of the three axes) moves with where on the shank the sensor sits. A measurement to steer the virtual sensors, never a fit: nothing
-here changes a constant.
+norm of the three axes) moves with where on the shank the sensor sits. A measurement to steer
+the virtual sensors, never a fit: nothing here changes a constant.
 """
 
 from __future__ import annotations
@@ -81,7 +81,8 @@ def main() -> None:
             sim = np.mean([spread(r.times, r.acc[:, 0], r.gyro[:, 0], cutoff) for r in recs], 0)
             lines.append(f"| | real / {name} ({len(recs)} walks) | "
                          + " | ".join(f"{v:.2f}" for v in real / sim) + " |")
-    lines += ["", "| sensor at, knee to ankle | 0.35 | 0.5 | 0.65 | 0.8 (preset) |", "|---|---:|---:|---:|---:|"]
+    lines += ["", "| sensor at, knee to ankle | 0.35 | 0.5 | 0.65 | 0.8 (preset) |",
+              "|---|---:|---:|---:|---:|"]
     norms = [np.mean([np.linalg.norm(spread(r.times, r.acc[:, 0], r.gyro[:, 0], 8.0)[:3])
                       for r in virtual([(f, 0) for f in bn2], fraction)])
              for fraction in (0.35, 0.5, 0.65, 0.8)]

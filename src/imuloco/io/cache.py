@@ -33,8 +33,8 @@ from imuloco.io.atomic import atomic_write
 from imuloco.io.bvh import cached_body_map
 
 # The code whose output an entry holds (paths in the package).
-_SOURCES = ("io/bvh.py", "io/numtext.py", "io/asf_amc.py", "io/upaxis.py", "io/motionfile.py", "io/cache.py",
-            "ops/rotations.py", "ops/kinematics.py")
+_SOURCES = ("io/bvh.py", "io/numtext.py", "io/asf_amc.py", "io/upaxis.py", "io/motionfile.py",
+            "io/cache.py", "ops/rotations.py", "ops/kinematics.py")
 _FORMAT = 2  # of the entry layout (see _store)
 _MAX_HEAD = 1 << 24  # bytes of an entry's JSON line (names of 2,000 joints fit many times)
 

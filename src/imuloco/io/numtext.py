@@ -31,6 +31,10 @@ def _arrow() -> tuple[ModuleType, ModuleType] | None:
         import pyarrow._compute as kernels
     except ImportError:
         return None
+    # a private module: should a pyarrow release move what is used here, numpy parses
+    if not all(hasattr(kernels, n) for n in ("call_function", "SplitPatternOptions",
+                                             "CastOptions")):
+        return None
     return pyarrow, kernels
 
 
