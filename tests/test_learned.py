@@ -211,6 +211,8 @@ def test_mirrored_model_twice_is_the_model(tiny_model, sample_db, test_signals):
 
 def test_onnx_export(tiny_model, sample_db, test_signals, tmp_path):
     onnx = pytest.importorskip("onnx")
+    from scipy.signal import lfilter
+
     from imuloco.methods.learned.export import export_onnx
 
     left = tiny_model.mirrored(sample_db.clips[:4])
@@ -226,11 +228,18 @@ def test_onnx_export(tiny_model, sample_db, test_signals, tmp_path):
         lag = int(meta["lag"])
         assert lag == model.lag == 8
         fed = np.concatenate([test_signals, np.repeat(test_signals[-1:], lag, axis=0)])
-        pose_, contacts, _, _ = sess.run(None, {"signals": fed[None].astype(np.float32),
-                                                "h": h})
+        pose_, contacts, sigma, _, novelty = sess.run(
+            None, {"signals": fed[None].astype(np.float32), "h": h})
         ref = model.predict(test_signals)  # output frame k is input frame k - lag
         np.testing.assert_allclose(pose_[0, lag:], ref.vectors, atol=2e-3)
         np.testing.assert_allclose(contacts[0, lag:], ref.contacts, atol=1e-4)
+        np.testing.assert_allclose(sigma[0, lag:], ref.sigma, rtol=1e-4)
+        # the host's smoothing of the documented recursion gives the model's own novelty
+        a = float(meta["novelty_alpha"])
+        smooth = lfilter([a], [1, -(1 - a)], novelty[0].astype(np.float64),
+                         zi=[(1 - a) * novelty[0, 0]])[0]
+        np.testing.assert_allclose(smooth[lag:], ref.novelty, rtol=1e-3)
+        assert float(meta["novelty_threshold"]) == model.novelty_threshold_
 
 
 def test_cli_train_any_method(tmp_path):

@@ -2,7 +2,9 @@
 
 - Foot (``right_foot``, ``left_foot``; on the shoe over the instep): the foot swings while
   the gyroscope norm's 50 ms window maximum exceeds 100 deg/s for at least 0.2 s; between two
-  swings is one stance, and its stillest moment the foot's rest. A zero-velocity-update Kalman
+  swings is one stance, and its stillest moment the foot's rest. Brief dips inside a swing
+  are bridged, but never between two runs each as long as a swing: a jogging foot's stance
+  dips under the threshold for tens of ms only. A zero-velocity-update Kalman
   filter with Rauch-Tung-Striebel smoothing (gaitmap's ``RtsKalman``) gives the foot's 3-D
   path, with gaitmap's default ZUPTs (the gyroscope's norm under 34 deg/s over 50 ms) or-ed
   with one at each stance's stillest moment (its ``StrideEventZuptDetector``): some walkers'
@@ -43,10 +45,11 @@ ZUPT_WINDOW_S, ZUPT_GYRO_DPS = 0.05, 34.0  # gaitmap RtsKalman's default ZUPT de
 MIN_STRIDES = 2
 # the shortest swing: ~0.3 s even in sprinting (about 40 % of a 0.7 s stride; Novacheck 1998,
 # The biomechanics of running, Gait & Posture 7); 0.2 s leaves a margin
+SHORTEST_SWING_S = 0.3
 MIN_SWING_S = 0.2  # fewer and no stride length or cadence is defined
 # The foot swings while the gyroscope norm's 50 ms window maximum exceeds this for at least
-# MIN_SWING_S (small gaps bridged): three times the ZUPT detector's still threshold, far under
-# the foot's mid-swing angular velocity of several hundred deg/s in walking.
+# MIN_SWING_S (gaps within a swing bridged, see _bridged): three times the ZUPT detector's
+# still threshold, far under the foot's mid-swing angular velocity of several hundred deg/s.
 SWING_DPS = 3 * ZUPT_GYRO_DPS
 
 
@@ -162,6 +165,27 @@ FOOT_METHOD = ("gaitmap RtsKalman ZUPT trajectory (one ZUPT per stance at least)
                "from swing to swing, HerzerEventDetection contacts")
 
 
+def _bridged(starts: np.ndarray, stops: np.ndarray, max_gap: int, min_length: int,
+             whole: int) -> tuple[np.ndarray, np.ndarray]:
+    """Runs (sample starts, exclusive stops) joined across gaps of at most ``max_gap``, then
+    those shorter than ``min_length`` dropped.
+
+    A gap between two runs of ``whole`` samples or more (each as long as a swing) is never
+    bridged: a foot swings once per stride, so the dip between them is a stance, however
+    brief (a jogging foot's gyroscope stays under the threshold for 10-65 ms only). Shorter
+    runs are pieces of a swing (a push-off before toe off, the foot's slap after heel strike)
+    and join the run after them first: the push-off belongs to the swing it starts.
+    """
+    out: list[list[int]] = []
+    for a, b in zip(starts[::-1].tolist(), stops[::-1].tolist()):
+        if out and out[-1][0] - b <= max_gap and min(b - a, out[-1][1] - out[-1][0]) < whole:
+            out[-1][0] = a
+        else:
+            out.append([a, b])
+    kept = np.array([r for r in out[::-1] if r[1] - r[0] >= min_length], int).reshape(-1, 2)
+    return kept[:, 0], kept[:, 1]
+
+
 def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
     """The foot's swings and the stillest moment of each stance around them.
 
@@ -173,13 +197,12 @@ def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
     """
     from scipy.ndimage import maximum_filter1d
 
-    from imuloco.phases.contacts import clean_mask
-
     window = max(1, round(ZUPT_WINDOW_S * rate))
     energy = maximum_filter1d(np.linalg.norm(gyro_dps, axis=1), window)
-    swinging = clean_mask(energy > SWING_DPS, window, round(MIN_SWING_S * rate))
-    swinging[[0, -1]] = False  # a stance (however short) before the first and after the last
-    starts, stops = _runs(swinging)
+    above = energy > SWING_DPS
+    above[[0, -1]] = False  # a stance (however short) before the first and after the last
+    starts, stops = _bridged(*_runs(above), window, round(MIN_SWING_S * rate),
+                             round(SHORTEST_SWING_S * rate))
     bounds = np.concatenate([[0], starts, [len(energy)]])
     lows = np.concatenate([[0], stops, [len(energy)]])
     moments = np.array([lo + int(np.argmin(energy[lo:hi])) for lo, hi in

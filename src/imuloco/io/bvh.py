@@ -597,10 +597,11 @@ def _guess_scale(names: list[str], parents: np.ndarray, offsets: np.ndarray,
         if f"{side}_hip" not in parts or f"{side}_ankle" not in parts:
             continue
         hip, j = names.index(parts[f"{side}_hip"]), names.index(parts[f"{side}_ankle"])
-        leg = 0.0
+        bones = []
         while j > hip:
-            leg += float(np.linalg.norm(offsets[j]))
+            bones.append(j)
             j = int(parents[j])
+        leg = float(np.linalg.norm(offsets[bones], axis=-1).sum())
         if j == hip and leg > 0:
             if leg < 3:
                 return UNITS["m"]

@@ -39,9 +39,12 @@ def read_grid(text: str, rows: int, width: int) -> np.ndarray | None:
     blank, each of ``width`` numbers separated by spaces or tabs (lines end in ``\n`` or
     ``\r\n``; no other line breaks). None when the text is not such a grid or a number does
     not parse; the numbers are not checked to be finite."""
-    arrow = _arrow()
-    data = None if arrow is None or not text.isascii() else _arrow_grid(*arrow, text, rows,
-                                                                         width)
+    arrow, data = _arrow(), None
+    if arrow is not None and text.isascii():
+        try:
+            data = _arrow_grid(*arrow, text, rows, width)
+        except arrow[0].ArrowException:  # a token that is not a number, more than 2**31 tokens
+            data = None
     if data is not None:
         return data
     with warnings.catch_warnings():
@@ -57,7 +60,7 @@ def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, rows: int, width: int
                 ) -> np.ndarray | None:
     """:func:`read_grid` by Arrow kernels: lines, trimmed, split at whitespace (each line's
     count checked), the tokens cast to float64. None also for blank lines between rows (left
-    to numpy)."""
+    to numpy); an ArrowException for a token that is not a number."""
     raw = text.encode("ascii")
     whole = pa.Array.from_buffers(pa.large_string(), 1, [
         None, pa.py_buffer(np.array([0, len(raw)], dtype=np.int64)), pa.py_buffer(raw)])
@@ -71,10 +74,7 @@ def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, rows: int, width: int
     if not np.all(_values(pc.call_function("list_value_length", [tokens]))[:rows] == width):
         return None
     tokens = pc.call_function("list_flatten", [tokens]).slice(0, rows * width)
-    try:
-        numbers = pc.call_function("cast", [tokens], pc.CastOptions.safe(pa.float64()))
-    except pa.ArrowInvalid:  # a token that is not a number
-        return None
+    numbers = pc.call_function("cast", [tokens], pc.CastOptions.safe(pa.float64()))
     return _values(numbers).reshape(rows, width)
 
 

@@ -68,7 +68,7 @@ def detect_up(motion: Motion) -> str:
     sub, sk = spread_frames(motion, _DETECT_FRAMES), motion.skeleton
     pos = joint_positions(sub.rotations, sub.root, sk.offsets, sk.parents,
                           [sk.part(p) for p in [top] + bottom])  # (T, 3, 3)
-    up = median(pos[:, 0] - pos[:, 1:].mean(axis=1))  # (3,) x, y, z
+    up = median(pos[:, 0] - (pos[:, 1] + pos[:, 2]) / 2)  # (3,) x, y, z; legs' mean
     return "z" if up[2] > up[1] else "y"
 
 

@@ -6,7 +6,16 @@ de-standardization (and, for a mirrored model, the mirroring) baked in:
 - inputs ``signals`` (1, T, 6 S) raw channels at the model rate (m/s^2, rad/s; sensor order
   and fps in the metadata) and ``h`` (layers, 1, hidden), zeros at the start;
 - outputs ``pose`` (1, T, 6 J + 4) pose vectors (:mod:`imuloco.methods.pose`), ``contacts``
-  (1, T, 4) probabilities, ``sigma`` (1, T) metres, and ``h_out`` to feed back.
+  (1, T, 4) probabilities, ``sigma`` (1, T) metres, ``h_out`` to feed back, and
+  ``novelty_frame`` (1, T): each frame's novelty before its causal smoothing (NaN for a model
+  file from before novelty was measured).
+
+The host smooths the novelty as :meth:`imuloco.methods.learned.method.Learned._novelty` does,
+``n[0] = f[0]``, ``n[k] = a f[k] + (1 - a) n[k - 1]`` with ``a`` the metadata's
+``novelty_alpha`` (carried across calls like ``h``); a frame is unreliable where ``n`` exceeds
+``novelty_threshold``. A model with a ``calibration`` (metadata, JSON) predicts the error
+``exp(coef[0]) * prod_k score_k ** coef[k]`` over its ``scores`` (``novelty``: n; ``sigma_m``:
+sigma), as :func:`imuloco.methods.base.calibrated_error`.
 
 Output frame k is the pose of input frame k - ``lag`` (metadata: the model's look-ahead in
 frames; 0 for a model without). T may be 1 (online, one frame per call carrying ``h``) or a
@@ -42,6 +51,12 @@ class _Exported(nn.Module):
         self.register_buffer("y_mean", torch.as_tensor(model.y_mean_, dtype=f))
         self.register_buffer("y_std", torch.as_tensor(model.y_std_, dtype=f))
         self.mirror = bool(model.output_mirror_)
+        self.novelty = model.novelty_mean_ is not None
+        if self.novelty:  # Learned._novelty's distance, its smoothing left to the host
+            self.register_buffer("n_mean", torch.as_tensor(model.novelty_mean_, dtype=f))
+            self.register_buffer("n_precision", torch.as_tensor(
+                model.novelty_precision_ / (len(model.novelty_mean_) * model.novelty_scale_),
+                dtype=f))
         sk = model.skeleton_
         self.j = sk.num_joints
         if self.mirror:
@@ -53,10 +68,16 @@ class _Exported(nn.Module):
             self.register_buffer("right", torch.as_tensor(frames, dtype=f))
             self.swap = [int(k) for k in mirror_pairs(sk)]
 
-    def forward(self, signals: torch.Tensor, h: torch.Tensor
-                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    def forward(self, signals: torch.Tensor, h: torch.Tensor) -> tuple[torch.Tensor, ...]:
         x = (signals @ self.imap.T - self.x_mean) / self.x_std
-        p, logit, logvar, h_out = self.net(x, h)
+        feats, h_out = self.net.encode(x, h)
+        p, logit, logvar = self.net.heads(feats)
+        sigma = torch.exp(0.5 * logvar[..., 0])
+        if self.novelty:
+            d = feats - self.n_mean
+            novelty = ((d @ self.n_precision) * d).sum(-1)
+        else:
+            novelty = torch.full_like(sigma, float("nan"))
         pose = p * self.y_std + self.y_mean
         contacts = torch.sigmoid(logit)
         if self.mirror:  # see Learned._mirror_vectors
@@ -70,7 +91,7 @@ class _Exported(nn.Module):
             sign[3] = -1.0
             pose = torch.cat([six, pose[..., 6 * j:] * sign], dim=-1)
             contacts = contacts[..., CONTACT_SWAP]
-        return pose, contacts, torch.exp(0.5 * logvar[..., 0]), h_out
+        return pose, contacts, sigma, h_out, novelty
 
 
 def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Path:
@@ -92,9 +113,11 @@ def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Pa
             warnings.simplefilter("ignore")
             torch.onnx.export(module, (x, h), str(tmp), dynamo=False, opset_version=17,
                               input_names=["signals", "h"],
-                              output_names=["pose", "contacts", "sigma", "h_out"],
+                              output_names=["pose", "contacts", "sigma", "h_out",
+                                            "novelty_frame"],
                               dynamic_axes={"signals": {1: "frames"}, "pose": {1: "frames"},
-                                            "contacts": {1: "frames"}, "sigma": {1: "frames"}})
+                                            "contacts": {1: "frames"}, "sigma": {1: "frames"},
+                                            "novelty_frame": {1: "frames"}})
         proto = onnx.load(str(tmp))
         sk = model.skeleton_
         meta = {"method": model.name, "placements": json.dumps(model.placements_),
@@ -104,6 +127,11 @@ def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Pa
                 "contacts": json.dumps(list(CONTACT_PARTS)), "lag": str(model.lookahead),
                 "channels": "per sensor acc x,y,z (m/s^2) then gyro x,y,z (rad/s), sensor "
                             "frame"}
+        if model.novelty_mean_ is not None:
+            meta.update(novelty_alpha=repr(model.novelty_alpha_),
+                        novelty_threshold=repr(model.novelty_threshold_))
+        if model.calibration_ is not None:
+            meta["calibration"] = json.dumps(model.calibration_)
         for k, v in meta.items():
             entry = proto.metadata_props.add()
             entry.key, entry.value = k, v
