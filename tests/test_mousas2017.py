@@ -514,3 +514,24 @@ def test_top_segments_ties_go_to_the_lower_index():
                     (5, [1, 2, 3, 4, 5])):
         assert sorted(top_segments(w, k).tolist()) == want
         assert sorted(compiled._largest(w, k, TIE_RTOL).tolist()) == want
+
+
+def test_a_cold_numba_cache_is_announced(tmp_path, caplog):
+    """The first compile takes about 25 s of CPU: without cached kernels, a warning says so;
+    with them, nothing."""
+    from imuloco.methods.mousas2017.stream import _say_if_compiling
+
+    class Module:  # what is read of imuloco.methods.mousas2017.compiled
+        def __init__(self) -> None:
+            self.__file__ = str(tmp_path / "compiled.py")
+            self.emission = type("Kernel", (), {})()
+            self.emission._cache = type("Cache", (), {"cache_path": str(tmp_path)})()
+
+    with caplog.at_level("WARNING"):
+        _say_if_compiling(Module())
+    assert "compiling its online step with numba" in caplog.text
+    caplog.clear()
+    (tmp_path / "compiled.emission-44.py311.nbi").write_bytes(b"")
+    with caplog.at_level("WARNING"):
+        _say_if_compiling(Module())
+    assert caplog.text == ""

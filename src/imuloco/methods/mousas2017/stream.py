@@ -34,10 +34,13 @@ recover when samples return) and the pose is the interpolated means without the 
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.util
 import itertools
+import logging
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -45,6 +48,8 @@ from imuloco.errors import MissingExtraError
 from imuloco.methods.base import Stream
 from imuloco.methods.mousas2017.beam import SegmentBeam
 from imuloco.methods.postprocess import FootPinner
+
+log = logging.getLogger(__name__)
 
 # These helpers run once per frame on a few dozen joints, where numpy's cost per call
 # dominates: sums over a last axis of 3 are products with ones (a reduction over a short last
@@ -152,7 +157,21 @@ def compiled_kernels():
             raise
         raise MissingExtraError("mousas2017's compiled step (engine=numba)", "numba",
                                 "fast") from None
+    _say_if_compiling(compiled)
     return compiled
+
+
+@functools.cache
+def _say_if_compiling(compiled) -> None:
+    """Log a warning, once a process, when numba has no cached kernels yet: the first step
+    then compiles them (about 25 s of CPU, once a machine), which would look like a hang."""
+    try:
+        folder = Path(compiled.emission._cache.cache_path)  # numba's cache of this module
+    except AttributeError:  # another numba's internals: say nothing rather than guess
+        return
+    if not any(folder.glob(f"{Path(compiled.__file__).stem}.*.nbi")):
+        log.warning("mousas2017: compiling its online step with numba (once on this machine, "
+                    "about 25 s of CPU; later runs load it from %s)", folder)
 
 
 # Segment masses within this relative distance of the K-th largest are ties, decided by the
