@@ -283,3 +283,18 @@ def test_gait_report_states_when_nothing_was_measured(demo_clip, demo_rec):
     out = gait_report(still, demo_rec, "right_ankle")
     assert out["gait_note"].startswith("no gait could be measured")
     assert out["gait"]["cadence_spm"] is None and out["gait"]["steps"] is None
+
+
+def test_the_summary_counts_the_contacts_no_estimate_matched():
+    """Two recordings: one matched everywhere, one whose 8 contacts all came too early. The
+    median timing error sees only the first; the matched share shows the second."""
+    from imuloco.evaluate.real import summarize, table
+
+    rows = [{"dataset": "d", "sensor": "right_foot", "estimator": "imuloco", "measured": True,
+             "ic_matched": 12, "ic_missed": 0, "ic_median_ms": 10.0},
+            {"dataset": "d", "sensor": "right_foot", "estimator": "imuloco", "measured": True,
+             "ic_matched": 0, "ic_missed": 8, "ic_median_ms": math.nan}]
+    s = summarize(rows)[0]
+    assert s["ic_median_ms"] == 10.0
+    assert s["ic_matched_pct"] == pytest.approx(60.0)
+    assert "IC matched %" in table([s]) and "| 60.0 |" in table([s])
