@@ -75,11 +75,16 @@ class FrameStates:
         return ((self.prec.reshape(g * dy, dy) @ y).reshape(g, dy) @ (0.5 * y)).astype(
             self.lin.dtype)
 
+    def linear(self, y: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``y' lin + const`` of every state, shape (N,) in lin's dtype: log b_i(y) without
+        the groups' quadratic term. y : (dy,); out : optional (N,) buffer (returned)."""
+        self._y_aug[:-1] = y
+        return np.matmul(self._y_aug, self._lin_aug, out=out)
+
     def log_emission(self, y: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """log b_i(y) for every state, shape (N,) in lin's dtype. y : (dy,) one sensor frame.
         out : optional preallocated (N,) buffer of that dtype (returned)."""
-        self._y_aug[:-1] = y
-        ll = np.matmul(self._y_aug, self._lin_aug, out=out)
+        ll = self.linear(y, out)
         # a group's states are one run (``group`` is sorted), so quad per state is a repeat
         ll -= np.repeat(self.quad(y), self.group_count)
         return ll

@@ -520,24 +520,21 @@ class MousasStream(Stream):
         first = self.alpha_up is None
         if first or self._beam is not None:
             self._filter(y)  # a stream's first step (pi), or the beam's step: numpy's
-            bu = self._bu
         else:
             if has_y:
                 b = self._b
-                fs._y_aug[:-1] = y
-                np.matmul(fs._y_aug, fs._lin_aug, out=b)
+                fs.linear(y, out=b)
                 k.emission(b, y, self._prec, self._quad, self._group_start_arr,
                            self._group_count, b.dtype.type(EXP_CLAMP))
                 np.exp(b, out=b)
             k.forward(self.alpha, self._pred, self._b, has_y, self._blocks_arr,
                       self._block_phase, self.lower.phase_trans, self._trans_w, self._bu,
                       self._floors[0], self._floors[1], self._scratch)
-            bu = self._bu
         if self._beam is not None:
             x = self._interpolate(y)
         else:
             self.phase = k.interpolate(
-                self.alpha, self.alpha_up, self._a_up, bu, has_y, not first,
+                self.alpha, self.alpha_up, self._a_up, self._bu, has_y, not first,
                 self._group_phase, self._phase_block_arr, self._blocks_arr, self.m.K,
                 TIE_RTOL, fs.mu_x, fs.mu_y, self._reg, self._cond_var,
                 y if has_y else self.y_bar, self.phase_posterior, self._x, self.y_bar,
