@@ -17,7 +17,8 @@ from imuloco.io.realimu import detect_layout, read_trials
 
 pytest.importorskip("gaitmap")
 pytest.importorskip("mobgap")
-from imuloco.evaluate.sensorgait import foot_gait, lower_back_gait, sensor_gait, swings
+from imuloco.evaluate.sensorgait import foot_gait, lower_back_gait, sensor_gait
+from imuloco.sensors.foottrack import swings
 
 DEMO = "dataset-2_walk_normal_001"
 
