@@ -62,24 +62,53 @@ def read_grid(text: str, rows: int, width: int) -> np.ndarray | None:
 
 def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, rows: int, width: int
                 ) -> np.ndarray | None:
-    """:func:`read_grid` by Arrow kernels: lines, trimmed, split at whitespace (each line's
-    count checked), the tokens cast to float64. None also for blank lines between rows (left
-    to numpy); an ArrowException for a token that is not a number."""
+    """:func:`read_grid` by Arrow's cast: the tokens are found by numpy on the bytes (where a
+    byte that is no space follows one that is), each line's count checked against the line
+    breaks, and the text between one token's start and the next's handed to Arrow as a string
+    array without copying, trimmed of its trailing whitespace and cast to float64. (Arrow's
+    own split kernels cost twice the cast, building a list of strings per line.) None also
+    for blank lines between rows (left to numpy) and control characters other than tab, CR
+    and LF; an ArrowException for a token that is not a number."""
     raw = text.encode("ascii")
-    whole = pa.Array.from_buffers(pa.large_string(), 1, [
-        None, pa.py_buffer(np.array([0, len(raw)], dtype=np.int64)), pa.py_buffer(raw)])
-    lines = pc.call_function("list_flatten", [pc.call_function(
-        "split_pattern", [whole], pc.SplitPatternOptions("\n"))])
-    lines = pc.call_function("ascii_trim_whitespace", [lines])
-    blank = _values(pc.call_function("binary_length", [lines])) == 0
-    if len(blank) < rows or blank[:rows].any() or not blank[rows:].all():
+    byte = np.frombuffer(raw, dtype=np.uint8)
+    space = byte <= 32  # tab, LF, CR and space: other control characters are refused here
+    lf = np.count_nonzero(byte == 10)
+    control = np.count_nonzero(byte < 32)
+    if control != lf and control != (
+            lf + np.count_nonzero(byte == 9) + np.count_nonzero(byte == 13)):
         return None
-    tokens = pc.call_function("ascii_split_whitespace", [lines])  # a blank line has one ""
-    if not np.all(_values(pc.call_function("list_value_length", [tokens]))[:rows] == width):
+    # where each token begins, and after the last one where it ends: token i is the text from
+    # bounds[i] to bounds[i + 1] less its trailing whitespace
+    edge = np.flatnonzero(space[:-1] > space[1:])
+    first = 0 if len(byte) and not space[0] else 1
+    bounds = np.empty(len(edge) + 2 - first, dtype=np.int64)
+    bounds[0] = 0
+    np.add(edge, 1, out=bounds[1 - first:-1])
+    bounds[-1] = len(raw.rstrip(b" \t\r\n"))
+    starts = bounds[:-1]
+    if len(starts) != rows * width or not _one_row_a_line(byte, starts, rows, width, lf):
         return None
-    tokens = pc.call_function("list_flatten", [tokens]).slice(0, rows * width)
+    tokens = pa.Array.from_buffers(pa.large_string(), len(starts), [
+        None, pa.py_buffer(bounds), pa.py_buffer(raw)])
+    tokens = pc.call_function("ascii_rtrim_whitespace", [tokens])
     numbers = pc.call_function("cast", [tokens], pc.CastOptions.safe(pa.float64()))
     return _values(numbers).reshape(rows, width)
+
+
+def _one_row_a_line(byte: np.ndarray, starts: np.ndarray, rows: int, width: int, lf: int
+                    ) -> bool:
+    """Whether the tokens beginning at ``starts`` (``rows * width`` of them) of the text
+    ``byte`` make ``rows`` lines of ``width`` tokens with no blank line between them (and only
+    whitespace after them); ``lf``: the text's count of line feeds."""
+    heads = starts[width::width]  # (rows - 1,) each later row's first token
+    if np.all(byte[heads - 1] == 10):  # right after a line break (no indent): the common case
+        # and the other gaps between the rows' tokens hold no line break
+        return lf - np.count_nonzero(byte[starts[-1]:] == 10) == rows - 1
+    # tokens before each line break: (k + 1) * width before the k-th of the first rows - 1,
+    # all of them from the last row's on
+    before = np.searchsorted(starts, np.flatnonzero(byte == 10)[:rows])
+    return (np.array_equal(before[:rows - 1], np.arange(width, rows * width, width))
+            and (len(before) < rows or before[rows - 1] == len(starts)))
 
 
 def _values(array) -> np.ndarray:
