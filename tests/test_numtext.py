@@ -29,7 +29,7 @@ def both(text: str, rows: int, width: int) -> tuple[np.ndarray | None, np.ndarra
     """read_grid's answer by Arrow alone (None for what it refuses), and by numpy alone."""
     pa, pc = numtext._arrow()
     try:
-        arrow = numtext._arrow_grid(pa, pc, text, rows, width)
+        arrow = numtext._arrow_grid(pa, pc, text, 0, rows, width)
     except pa.ArrowException:
         arrow = None
     saved = numtext._arrow
@@ -74,7 +74,7 @@ def test_grids_that_are_not_are_refused_by_both(text: str, why: str):
 
 def test_blank_lines_between_rows_are_left_to_numpy():
     text = "1 2 3\n\n4 5 6\n"
-    assert numtext._arrow_grid(*numtext._arrow(), text, 2, 3) is None
+    assert numtext._arrow_grid(*numtext._arrow(), text, 0, 2, 3) is None
     np.testing.assert_array_equal(numtext.read_grid(text, 2, 3), [[1, 2, 3], [4, 5, 6]])
 
 

@@ -239,10 +239,10 @@ def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True
     up = check_up(up)
     if root_offset not in ("auto", "replace", "add"):
         raise ValueError(f"root_offset must be 'auto', 'replace' or 'add', got {root_offset!r}")
-    joints, fps, data = parse_bvh(path, _decode(path))
+    joints, fps, data, extremes = _parse(path, _decode(path))
     check_skip(skip_frames, len(data), path)
     motion, scale = _build_motion(path, joints, data[skip_frames:], fps, UNITS.get(unit),
-                                  fold_static_root)
+                                  fold_static_root, None if skip_frames else extremes)
     up = resolve_up(motion, up)
     motion = to_y_up(motion, up, path)
     # The root's OFFSET on the axes its position channels replace (see the module).
@@ -261,6 +261,13 @@ def parse_bvh(path: Path, text: str) -> tuple[list[_Joint], float, np.ndarray]:
     than ``\n`` and ``\r\n``) goes to the line-by-line reading, which names the line and
     field at fault.
     """
+    return _parse(path, text)[:3]
+
+
+def _parse(path: Path, text: str
+           ) -> tuple[list[_Joint], float, np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+    """:func:`parse_bvh`, and each channel's highest and lowest value (C,) when the fast reading
+    found them (for :func:`_build_motion`)."""
     m = None if _odd_breaks(text) else _motion_line(text)
     hierarchy = None if m is None else _memo_hierarchy(path, text[:m.start()])
     if hierarchy is not None:
@@ -275,7 +282,7 @@ def parse_bvh(path: Path, text: str) -> tuple[list[_Joint], float, np.ndarray]:
         raise FormatError(path, max(len(lines), 1), "file ends early: expected a MOTION line "
                           "after the HIERARCHY")
     joints = _parse_hierarchy(_Tokens(path, lines[:motion_at]))
-    return joints, *_parse_motion(path, lines, motion_at, joints)
+    return joints, *_parse_motion(path, lines, motion_at, joints), None
 
 
 _HIERARCHIES: dict[str, tuple[list[_Joint], int]] = {}
@@ -309,25 +316,30 @@ def _motion_line(text: str) -> re.Match[str] | None:
 
 def _odd_breaks(text: str) -> bool:
     """Whether ``text`` breaks lines other than by ``\\n`` or ``\\r\\n``."""
-    if any(c in text for c in (_ODD_BREAKS[:5] if text.isascii() else _ODD_BREAKS)):
+    if any(map(text.__contains__, _ODD_BREAKS[:5] if text.isascii() else _ODD_BREAKS)):
         return True
     return "\r" in text and text.count("\r") != text.count("\r\n")
 
 
 def _parse_motion_fast(path: Path, text: str, start: int, motion_line: int,
-                       joints: list[_Joint]) -> tuple[float, np.ndarray] | None:
-    """Frames per second and values (T, C) of the MOTION block after ``text[start]``, or None
-    when the block needs the line-by-line reading (which then says what is wrong)."""
+                       joints: list[_Joint]
+                       ) -> tuple[float, np.ndarray, tuple[np.ndarray, np.ndarray]] | None:
+    """Frames per second, values (T, C) and each channel's highest and lowest value (C,) of the
+    MOTION block after ``text[start]``, or None when the block needs the line-by-line reading
+    (which then says what is wrong)."""
     h = _HEADERS.match(text, start)
     if h is None:
         return None
     frames_line = motion_line + text.count("\n", start, h.start(1))
     frames = _frame_count(path, frames_line, h.group(1))
     fps = frame_rate(path, motion_line + text.count("\n", start, h.start(2)), h.group(2))
-    data = read_grid(text[h.end():], frames, _width(path, motion_line, joints))
-    if data is None or not (data.max() <= _MAX_ABS and data.min() >= -_MAX_ABS):
+    data = read_grid(text, frames, _width(path, motion_line, joints), start=h.end())
+    if data is None:
+        return None
+    high, low = data.max(axis=0), data.min(axis=0)
+    if not (high.max() <= _MAX_ABS and low.min() >= -_MAX_ABS):
         return None  # NaN fails the comparisons too
-    return fps, data
+    return fps, data, (high, low)
 
 
 def _frame_count(path: Path, line: int, token: str) -> int:
@@ -505,7 +517,7 @@ def _layout(joints: list[_Joint]) -> _Layout:
             cols.append(rot_cols)
         col += len(j.channels)
     translating = sorted(set(pos_joint))
-    parents = np.array([j.parent for j in joints])
+    parents = np.array([j.parent for j in joints], dtype=np.int64)
     rotated = {k for ks, _ in by_order.values() for k in ks}
     ends = [k for k, j in enumerate(joints) if j.end_site is not None]
     layout = _Layout(np.array(pos_joint, dtype=np.int64), np.array(pos_axis, dtype=np.int64),
@@ -535,14 +547,17 @@ def _span(index: np.ndarray) -> np.ndarray | slice:
 
 
 def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float,
-                  scale: float | None, fold_static_root: bool) -> tuple[Motion, float]:
-    """The Motion of channel values ``data`` (T, C), and the metres per file unit used.
+                  scale: float | None, fold_static_root: bool,
+                  extremes: tuple[np.ndarray, np.ndarray] | None = None
+                  ) -> tuple[Motion, float]:
+    """The Motion of channel values ``data`` (T, C), and the metres per file unit used
+    (``extremes``: each channel's highest and lowest value, when known).
 
     Only what varies is computed per frame: rotations of joints whose angles never change are
     converted once, and positions per frame only for the root's chain (the folding); every other
     joint's position channels must be constant and become its offset."""
     t, n, lay = data.shape[0], len(joints), _layout(joints)
-    high, low = data.max(axis=0), data.min(axis=0)  # (C,) each channel's extremes
+    high, low = extremes or (data.max(axis=0), data.min(axis=0))  # (C,) channel extremes
     offsets = lay.offsets.copy()  # (J, 3), position channels' first values
     offsets[lay.pos_joint, lay.pos_axis] = data[0, lay.pos_col]
     local_rot = np.empty((t, n, 4))
@@ -595,9 +610,10 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
     offsets = offsets[first:]
     offsets[0] = 0.0
     sk_parents = np.where(parents[first:] >= 0, parents[first:] - first, -1)
-    parts = cached_body_map(tuple(names[first:]))
+    kept = tuple(names[first:])
+    parts = cached_body_map(kept)
     if scale is None:
-        scale = _guess_scale(names[first:], sk_parents, offsets, parts)
+        scale = _memo_scale(kept, sk_parents.tobytes(), offsets.tobytes())
     sites = lay.end_sites * scale
     end_sites = {k - first: sites[i] for i, k in enumerate(lay.end_joints) if k >= first}
     try:
@@ -620,6 +636,15 @@ def cached_body_map(names: tuple[str, ...]) -> dict[str, str]:
     """The body map of joint ``names`` (memoised: a folder's clips share one rig); callers
     copy it before handing it on."""
     return resolve_body_map(list(names), strict=False)
+
+
+@functools.lru_cache(maxsize=256)
+def _memo_scale(names: tuple[str, ...], parents: bytes, offsets: bytes) -> float:
+    """:func:`_guess_scale` of a rig given as joint names, parents (int64 bytes) and offsets
+    (float64 bytes), memoised: a folder's clips share their rig and often its offsets."""
+    return _guess_scale(list(names), np.frombuffer(parents, dtype=np.int64),
+                        np.frombuffer(offsets, dtype=np.float64).reshape(-1, 3),
+                        cached_body_map(names))
 
 
 def _guess_scale(names: list[str], parents: np.ndarray, offsets: np.ndarray,

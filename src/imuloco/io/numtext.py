@@ -38,15 +38,18 @@ def _arrow() -> tuple[ModuleType, ModuleType] | None:
     return pyarrow, kernels
 
 
-def read_grid(text: str, rows: int, width: int) -> np.ndarray | None:
-    """The numbers of ``text`` as a (``rows``, ``width``) array: ``rows`` lines that are not
-    blank, each of ``width`` numbers separated by spaces or tabs (lines end in ``\n`` or
+def read_grid(text: str, rows: int, width: int, start: int = 0) -> np.ndarray | None:
+    """The numbers of ``text[start:]`` as a (``rows``, ``width``) array: ``rows`` lines that are
+    not blank, each of ``width`` numbers separated by spaces or tabs (lines end in ``\n`` or
     ``\r\n``; no other line breaks). None when the text is not such a grid or a number does
-    not parse; the numbers are not checked to be finite."""
+    not parse; the numbers are not checked to be finite. (``start`` spares the caller a copy
+    of the text after its header.)"""
     arrow, data = _arrow(), None
+    if arrow is not None and not text.isascii():
+        text, start = text[start:], 0
     if arrow is not None and text.isascii():
         try:
-            data = _arrow_grid(*arrow, text, rows, width)
+            data = _arrow_grid(*arrow, text, start, rows, width)
         except arrow[0].ArrowException:  # a token that is not a number, more than 2**31 tokens
             data = None
     if data is not None:
@@ -54,13 +57,14 @@ def read_grid(text: str, rows: int, width: int) -> np.ndarray | None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # numpy warns of an empty text
         try:
-            data = np.loadtxt(io.StringIO(text), dtype=np.float64, comments=None, ndmin=2)
+            data = np.loadtxt(io.StringIO(text[start:]), dtype=np.float64, comments=None,
+                              ndmin=2)
         except (ValueError, Warning):
             return None
     return data if data.shape == (rows, width) else None
 
 
-def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, rows: int, width: int
+def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, start: int, rows: int, width: int
                 ) -> np.ndarray | None:
     """:func:`read_grid` by Arrow's cast: the tokens are found by numpy on the bytes (where a
     byte that is no space follows one that is), each line's count checked against the line
@@ -70,7 +74,7 @@ def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, rows: int, width: int
     for blank lines between rows (left to numpy) and control characters other than tab, CR
     and LF; an ArrowException for a token that is not a number."""
     raw = text.encode("ascii")
-    byte = np.frombuffer(raw, dtype=np.uint8)
+    byte = np.frombuffer(raw, dtype=np.uint8)[start:]
     space = byte <= 32  # tab, LF, CR and space: other control characters are refused here
     lf = np.count_nonzero(byte == 10)
     control = np.count_nonzero(byte < 32)
@@ -78,16 +82,20 @@ def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, rows: int, width: int
             lf + np.count_nonzero(byte == 9) + np.count_nonzero(byte == 13)):
         return None
     # where each token begins, and after the last one where it ends: token i is the text from
-    # bounds[i] to bounds[i + 1] less its trailing whitespace
+    # bounds[i] to bounds[i + 1] (in byte, then in raw) less its trailing whitespace
     edge = np.flatnonzero(space[:-1] > space[1:])
     first = 0 if len(byte) and not space[0] else 1
     bounds = np.empty(len(edge) + 2 - first, dtype=np.int64)
     bounds[0] = 0
     np.add(edge, 1, out=bounds[1 - first:-1])
-    bounds[-1] = len(raw.rstrip(b" \t\r\n"))
+    end = len(byte)  # after the last token (bytes.rstrip would copy the text)
+    while end and byte[end - 1] <= 32:
+        end -= 1
+    bounds[-1] = end
     starts = bounds[:-1]
     if len(starts) != rows * width or not _one_row_a_line(byte, starts, rows, width, lf):
         return None
+    bounds += start
     tokens = pa.Array.from_buffers(pa.large_string(), len(starts), [
         None, pa.py_buffer(bounds), pa.py_buffer(raw)])
     tokens = pc.call_function("ascii_rtrim_whitespace", [tokens])

@@ -45,28 +45,28 @@ def joint_positions(rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray
                     parents: np.ndarray, joints: list[int]) -> np.ndarray:
     """World positions of a few ``joints`` only, from the chains that lead to them: cheaper
     than :func:`fk` when they are few (the readers' up-axis and floor checks). The chains'
-    joints are taken a tree level at a time (one matrix product for all joints at a depth).
+    joints are taken a tree level at a time: one product of 4x4 rigid transforms (rotation and
+    offset) for all joints at a depth.
 
     rotations : (..., J, 4); root : (..., 3); offsets : (J, 3); parents : (J,) -> (..., K, 3).
     """
     order, levels, picks = _chains(np.asarray(parents, dtype=np.int64).tobytes(), tuple(joints))
     local = to_matrix(np.asarray(rotations, dtype=np.float64)[..., order, :])  # (..., N, 3, 3)
-    shift = np.asarray(offsets, dtype=np.float64)[order, :, None]  # (N, 3, 1)
-    glob = np.empty_like(local)
-    pos = np.empty(local.shape[:-1])  # (..., N, 3)
-    glob[..., 0, :, :] = local[..., 0, :, :]  # the root
-    pos[..., 0, :] = root
+    pose = np.zeros(local.shape[:-2] + (4, 4))  # each joint's transform, local then world
+    pose[..., :3, :3] = local
+    pose[..., :3, 3] = np.asarray(offsets, dtype=np.float64)[order]
+    pose[..., 0, :3, 3] = root
+    pose[..., 3, 3] = 1.0
     for here, up in levels:
-        above = glob[..., up, :, :]
-        glob[..., here, :, :] = above @ local[..., here, :, :]
-        pos[..., here, :] = pos[..., up, :] + (above @ shift[here])[..., 0]
-    return pos[..., picks, :]
+        pose[..., here, :, :] = pose[..., up, :, :] @ pose[..., here, :, :]
+    return pose[..., :3, 3][..., picks, :]
 
 
 def _run(index: list[int]) -> np.ndarray | slice:
-    """``index`` as a slice when it is a run of consecutive numbers (cheaper to index by)."""
-    if index == list(range(index[0], index[0] + len(index))):
-        return slice(index[0], index[0] + len(index))
+    """``index`` as a slice when it is a run of consecutive numbers, or one number repeated
+    (a slice of one, which broadcasts): cheaper to index by than an index array."""
+    if index == list(range(index[0], index[0] + len(index))) or len(set(index)) == 1:
+        return slice(index[0], index[0] + (1 if len(set(index)) == 1 else len(index)))
     return np.array(index)
 
 
