@@ -808,6 +808,33 @@ def test_calibration_waits_for_the_walk_and_takes_up_from_standing(fitted, phone
                                [0.0, 9.81, 0.0], atol=0.05)
 
 
+def test_a_shoe_sensor_is_calibrated_from_its_strides_then_streamed(sample_db):
+    """A foot sensor in any orientation: the session calibrates it as the offline pipeline does
+    (up from the resting foot, forward from its strides) once two strides are in, then
+    streams the shipped foot model."""
+    pytest.importorskip("gaitmap")
+    from imuloco.app.pipeline import choose_method
+
+    fitted, _ = choose_method(placement="right_foot")
+    clip = next(c for c in sample_db.clips if c.name == CLIP)
+    rec = simulate(clip, ["right_foot"], rate=100.0, noise="phone", seed=11)
+    q = from_rotvec(np.array([-2.1, 0.3, 0.9]))
+    times, acc, gyro = rec.times, qrot(q, rec.acc), qrot(q, rec.gyro)
+    s = LiveSession(fitted, calibrate_s=CALIB_S)
+    frames = []
+    for i in range(len(times)):
+        frames += s.push(times[i], acc[i], gyro[i])
+    c = s.calibration
+    assert c is not None and c.details[0]["up_from"] == "stances" and frames
+    _, mounts = calibrate(Recording(times[:c.samples], acc[:c.samples], gyro[:c.samples],
+                                    ["right_foot"]))
+    np.testing.assert_allclose(c.rotations[0], mounts[0].rotation)
+    # gravity at rest on the flat foot reads as on the virtual foot sensor: up and back along
+    # its bones' slope, nothing sideways
+    up = qrot(c.rotations[0], qrot(q, rec.acc[0, 0]))
+    assert abs(up[0]) < 1.5 and up[1] > 3.0 and up[2] > 5.0, up
+
+
 def test_live_page_shows_the_predicted_error_and_flags(fitted, browser, sample_db, tmp_path):
     """Pose messages carry the stream's confidence through the server to the page, which
     writes the predicted error and tints a flagged walker."""

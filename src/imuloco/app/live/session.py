@@ -317,6 +317,7 @@ class LiveSession:
         self._join = self._recent[-1][0] if self._recent else None
 
     def _calibrate(self, final: bool = False) -> bool:
+        from imuloco.errors import MissingExtraError
         from imuloco.sensors.calibration import LEG_PLACEMENTS, calibrate
 
         raw, s = self._raw[:self._n], self.num_sensors
@@ -325,7 +326,7 @@ class LiveSession:
                         raw[:, 1 + 3 * s:].reshape(-1, s, 3), self.placements)
         try:
             _, mounts = calibrate(rec)
-        except (ValueError, np.linalg.LinAlgError) as e:  # e.g. standing still only: no swing
+        except (ValueError, np.linalg.LinAlgError, MissingExtraError) as e:  # e.g. no swing yet
             mounts, why = None, f"{type(e).__name__}: {e}"
         else:
             legs = [m for p, m in zip(self.placements, mounts)
