@@ -52,6 +52,22 @@ def test_proportioned_scales_limbs_and_keeps_rotations(sample_db):
     np.testing.assert_allclose(p.root, m.root * height * legs)
 
 
+def test_strap_draws_are_worn_on_a_strap_and_none_without(sample_db):
+    """``strap``: that share of augmented draws worn on a random soft-tissue strap; without
+    it the draws are the rigid ones, sample for sample."""
+    from imuloco.methods.learned.train import augment
+    from imuloco.methods.training import synthesize
+
+    base = synthesize(sample_db.subset([0, 12]), ["right_ankle"], "phone", seed=0)
+    args = (["right_ankle"], "phone", 0, 2, 0.15, 2.0, False)
+    rigid, again, worn = augment(base, *args), augment(base, *args, strap=0.0), augment(
+        base, *args, strap=1.0)
+    assert len(rigid) == len(worn) == 6
+    for a, b, c in zip(rigid[2:], again[2:], worn[2:]):
+        np.testing.assert_array_equal(a.signals, b.signals)
+        assert a.signals.shape != c.signals.shape or not np.allclose(a.signals, c.signals)
+
+
 def test_novelty_grows_with_the_distance_from_training_features(tiny):
     w = tiny.novelty_mean_.shape[0]
     at_mean = tiny._novelty(np.tile(tiny.novelty_mean_, (30, 1)))

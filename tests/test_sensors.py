@@ -96,3 +96,59 @@ def test_fk_matches_hand_computed_positions(two_joint_skeleton):
                    two_joint_skeleton.parents)
     np.testing.assert_allclose(pos, [[1.0, 2.0, 3.0], [0.0, 2.0, 3.0]], atol=1e-12)
     np.testing.assert_allclose(np.abs(grot[1] @ rot[0]), 1.0, atol=1e-12)  # same rotation
+
+
+def test_a_strap_passes_gravity_and_rolls_by_its_static_gain():
+    """At rest the strapped phone reads what the rigid sensor reads; under a slow, steady
+    angular acceleration about x it settles at roll_gain x alpha, and its gyroscope's y reads
+    the roll's rate."""
+    from imuloco.sensors.strap import Strap, strapped
+
+    rate, n = 400.0, 4000
+    t = np.arange(n) / rate
+    acc = np.tile([0.3, 9.81, -0.2], (n, 1))
+    still = strapped(acc, np.zeros((n, 3)), rate, Strap(4.0, 0.5, 0.003))
+    np.testing.assert_allclose(still[0], acc, atol=1e-9)
+    np.testing.assert_allclose(still[1], 0.0, atol=1e-12)
+    alpha = 20.0  # rad/s^2, constant: gyro x a ramp
+    gyro = np.stack([alpha * t, np.zeros(n), np.zeros(n)], 1)
+    acc2, gyro2, roll = strapped(acc, gyro, rate, Strap(4.0, 0.5, 0.003))
+    assert roll[-1] == pytest.approx(0.003 * alpha, rel=1e-3)
+    # gravity turned with the phone about y: y unchanged, the norm kept
+    assert acc2[-1, 1] == pytest.approx(9.81)
+    assert np.linalg.norm(acc2[-1]) == pytest.approx(np.linalg.norm(acc[-1]))
+    np.testing.assert_allclose(gyro2[-1], [np.cos(roll[-1]) * alpha * t[-1], 0.0,
+                                           np.sin(roll[-1]) * alpha * t[-1]], rtol=1e-3,
+                               atol=1e-6)
+    rate_of_roll = np.gradient(roll, 1 / rate)
+    np.testing.assert_allclose(gyro2[:, 1], rate_of_roll, atol=1e-9)
+
+
+def test_a_strap_damps_what_is_faster_than_it():
+    from imuloco.sensors.strap import Strap, strapped
+
+    rate = 400.0
+    t = np.arange(8000) / rate
+    strap = Strap(5.0, 0.7, 0.0)
+    for hz, low, high in ((0.5, 0.97, 1.03), (40.0, 0.0, 0.2)):
+        acc = np.stack([np.sin(2 * np.pi * hz * t)] * 3, 1)
+        out = strapped(acc, np.zeros_like(acc), rate, strap)[0]
+        gain = out[4000:, 0].std() / acc[4000:, 0].std()
+        assert low < gain < high, (hz, gain)
+
+
+def test_a_strapped_recording_stays_consistent_with_its_orientation(sample_db):
+    """The roll goes into the recorded orientation too: the gyroscope is still its rate."""
+    from scipy.spatial.transform import Rotation
+
+    from imuloco.sensors.strap import Strap
+
+    clip = sample_db.where(content="walk").clips[0]
+    rigid = simulate(clip, ["right_ankle"], 100.0, "clean")
+    rec = simulate(clip, ["right_ankle"], 100.0, "clean", strap=Strap(3.0, 0.3, 0.003))
+    r = Rotation.from_quat(rec.orientation[:, 0])
+    rate = (r[:-1].inv() * r[1:]).as_rotvec() / np.diff(rec.times)[:, None]
+    mid = 0.5 * (rec.gyro[1:, 0] + rec.gyro[:-1, 0])
+    assert np.median(np.linalg.norm(rate - mid, axis=1)) < 0.05
+    # and it rolls: more rotation about the shank's long axis than the rigid sensor's
+    assert rec.gyro[:, 0, 1].std() > 1.2 * rigid.gyro[:, 0, 1].std()

@@ -30,6 +30,7 @@ from imuloco.sensors.noise import (
     sample_times,
 )
 from imuloco.sensors.placement import Placement, anatomical_frame, get_placement
+from imuloco.sensors.strap import Strap, strapped
 
 GRAVITY = np.array([0.0, -G, 0.0])  # world is Y up
 
@@ -73,12 +74,32 @@ def ideal_signals(motion: Motion, placement: str | Placement, times: np.ndarray
     return qrot(qinv(q), acc_world - GRAVITY), omega_sensor, q
 
 
+STRAP_RATE = 400.0  # Hz of the grid a strap's filters run on, before sampling at the times
+
+
+def strapped_signals(motion: Motion, placement: str | Placement, times: np.ndarray,
+                     strap: Strap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`ideal_signals` of a phone on a strap (:mod:`imuloco.sensors.strap`): the rigid
+    sensor's signals on a uniform grid, through the strap, then at ``times``."""
+    from imuloco.ops.filters import resample_linear
+    from imuloco.ops.rotations import from_rotvec, qmul, slerp
+
+    grid = np.arange(0.0, motion.duration + 1.0 / STRAP_RATE, 1.0 / STRAP_RATE)
+    grid = grid[grid <= motion.times[-1]]
+    acc, gyro, q = ideal_signals(motion, placement, grid)
+    acc, gyro, roll = strapped(acc, gyro, STRAP_RATE, strap)
+    q = qmul(q, from_rotvec(np.outer(roll, [0.0, 1.0, 0.0])))
+    t = np.clip(times, grid[0], grid[-1])
+    return resample_linear(grid, acc, t), resample_linear(grid, gyro, t), slerp(q, grid, t)
+
+
 def simulate(
     motion: Motion,
     placements: Sequence[str | Placement] = ("right_ankle",),
     rate: float = 100.0,
     noise: str | NoiseModel = "clean",
     seed: int = 0,
+    strap: Strap | None = None,
 ) -> Recording:
     """Simulate body-worn sensors during ``motion``.
 
@@ -88,6 +109,8 @@ def simulate(
     rate : nominal sampling rate in Hz (phones sample at about 100 Hz).
     noise : a preset of :mod:`imuloco.sensors.noise` or a NoiseModel.
     seed : seeds every random draw, so the same arguments give the same recording.
+    strap : every sensor sits on this soft-tissue strap (:mod:`imuloco.sensors.strap`);
+        None: rigidly on its segment.
 
     Returns
     -------
@@ -102,7 +125,8 @@ def simulate(
         place = get_placement(p)
         if model.misalignment_deg > 0 or model.offset_m > 0:
             place = place.perturbed(*random_misplacement(model, rng))
-        acc, gyro, ori = ideal_signals(motion, place, times)
+        acc, gyro, ori = (ideal_signals(motion, place, times) if strap is None else
+                          strapped_signals(motion, place, times, strap))
         acc, gyro = corrupt(acc, gyro, model, rng)
         accs.append(acc)
         gyros.append(gyro)

@@ -95,6 +95,10 @@ class Learned(Method):
         backwards, :func:`imuloco.methods.learned.train.reversed_motion`). On
         ``heldout-contents`` (``--limit 30``, seed 0) 0.3 took walking backwards, never seen,
         from 10.32 to 7.43 cm (the mean pose: 10.03) and forward walking from 4.15 to 4.30.
+    strap : the fraction of augmented clips whose sensor sits on a random soft-tissue strap
+        (:mod:`imuloco.sensors.strap`: impacts damped, the phone rolling about the shin); a
+        real shin phone rolls so at toe off (docs/results/learned/experiments.md, seventh
+        round).
     bidirectional : a GRU that reads the recording both ways (offline only: no :meth:`stream`;
         ``lag`` is then not needed and ignored).
     threads : torch CPU threads while fitting (None: torch's default). Use 1 on a machine
@@ -108,7 +112,7 @@ class Learned(Method):
     # files from before the look-ahead and the heavier acceleration term
     legacy_params: ClassVar[dict[str, Any]] = {"lag": 0, "accel_weight": 30.0,
                                                "proportions": 0.0, "bidirectional": False,
-                                               "reverse": 0.0}
+                                               "reverse": 0.0, "strap": 0.0}
     # inputs centred by a causal running mean (``features="centered"``, time constant ``tau``)
     # measured worse (4.06 vs 3.94 cm, docs/results/learned/experiments.md) and were removed
     retired_params: ClassVar[dict[str, Any]] = {"features": "raw", "tau": None}
@@ -118,8 +122,9 @@ class Learned(Method):
                  speed: float = 0.15, noise_scale: float = 2.0, mirror: bool = True,
                  validation: float = 0.05, dropout: float = 0.0, weight_decay: float = 1e-4,
                  position_weight: float = 10.0, accel_weight: float = 150.0, lag: int = 8,
-                 proportions: float = 0.1, reverse: float = 0.3, bidirectional: bool = False,
-                 threads: int | None = None, seed: int = 0) -> None:
+                 proportions: float = 0.1, reverse: float = 0.3, strap: float = 0.0,
+                 bidirectional: bool = False, threads: int | None = None, seed: int = 0
+                 ) -> None:
         self.hidden = hidden
         self.layers = layers
         self.epochs = epochs
@@ -138,6 +143,7 @@ class Learned(Method):
         self.lag = lag
         self.proportions = proportions
         self.reverse = reverse
+        self.strap = strap
         self.bidirectional = bidirectional
         self.threads = threads
         self.seed = seed
@@ -155,7 +161,7 @@ class Learned(Method):
             can_mirror = False
         train_ex = tr.augment(train_ex, list(data.placements), data.noise, self.seed, self.draws,
                               self.speed, self.noise_scale, can_mirror, progress,
-                              self.proportions, self.reverse)
+                              self.proportions, self.reverse, self.strap)
         train_ex = [self._looking_ahead(e) for e in train_ex]
         val_ex = [self._looking_ahead(e) for e in val_ex]
         x, y, c, pos, lengths = tr.stack(train_ex)

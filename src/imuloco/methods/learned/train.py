@@ -7,8 +7,9 @@ preset's levels scaled by a log-uniform factor up to ``noise_scale`` (white nois
 timestamp jitter, misalignment, placement offset), other body proportions (the sensor simulated
 on a body :func:`proportioned` by up to ``proportions``; the targets stay on the training
 skeleton), every other draw left/right mirrored (:func:`imuloco.core.mirror.mirror`), so
-that a model learns both legs' gaits from one sensor, and a fraction ``reverse`` of the draws
-played backwards in time (:func:`reversed_motion`).
+that a model learns both legs' gaits from one sensor, a fraction ``reverse`` of the draws
+played backwards in time (:func:`reversed_motion`) and a fraction ``strap`` worn on a random
+soft-tissue strap (:mod:`imuloco.sensors.strap`).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from imuloco.ops.rotations import from_6d, slerp
 from imuloco.phases.contacts import foot_contacts
 from imuloco.sensors.noise import NoiseModel, get_noise
 from imuloco.sensors.simulate import simulate
+from imuloco.sensors.strap import random_strap
 
 DRAW_SEED_STRIDE = 7919  # seeds of augmented draws: seed + stride * draw
 
@@ -106,10 +108,12 @@ def contact_targets(motion: Motion) -> np.ndarray:
 def augment(examples: list[Example], placements: list[str], noise: str, seed: int,
             draws: int, speed: float, noise_scale: float, mirrored: bool,
             progress: bool = False, proportions: float = 0.0,
-            reverse: float = 0.0) -> list[Example]:
+            reverse: float = 0.0, strap: float = 0.0) -> list[Example]:
     """The benchmark's examples plus ``draws`` augmented simulations of every clip (see the
     module docstring). Draw ``d`` mirrors the motion when ``mirrored`` and ``d`` is odd; each
-    augmented clip is reversed in time with probability ``reverse``."""
+    augmented clip is reversed in time with probability ``reverse``, and its sensors sit on a
+    random soft-tissue strap (:func:`imuloco.sensors.strap.random_strap`) with probability
+    ``strap``."""
     out = list(examples)
     if draws <= 0:
         return out
@@ -129,8 +133,9 @@ def augment(examples: list[Example], placements: list[str], noise: str, seed: in
         if reverse > 0 and rng.uniform() < reverse:
             motion = reversed_motion(motion)
         body = proportioned(motion, rng, proportions)
+        worn = random_strap(rng) if strap > 0 and rng.uniform() < strap else None
         rec = simulate(body, placements, 100.0, model,
-                       clip_seed(e.labels["name"], seed + DRAW_SEED_STRIDE * d))
+                       clip_seed(e.labels["name"], seed + DRAW_SEED_STRIDE * d), worn)
         out.append(Example(motion, to_frames(rec, motion), dict(e.labels, draw=str(d))))
     return out
 
