@@ -85,7 +85,8 @@ def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, start: int, rows: int
     # bounds[i] to bounds[i + 1] (in byte, then in raw) less its trailing whitespace
     edge = np.flatnonzero(space[:-1] > space[1:])
     first = 0 if len(byte) and not space[0] else 1
-    bounds = np.empty(len(edge) + 2 - first, dtype=np.int64)
+    small = len(raw) < 2**31  # 32-bit offsets (Arrow's string rather than large_string)
+    bounds = np.empty(len(edge) + 2 - first, dtype=np.int32 if small else np.int64)
     bounds[0] = 0
     np.add(edge, 1, out=bounds[1 - first:-1])
     end = len(byte)  # after the last token (bytes.rstrip would copy the text)
@@ -96,7 +97,7 @@ def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, start: int, rows: int
     if len(starts) != rows * width or not _one_row_a_line(byte, starts, rows, width, lf):
         return None
     bounds += start
-    tokens = pa.Array.from_buffers(pa.large_string(), len(starts), [
+    tokens = pa.Array.from_buffers(pa.string() if small else pa.large_string(), len(starts), [
         None, pa.py_buffer(bounds), pa.py_buffer(raw)])
     tokens = pc.call_function("ascii_rtrim_whitespace", [tokens])
     numbers = pc.call_function("cast", [tokens], pc.CastOptions.safe(pa.float64()))
