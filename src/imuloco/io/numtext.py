@@ -3,10 +3,11 @@
 :func:`read_grid` uses pyarrow's compute kernels when pyarrow is installed (the ``dist`` extra)
 and the text is ASCII, else ``numpy.loadtxt``. Both parse with correct rounding (Arrow's
 ``cast`` uses fast_float, numpy Python's own ``float`` parsing), so they give the same numbers;
-Arrow's is the faster: on the shared BVH files it reads a MOTION block in about two thirds of
-``numpy.loadtxt``'s CPU time, where pyarrow's CSV reader (one column per channel) and pandas'
-are no faster than numpy, and splitting into Python strings costs as much as numpy's whole
-parse (measured in the issue 22 work, see ``docs/results/io/README.md``).
+Arrow's is the faster: on the shared BVH files it reads a MOTION block in about half of
+``numpy.loadtxt``'s CPU time (numpy finds the tokens, Arrow trims and casts them; Arrow's own
+split kernels cost as much again), where pyarrow's CSV reader (one column per channel) and
+pandas' are no faster than numpy, and splitting into Python strings costs as much as numpy's
+whole parse (measured in the issue 22 work, see ``docs/results/io/README.md``).
 
 Neither says what is wrong with text it refuses: callers read such text line by line.
 """

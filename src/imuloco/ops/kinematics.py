@@ -65,8 +65,8 @@ def joint_positions(rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray
 
 
 def _quaternion_to_pose() -> np.ndarray:
-    """(16, 16): the 4x4 transform's entries (row-major) from the products q_i q_j (index
-    4 i + j) of a unit quaternion (x, y, z, w), less the identity: R = I + 2 (...)."""
+    """(16, 16): the entries of a unit quaternion's (x, y, z, w) 4x4 rotation (row-major) less
+    the identity's, from the products q_i q_j (index 4 i + j): R = I + 2 (...)."""
     m = np.zeros((16, 16))
     x, y, z, w = range(4)
     entries = {(0, 0): [(-2, y, y), (-2, z, z)], (0, 1): [(2, x, y), (-2, w, z)],
@@ -87,8 +87,11 @@ _IDENTITY_POSE = np.eye(4).ravel()
 def _run(index: list[int]) -> np.ndarray | slice:
     """``index`` as a slice when it is a run of consecutive numbers, or one number repeated
     (a slice of one, which broadcasts): cheaper to index by than an index array."""
-    if index == list(range(index[0], index[0] + len(index))) or len(set(index)) == 1:
-        return slice(index[0], index[0] + (1 if len(set(index)) == 1 else len(index)))
+    first = index[0]
+    if len(set(index)) == 1:
+        return slice(first, first + 1)
+    if index == list(range(first, first + len(index))):
+        return slice(first, first + len(index))
     return np.array(index)
 
 
