@@ -375,10 +375,22 @@ def _offset_is_added(motion: Motion, shift: np.ndarray) -> bool:
     return abs(lowest + shift[1]) < abs(lowest)
 
 
+_RATES: dict[str, float] = {}
+
+
 def frame_rate(path: Path, line: int, token: str) -> float:
     """Frames per second of a ``Frame Time`` token, rounded to a whole number when the token is
     that rate's frame time printed to its decimals, to at least 3 significant digits
-    (``0.016667`` is 60 fps, not 59.9988; ``0.03`` stays 33.33)."""
+    (``0.016667`` is 60 fps, not 59.9988; ``0.03`` stays 33.33). Memoised by token (a
+    folder's clips share one)."""
+    if token not in _RATES:
+        if len(_RATES) >= 256:
+            _RATES.clear()
+        _RATES[token] = _frame_rate(path, line, token)
+    return _RATES[token]
+
+
+def _frame_rate(path: Path, line: int, token: str) -> float:
     frame_time = _number(path, line, token, "Frame Time")
     if not 1.0 / MAX_FPS <= frame_time <= 1.0 / MIN_FPS:
         raise FormatError(path, line, f"expected a Frame Time from {1 / MAX_FPS:g} to "

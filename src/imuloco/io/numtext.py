@@ -111,7 +111,7 @@ def _one_row_a_line(byte: np.ndarray, starts: np.ndarray, rows: int, width: int,
     ``byte`` make ``rows`` lines of ``width`` tokens with no blank line between them (and only
     whitespace after them); ``lf``: the text's count of line feeds."""
     heads = starts[width::width]  # (rows - 1,) each later row's first token
-    if np.all(byte[heads - 1] == 10):  # right after a line break (no indent): the common case
+    if (byte[heads - 1] == 10).all():  # right after a line break (no indent): the common case
         # and the other gaps between the rows' tokens hold no line break
         return lf - np.count_nonzero(byte[starts[-1]:] == 10) == rows - 1
     # tokens before each line break: (k + 1) * width before the k-th of the first rows - 1,
