@@ -387,3 +387,235 @@ def pose(x, num_joints, blend, fps, t, state, r_prev, q_prev, shepperd, shepperd
                 feet[f, j] += e[j, 0] * off[0] + e[j, 1] * off[1] + e[j, 2] * off[2]
             _mm3(e, rm[chains[f, d]], p)
             e[:] = p
+
+
+# ---- the beam's step (:mod:`.beam`) ----------------------------------------------------------
+@_jit
+def kth_largest(v, k):
+    """The k-th largest of v (n,) float64 >= 0 (no NaN), 0 < k <= n: a radix select on the
+    floats' bits, which order as the values for non-negative floats (11 bits a pass, each pass
+    over the values left in the bucket of the k-th). Hand-written: numba's ``np.partition``
+    takes 4-7 times longer than this on the beam's 10^4 values."""
+    cand = v.view(np.int64)
+    hist = np.empty(2048, dtype=np.int64)
+    shift = 52
+    while cand.size > 32:
+        hist[:] = 0
+        for i in range(cand.size):
+            hist[(cand[i] >> shift) & 2047] += 1
+        e = 2047
+        while hist[e] < k:
+            k -= hist[e]
+            e -= 1
+        sub = np.empty(hist[e], dtype=np.int64)
+        m = 0
+        for i in range(cand.size):
+            if (cand[i] >> shift) & 2047 == e:
+                sub[m] = cand[i]
+                m += 1
+        cand = sub
+        if shift == 0:
+            break
+        shift = max(shift - 11, 0)
+    s = np.sort(cand)
+    return s.view(np.float64)[s.size - k]
+
+
+@_jit
+def keep_largest(v, k, tie_rtol):
+    """Mask of the k largest entries of v (n,) >= 0, 0 < k <= n, as
+    :func:`.beam.keep_largest`: those above the k-th largest by more than ``tie_rtol``
+    (relative), then the lowest indices among the ties. O(n)."""
+    thr = kth_largest(v, k)
+    lo, hi = thr * (1.0 - tie_rtol), thr * (1.0 + tie_rtol)
+    keep = v > hi
+    room = k - keep.sum()
+    for i in range(v.size):
+        if room == 0:
+            break
+        if not keep[i] and v[i] >= lo:
+            keep[i] = True
+            room -= 1
+    return keep
+
+
+@_jit_sums
+def beam_step(seg, alpha, has_y, y_aug, prec, quad, lin, first_lin, group, first_group,
+              seg0, seg_block, seg_len, block_phase, counts, phase_trans, a_frame,
+              group_count, width, emission_floor, alpha_floor, tie_rtol, member, states,
+              dense, bu):
+    """One step of :class:`.beam.SegmentBeam` after its first, as its numpy ``step``: returns
+    the new kept segments (n',), their forward probabilities (n', W) and masses (n',).
+
+    seg : (n,) kept segments; alpha : (n, W) their frames' forward probabilities (float64);
+    has_y : a sample is given (``y_aug`` (dy + 1,) the sample and 1, in lin's dtype), else
+    transitions only; prec : (G, dy, dy); quad : (G + 1,) scratch of lin's dtype whose last
+    entry is inf; lin : (S, W, dy + 1) the beam's ``lin``; first_lin : (dy + 1, S);
+    group : (S, W), first_group : (S,) groups (G in the padding); seg0 : (B,) first segment of
+    each block; seg_block, seg_len : (S,) block and length of each segment; block_phase : (B,);
+    counts : (B,) segments per block; phase_trans : (P, P); a_frame : (3,) (self, next, skip);
+    group_count : (G,) float64; member : (S,) bool, True on the kept segments, updated;
+    states : (S, W) frame states of each segment; dense : (N,) float64 the forward variable
+    over all states, updated (zero outside the beam); bu : (G,) set to eq. 8's emission when
+    ``has_y``.
+    """
+    n, w_ = alpha.shape
+    num_s, num_b, num_g = first_lin.shape[1], counts.size, group_count.size
+    fs_, fn, fk = a_frame[0], a_frame[1], a_frame[2]
+    # 1. the kept segments' mass moved one frame; what moves into the padding ends them
+    pred = np.empty((n, w_))
+    out_phase = np.zeros(phase_trans.shape[0])
+    for r in range(n):
+        s = seg[r]
+        length = seg_len[s]
+        ended = 0.0
+        for j in range(w_):
+            v = alpha[r, j] * fs_
+            if j >= 1:
+                v += fn * alpha[r, j - 1]
+            if j >= 2:
+                v += fk * alpha[r, j - 2]
+            if j < length:
+                pred[r, j] = v
+            else:
+                pred[r, j] = 0.0
+                ended += v
+        out_phase[block_phase[seg_block[s]]] += ended
+    up = _vm(out_phase, phase_trans)
+    entry = np.empty(num_b)
+    for b in range(num_b):
+        entry[b] = up[block_phase[b]] / counts[b]
+    for r in range(n):
+        pred[r, 0] += entry[seg_block[seg[r]]]
+    # 2. emissions of the kept frames and of every first frame, relative to their best
+    floor = emission_floor if has_y else 0.0
+    limit = np.zeros(num_b)
+    raw = np.zeros(num_s)
+    ll = np.full((n, w_), -np.inf)  # log b, then b (kept frames)
+    a = pred
+    if has_y:
+        dy = prec.shape[1]
+        for g in range(num_g):
+            q = 0.0
+            for d in range(dy):
+                t = 0.0
+                for e in range(dy):
+                    t += prec[g, d, e] * y_aug[e]
+                q += t * (0.5 * y_aug[d])
+            quad[g] = q
+        top = -np.inf
+        for r in range(n):
+            s = seg[r]
+            for j in range(seg_len[s]):
+                t = 0.0
+                for d in range(dy + 1):
+                    t += lin[s, j, d] * y_aug[d]
+                v = t - quad[group[s, j]]
+                ll[r, j] = v
+                top = max(top, v)
+        for d in range(dy + 1):
+            yd = y_aug[d]
+            row = first_lin[d]
+            for s in range(num_s):
+                raw[s] += row[s] * yd
+        for b in range(num_b):
+            q0 = quad[first_group[seg0[b]]]
+            for s in range(seg0[b], seg0[b] + counts[b]):
+                top = max(top, raw[s] - q0)
+        for b in range(num_b):
+            limit[b] = quad[first_group[seg0[b]]] + top
+        a = np.zeros((n, w_))  # zero in the padding, where pred is
+        for r in range(n):
+            for j in range(seg_len[seg[r]]):
+                ll[r, j] = np.exp(ll[r, j] - top) + floor
+                a[r, j] = pred[r, j] * ll[r, j]
+    mass = np.empty(n)
+    for r in range(n):
+        t = 0.0
+        for j in range(w_):
+            t += a[r, j]
+        mass[r] = t
+    # 3. segments outside the beam whose entry mass times first frame's emission reaches the
+    # width-th largest kept mass
+    thr = (mass.min() if n == width else kth_largest(mass, width)) if n >= width else 0.0
+    lim = np.empty(num_b)
+    for b in range(num_b):
+        if entry[b] > 0:
+            need = thr / entry[b] - floor
+            lim[b] = (np.log(need) if need > 0 else -np.inf) + limit[b]
+        else:
+            lim[b] = np.inf
+    num_new = 0
+    new = np.empty(num_s, dtype=np.int64)
+    for b in range(num_b):
+        for s in range(seg0[b], seg0[b] + counts[b]):
+            ok = raw[s] >= lim[b] if has_y else lim[b] <= 0.0
+            if ok and not member[s]:
+                new[num_new] = s
+                num_new += 1
+    new = new[:num_new]
+    new_b = np.ones(num_new)
+    if has_y:
+        for i in range(num_new):
+            s = new[i]
+            new_b[i] = np.exp(raw[s] - limit[seg_block[s]]) + floor
+        # eq. 8: the mean over each group's segments, the frames not computed at the floor
+        num = np.zeros(num_g)
+        cnt = np.zeros(num_g)
+        for r in range(n):
+            s = seg[r]
+            for j in range(seg_len[s]):
+                num[group[s, j]] += ll[r, j]
+                cnt[group[s, j]] += 1.0
+        for i in range(num_new):
+            g = first_group[new[i]]
+            num[g] += new_b[i]
+            cnt[g] += 1.0
+        for g in range(num_g):
+            bu[g] = (num[g] + (group_count[g] - cnt[g]) * emission_floor) / group_count[g]
+    # 4. keep the width segments of largest mass, renormalised
+    vals = np.empty(n + num_new)
+    vals[:n] = mass
+    for i in range(num_new):
+        vals[n + i] = entry[seg_block[new[i]]] * new_b[i]
+    keep = keep_largest(vals, min(width, vals.size), tie_rtol)
+    m = keep.sum()
+    out_seg = np.empty(m, dtype=np.int64)
+    out_a = np.zeros((m, w_))
+    out_mass = np.empty(m)
+    r2 = 0
+    for r in range(n + num_new):
+        if keep[r]:
+            if r < n:
+                out_seg[r2] = seg[r]
+                out_a[r2] = a[r]
+            else:
+                out_seg[r2] = new[r - n]
+                out_a[r2, 0] = vals[r]
+            out_mass[r2] = vals[r]
+            r2 += 1
+    c = 0.0
+    for r in range(m):
+        c += out_mass[r]
+    if not c > 0:  # every kept state impossible at float precision: spread evenly
+        for r in range(m):
+            out_a[r, :] = 0.0
+            out_a[r, :seg_len[out_seg[r]]] = 1.0
+            out_mass[r] = seg_len[out_seg[r]]
+        c = out_mass.sum()
+    for r in range(m):
+        out_mass[r] /= c
+        for j in range(seg_len[out_seg[r]]):
+            out_a[r, j] = out_a[r, j] / c + alpha_floor
+    # the dense view and the membership
+    for r in range(n):
+        s = seg[r]
+        member[s] = False
+        for j in range(seg_len[s]):
+            dense[states[s, j]] = 0.0
+    for r in range(m):
+        s = out_seg[r]
+        member[s] = True
+        for j in range(seg_len[s]):
+            dense[states[s, j]] = out_a[r, j]
+    return out_seg, out_a, out_mass
