@@ -27,10 +27,13 @@ rows replaces a sparse (CSR) successor table and the de-duplication of successor
 per-state Python work, and no per-frame array of N states. Hand-written for the reason
 :mod:`.forward` gives (no library offers an online step for this structure).
 
+The segments kept are chosen by :func:`keep_largest` (ties to the lower index), so that the
+numpy step and the compiled one (:func:`.compiled.beam_step`, engine numba) keep the same.
 Measured on the shared data (docs/results/mousas2017/speed.md): a quarter of the mass sits on
-first frames every frame, so thousands of segments compete to enter the beam each step, and
-the upper level's emission needs every state's; no width was both faster than the exact step
-and as accurate, so the method's default is the exact step.
+first frames every frame, so thousands of segments pass the entry test each step (6,000 to
+15,000 of 21,536 at 100k database frames), each needing its emission, and every first frame
+is scanned each step; no width was both clearly faster than the exact step and as accurate,
+also compiled, so the method's default is the exact step.
 """
 
 from __future__ import annotations
@@ -110,7 +113,6 @@ class SegmentBeam:
         self._y = np.ones(fs.lin.shape[0] + 1, dtype=fs.lin.dtype)  # the sample and 1
         self.seg: np.ndarray | None = None
         self._kernel_args: tuple | None = None  # of step_compiled, after the first step
-        self.dense_alpha = np.zeros(0)
         self.alpha = np.zeros((0, self.W))
         self.mass = np.zeros(0)
 
@@ -227,10 +229,8 @@ class SegmentBeam:
     # ---- the compiled step ------------------------------------------------------------------
     def step_compiled(self, kernels, y: np.ndarray | None, bu: np.ndarray) -> None:
         """:meth:`step` after the first, by :func:`.compiled.beam_step` (the same arithmetic,
-        to float rounding): sets ``bu`` (G,) to eq. 8's emission when ``y`` (dy,) is given.
-        Also keeps :attr:`dense_alpha`, the forward variable over all states (N,) float64."""
+        to float rounding): sets ``bu`` (G,) to eq. 8's emission when ``y`` (dy,) is given."""
         if self._kernel_args is None:
-            self.dense_alpha = self.dense()
             member = np.zeros(self.num_segments, dtype=bool)
             member[self.seg] = True
             self._kernel_args = (
@@ -240,8 +240,7 @@ class SegmentBeam:
                 self.lower.phases.astype(np.int64), self.counts.astype(np.int64),
                 np.ascontiguousarray(self.lower.phase_trans, dtype=np.float64),
                 np.array(self.lower.a_frame, dtype=np.float64), self.group_count, self.width,
-                self.emission_floor, self.alpha_floor, TIE_RTOL, member, self.states,
-                self.dense_alpha, bu)
+                self.emission_floor, self.alpha_floor, TIE_RTOL, member, bu)
         if y is not None:
             self._y[:-1] = y
         self.seg, self.alpha, self.mass = kernels.beam_step(

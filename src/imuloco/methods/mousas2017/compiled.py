@@ -1,4 +1,4 @@
-"""Compiled kernels of the online stream's exact step (numba, the ``fast`` extra).
+"""Compiled kernels of the online stream's step (numba, the ``fast`` extra).
 
 The numpy step of :mod:`.stream` makes about 150 numpy calls a frame on arrays of a few dozen
 joints and 15 passes over the N frame states; each call costs microseconds on its own. These
@@ -12,7 +12,10 @@ kernels do the same arithmetic in a few compiled loops, called once a frame each
   normalisation and the forward floor: two passes over the states;
 - :func:`interpolate`: the upper level's dense step, the phase posterior and eq. 10-13;
 - :func:`pose`: velocity-based blending, Gram-Schmidt, root decoding, quaternions and the legs'
-  forward kinematics for the foot clean-up.
+  forward kinematics for the foot clean-up;
+- with a beam (:mod:`.beam`): :func:`beam_step`, the beam's whole step (transitions of the
+  kept segments, their emissions and every first frame's, the entrants, eq. 8, the selection
+  of the ``width`` segments by :func:`keep_largest`), and :func:`interpolate_beam`.
 
 Element operations are those of the numpy step in the forward variable's precision (float32
 in a fitted model); sums accumulate in float64, where numpy's float32 reductions (BLAS dot,
@@ -158,19 +161,9 @@ def forward(alpha, pred, b, has_b, blocks, block_phase, phase_trans, weights, bu
 
 # ---- eq. 10-13 -------------------------------------------------------------------------------
 @_jit
-def interpolate(alpha, alpha_up, a_up, bu, has_y, step_up, group_phase, phase_block, blocks,
-                top_k, tie_rtol, mu_x, mu_y, reg, cond_var, y, pp, x, y_bar, variance):
-    """The upper level's step (dense, G states; when ``step_up``), then eq. 10-13 in the most
-    probable phase that holds lower-level mass, as the numpy step's ``_filter`` (upper part)
-    and ``_interpolate``. In place: ``alpha_up`` (G,), ``pp`` (P,) the phase posterior, ``x``
-    (dx,) the interpolated features, ``y_bar`` (dy,), ``variance`` (dx,). Returns the phase.
-
-    alpha : (N,) the lower level's forward variable; a_up : (G, G); bu : (G,) eq. 8;
-    has_y : a sample (y, bu) is given, else only transitions and means; phase_block : (P,)
-    block of each phase, -1 for none; blocks : as :func:`forward`; mu_x : (N, dx);
-    mu_y : (N, dy); reg : (G, dx, dy); cond_var : (G, dx); y : (dy,) the sample;
-    top_k, tie_rtol : K and the ties of :func:`.stream.top_segments`.
-    """
+def _upper(alpha_up, a_up, bu, has_y, step_up, group_phase, pp):
+    """The upper level's dense step (when ``step_up``) and the phase posterior ``pp`` (P,), in
+    place; returns the phases, most probable first."""
     if step_up:
         up = _vm(alpha_up, a_up)
         c = 0.0
@@ -188,8 +181,58 @@ def interpolate(alpha, alpha_up, a_up, bu, has_y, step_up, group_phase, phase_bl
     pp[:] = 0.0
     for g in range(alpha_up.size):
         pp[group_phase[g]] += alpha_up[g]
+    return np.argsort(-pp, kind="mergesort")
+
+
+@_jit
+def _blend(frames, rows, tot, g0, has_y, mu_x, mu_y, reg, cond_var, y, x, y_bar, variance):
+    """Eq. 10-13 over K segments of one block: ``frames`` (K, L) their frames' forward
+    probabilities, summing to ``tot``; ``rows`` (K, L) their frame states; g0 the block's
+    first group. Sets ``x`` (dx,), ``y_bar`` (dy,), ``variance`` (dx,)."""
+    k, length = frames.shape
+    dx, dy = mu_x.shape[1], mu_y.shape[1]
+    x[:] = 0.0
+    y_bar[:] = 0.0
+    variance[:] = 0.0
+    wl = np.zeros(length)
+    wy = np.zeros((length, dy))
+    for i in range(k):
+        for j in range(length):
+            row = rows[i, j]
+            wt = frames[i, j] / tot if tot > 0 else 1.0 / (k * length)
+            wl[j] += wt
+            for d in range(dx):
+                x[d] += wt * mu_x[row, d]
+            for d in range(dy):
+                wy[j, d] += wt * mu_y[row, d]
+    for j in range(length):
+        for d in range(dy):
+            y_bar[d] += wy[j, d]                                            # eq. 10
+        for d in range(dx):
+            variance[d] += wl[j] * cond_var[g0 + j, d]                     # eq. 12
+        if has_y:                                                           # eq. 6, 11
+            for d in range(dy):
+                r = wl[j] * y[d] - wy[j, d]
+                for e in range(dx):
+                    x[e] += reg[g0 + j, e, d] * r
+
+
+@_jit
+def interpolate(alpha, alpha_up, a_up, bu, has_y, step_up, group_phase, phase_block, blocks,
+                top_k, tie_rtol, mu_x, mu_y, reg, cond_var, y, pp, x, y_bar, variance):
+    """The upper level's step (dense, G states; when ``step_up``), then eq. 10-13 in the most
+    probable phase that holds lower-level mass, as the numpy step's ``_filter`` (upper part)
+    and ``_interpolate``. In place: ``alpha_up`` (G,), ``pp`` (P,) the phase posterior, ``x``
+    (dx,) the interpolated features, ``y_bar`` (dy,), ``variance`` (dx,). Returns the phase.
+
+    alpha : (N,) the lower level's forward variable; a_up : (G, G); bu : (G,) eq. 8;
+    has_y : a sample (y, bu) is given, else only transitions and means; phase_block : (P,)
+    block of each phase, -1 for none; blocks : as :func:`forward`; mu_x : (N, dx);
+    mu_y : (N, dy); reg : (G, dx, dy); cond_var : (G, dx); y : (dy,) the sample;
+    top_k, tie_rtol : K and the ties of :func:`.stream.top_segments`.
+    """
+    order = _upper(alpha_up, a_up, bu, has_y, step_up, group_phase, pp)
     # the most probable phase whose block holds mass
-    order = np.argsort(-pp, kind="mergesort")
     blk, w = -1, np.zeros(0)
     phase = int(order[0])
     for h in order:
@@ -210,31 +253,56 @@ def interpolate(alpha, alpha_up, a_up, bu, has_y, step_up, group_phase, phase_bl
     tot = 0.0
     for s in top:
         tot += w[s]
-    dx, dy = mu_x.shape[1], mu_y.shape[1]
-    x[:] = 0.0
-    y_bar[:] = 0.0
-    variance[:] = 0.0
-    wl = np.zeros(length)
-    wy = np.zeros((length, dy))
-    for s in top:
+    frames = np.empty((k, length))
+    rows = np.empty((k, length), dtype=np.int64)
+    for i in range(k):
         for j in range(length):
-            row = st + j * big_h + s
-            wt = alpha[row] / tot if tot > 0 else 1.0 / (k * length)
-            wl[j] += wt
-            for d in range(dx):
-                x[d] += wt * mu_x[row, d]
-            for d in range(dy):
-                wy[j, d] += wt * mu_y[row, d]
-    for j in range(length):
-        for d in range(dy):
-            y_bar[d] += wy[j, d]                                            # eq. 10
-        for d in range(dx):
-            variance[d] += wl[j] * cond_var[g0 + j, d]                     # eq. 12
-        if has_y:                                                           # eq. 6, 11
-            for d in range(dy):
-                r = wl[j] * y[d] - wy[j, d]
-                for e in range(dx):
-                    x[e] += reg[g0 + j, e, d] * r
+            rows[i, j] = st + j * big_h + top[i]
+            frames[i, j] = alpha[rows[i, j]]
+    _blend(frames, rows, tot, g0, has_y, mu_x, mu_y, reg, cond_var, y, x, y_bar, variance)
+    return phase
+
+
+@_jit
+def interpolate_beam(seg, seg_alpha, seg_block, alpha_up, a_up, bu, has_y, step_up,
+                     group_phase, phase_block, blocks, seg0, top_k, tie_rtol, mu_x, mu_y, reg,
+                     cond_var, y, pp, x, y_bar, variance):
+    """:func:`interpolate` with the lower level's forward variable in a beam
+    (:class:`.beam.SegmentBeam`: ``seg`` (n,) kept segments, ``seg_alpha`` (n, W) their
+    frames'; ``seg_block`` (S,) block of each segment, ``seg0`` (B,) first segment of each
+    block), as the numpy step's ``_interpolate`` with a beam: the top K of the block's kept
+    segments, in the order of their index."""
+    order = _upper(alpha_up, a_up, bu, has_y, step_up, group_phase, pp)
+    blk, w, mine = -1, np.zeros(0), np.zeros(0, dtype=np.int64)
+    phase = int(order[0])
+    for h in order:
+        k = phase_block[h]
+        if k < 0:
+            continue
+        length = blocks[k, 2]
+        mine = np.flatnonzero(seg_block[seg] == k)
+        mine = mine[np.argsort(seg[mine])]
+        w = np.zeros(mine.size)
+        for i in range(mine.size):
+            for j in range(length):
+                w[i] += seg_alpha[mine[i], j]
+        blk, phase = k, int(h)
+        if w.size and w.max() > 0:
+            break
+    st, big_h, length, g0 = blocks[blk, 0], blocks[blk, 1], blocks[blk, 2], blocks[blk, 3]
+    k = min(top_k, w.size)
+    top = _largest(w, k, tie_rtol)
+    tot = 0.0
+    for i in top:
+        tot += w[i]
+    frames = np.empty((k, length))
+    rows = np.empty((k, length), dtype=np.int64)
+    for i in range(k):
+        r = mine[top[i]]
+        for j in range(length):
+            rows[i, j] = st + j * big_h + seg[r] - seg0[blk]
+            frames[i, j] = seg_alpha[r, j]
+    _blend(frames, rows, tot, g0, has_y, mu_x, mu_y, reg, cond_var, y, x, y_bar, variance)
     return phase
 
 
@@ -439,11 +507,10 @@ def keep_largest(v, k, tie_rtol):
     return keep
 
 
-@_jit_sums
+@_jit_max
 def beam_step(seg, alpha, has_y, y_aug, prec, quad, lin, first_lin, group, first_group,
               seg0, seg_block, seg_len, block_phase, counts, phase_trans, a_frame,
-              group_count, width, emission_floor, alpha_floor, tie_rtol, member, states,
-              dense, bu):
+              group_count, width, emission_floor, alpha_floor, tie_rtol, member, bu):
     """One step of :class:`.beam.SegmentBeam` after its first, as its numpy ``step``: returns
     the new kept segments (n',), their forward probabilities (n', W) and masses (n',).
 
@@ -455,9 +522,7 @@ def beam_step(seg, alpha, has_y, y_aug, prec, quad, lin, first_lin, group, first
     each block; seg_block, seg_len : (S,) block and length of each segment; block_phase : (B,);
     counts : (B,) segments per block; phase_trans : (P, P); a_frame : (3,) (self, next, skip);
     group_count : (G,) float64; member : (S,) bool, True on the kept segments, updated;
-    states : (S, W) frame states of each segment; dense : (N,) float64 the forward variable
-    over all states, updated (zero outside the beam); bu : (G,) set to eq. 8's emission when
-    ``has_y``.
+    bu : (G,) set to eq. 8's emission when ``has_y``.
     """
     n, w_ = alpha.shape
     num_s, num_b, num_g = first_lin.shape[1], counts.size, group_count.size
@@ -519,9 +584,10 @@ def beam_step(seg, alpha, has_y, y_aug, prec, quad, lin, first_lin, group, first
             for s in range(num_s):
                 raw[s] += row[s] * yd
         for b in range(num_b):
-            q0 = quad[first_group[seg0[b]]]
+            best = -np.inf
             for s in range(seg0[b], seg0[b] + counts[b]):
-                top = max(top, raw[s] - q0)
+                best = max(best, raw[s])
+            top = max(top, best - quad[first_group[seg0[b]]])
         for b in range(num_b):
             limit[b] = quad[first_group[seg0[b]]] + top
         a = np.zeros((n, w_))  # zero in the padding, where pred is
@@ -548,9 +614,17 @@ def beam_step(seg, alpha, has_y, y_aug, prec, quad, lin, first_lin, group, first
     num_new = 0
     new = np.empty(num_s, dtype=np.int64)
     for b in range(num_b):
-        for s in range(seg0[b], seg0[b] + counts[b]):
-            ok = raw[s] >= lim[b] if has_y else lim[b] <= 0.0
-            if ok and not member[s]:
+        lo, hi = seg0[b], seg0[b] + counts[b]
+        if not has_y:  # every segment of the block or none
+            if lim[b] <= 0.0:
+                for s in range(lo, hi):
+                    if not member[s]:
+                        new[num_new] = s
+                        num_new += 1
+            continue
+        limb = lim[b]
+        for s in range(lo, hi):
+            if raw[s] >= limb and not member[s]:
                 new[num_new] = s
                 num_new += 1
     new = new[:num_new]
@@ -588,7 +662,8 @@ def beam_step(seg, alpha, has_y, y_aug, prec, quad, lin, first_lin, group, first
         if keep[r]:
             if r < n:
                 out_seg[r2] = seg[r]
-                out_a[r2] = a[r]
+                for j in range(w_):
+                    out_a[r2, j] = a[r, j]
             else:
                 out_seg[r2] = new[r - n]
                 out_a[r2, 0] = vals[r]
@@ -598,24 +673,18 @@ def beam_step(seg, alpha, has_y, y_aug, prec, quad, lin, first_lin, group, first
     for r in range(m):
         c += out_mass[r]
     if not c > 0:  # every kept state impossible at float precision: spread evenly
+        c = 0.0
         for r in range(m):
             out_a[r, :] = 0.0
             out_a[r, :seg_len[out_seg[r]]] = 1.0
             out_mass[r] = seg_len[out_seg[r]]
-        c = out_mass.sum()
+            c += out_mass[r]
     for r in range(m):
         out_mass[r] /= c
         for j in range(seg_len[out_seg[r]]):
             out_a[r, j] = out_a[r, j] / c + alpha_floor
-    # the dense view and the membership
     for r in range(n):
-        s = seg[r]
-        member[s] = False
-        for j in range(seg_len[s]):
-            dense[states[s, j]] = 0.0
+        member[seg[r]] = False
     for r in range(m):
-        s = out_seg[r]
-        member[s] = True
-        for j in range(seg_len[s]):
-            dense[states[s, j]] = out_a[r, j]
+        member[out_seg[r]] = True
     return out_seg, out_a, out_mass

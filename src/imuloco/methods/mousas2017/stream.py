@@ -527,9 +527,18 @@ class MousasStream(Stream):
                       self._floors[0], self._floors[1], self._scratch)
         if first and self._beam is not None:
             x = self._interpolate(y)
+        elif self._beam is not None:
+            bm = self._beam
+            self.phase = k.interpolate_beam(
+                bm.seg, bm.alpha, bm.block, self.alpha_up, self._a_up, self._bu, has_y, True,
+                self._group_phase, self._phase_block_arr, self._blocks_arr, bm.seg0, self.m.K,
+                TIE_RTOL, fs.mu_x, fs.mu_y, self._reg, self._cond_var,
+                y if has_y else self.y_bar, self.phase_posterior, self._x, self.y_bar,
+                self.variance)
+            x = self._x
         else:
             self.phase = k.interpolate(
-                self.alpha if self._beam is None else self._beam.dense_alpha, self.alpha_up, self._a_up, self._bu, has_y, not first,
+                self.alpha, self.alpha_up, self._a_up, self._bu, has_y, not first,
                 self._group_phase, self._phase_block_arr, self._blocks_arr, self.m.K,
                 TIE_RTOL, fs.mu_x, fs.mu_y, self._reg, self._cond_var,
                 y if has_y else self.y_bar, self.phase_posterior, self._x, self.y_bar,
