@@ -24,3 +24,25 @@ def test_arrow_and_numpy_parse_count_the_same_frames(tmp_path):
     bad.write_text(text, encoding="latin-1")
     with pytest.raises(FormatError, match="short_row.bvh"):
         arrow_parse(bad)
+
+
+def test_reader_comparison_finds_the_largest_difference_and_refusals(tmp_path):
+    from imuloco.evaluate.loadspeed import compare_readers, motion_difference
+    from imuloco.io.bvh import read_bvh
+
+    files = sorted(SAMPLE.glob("*.bvh"))[:2]
+    assert compare_readers(files, read_bvh, progress=False) == (0.0, 0)
+
+    def nudged(path):
+        m = read_bvh(path)
+        m.root[3, 1] += 0.25
+        return m
+
+    assert compare_readers(files, nudged, progress=False) == (0.25, 0)
+    m = read_bvh(files[0])
+    assert motion_difference(m, m.slice(0, 3)) == float("inf")  # other frames
+
+    def refuses(path):
+        raise FormatError(path, 1, "not today")
+
+    assert compare_readers(files, refuses, progress=False) == (0.0, 2)

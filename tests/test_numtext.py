@@ -29,7 +29,7 @@ def both(text: str, rows: int, width: int) -> tuple[np.ndarray | None, np.ndarra
     """read_grid's answer by Arrow alone (None for what it refuses), and by numpy alone."""
     pa, pc = numtext._arrow()
     try:
-        arrow = numtext._arrow_grid(pa, pc, text, rows, width)
+        arrow = numtext._arrow_grid(pa, pc, text, 0, rows, width)
     except pa.ArrowException:
         arrow = None
     saved = numtext._arrow
@@ -66,15 +66,27 @@ def test_arrow_and_numpy_read_the_same_numbers(values, fmt, sep, crlf, pad, tail
     ("1 2 x\n4 5 6\n", "a word"),
     ("1 2 1_0\n4 5 6\n", "an underscore (Python's float takes it, numpy's parse does not)"),
     ("1 2 3,5\n4 5 6\n", "a decimal comma"),
+    ("1 2\x013\n4 5 6\n", "a control character between numbers"),
+    ("1 2 3\n4 5\n6\n", "the right count, a row broken in two"),
 ])
 def test_grids_that_are_not_are_refused_by_both(text: str, why: str):
     arrow, numpy = both(text, 2, 3)
     assert arrow is None and numpy is None, why
 
 
+@pytest.mark.parametrize("arrow", [True, False])
+def test_a_grid_after_a_header_is_read_in_place(arrow: bool, monkeypatch):
+    if not arrow:
+        monkeypatch.setattr(numtext, "_arrow", lambda: None)
+    head = "Frames: 2\nFrame Time: 0.01\n"
+    got = numtext.read_grid(head + " 1 2.5 -3\n4 5e1 6\n\n", 2, 3, start=len(head))
+    np.testing.assert_array_equal(got, [[1, 2.5, -3], [4, 50, 6]])
+    assert numtext.read_grid(head + "1 2 3\n", 2, 3, start=len(head)) is None
+
+
 def test_blank_lines_between_rows_are_left_to_numpy():
     text = "1 2 3\n\n4 5 6\n"
-    assert numtext._arrow_grid(*numtext._arrow(), text, 2, 3) is None
+    assert numtext._arrow_grid(*numtext._arrow(), text, 0, 2, 3) is None
     np.testing.assert_array_equal(numtext.read_grid(text, 2, 3), [[1, 2, 3], [4, 5, 6]])
 
 

@@ -15,6 +15,11 @@ For each folder, every ``*.bvh`` is read five ways, each over the whole folder:
   folder (parse, hash and write each entry);
 - ``warm``: the same again, every clip from the cache.
 
+With ``--against``, every clip is also read once more by both readers (untimed) and the
+largest absolute difference between their Motions (rotations, root path, offsets, End Sites)
+is reported, with the clips whose joints, frame rate or refusal differ: a faster reader must
+give the same Motions.
+
 Files are read once beforehand so that every way finds them in the page cache. Frames per
 second count the frames of the clips a way read (the old reader refuses some real rigs: the
 table says how many). Times are wall
@@ -122,6 +127,41 @@ def old_reader(rev: str) -> Callable[[Path], Any]:
     return old["imuloco.io.bvh"].read_bvh
 
 
+def motion_difference(a: Any, b: Any) -> float:
+    """The largest absolute difference between two Motions' rotations, root paths, offsets
+    and End Sites; inf when their joints, parents, frame rates or End Site joints differ."""
+    ska, skb = a.skeleton, b.skeleton
+    if (ska.names != skb.names or a.fps != b.fps or ska.end_sites.keys() != skb.end_sites.keys()
+            or not np.array_equal(ska.parents, skb.parents)
+            or a.rotations.shape != b.rotations.shape):
+        return float("inf")
+    pairs = [(a.rotations, b.rotations), (a.root, b.root), (ska.offsets, skb.offsets)]
+    pairs += [(ska.end_sites[k], skb.end_sites[k]) for k in ska.end_sites]
+    return max(float(np.max(np.abs(np.asarray(x) - np.asarray(y)), initial=0.0))
+               for x, y in pairs)
+
+
+def compare_readers(files: list[Path], old: Callable[[Path], Any], progress: bool
+                    ) -> tuple[float, int]:
+    """The largest :func:`motion_difference` between ``old``'s and today's Motion over
+    ``files``, and how many clips differ otherwise (one reader refuses what the other reads,
+    or they refuse it with different messages)."""
+    worst, mismatched = 0.0, 0
+    for f in tqdm(files, desc=f"{files[0].parent.name} same?", disable=not progress,
+                  unit="clip", leave=False):
+        got = []
+        for read in (old, read_bvh):
+            try:
+                got.append(read(f))
+            except FormatError as e:
+                got.append(str(e))
+        if isinstance(got[0], str) or isinstance(got[1], str):
+            mismatched += got[0] != got[1]
+        else:
+            worst = max(worst, motion_difference(*got))
+    return worst, mismatched
+
+
 def _timed(files: list[Path], read: Callable[[Path], Any], desc: str, progress: bool
            ) -> tuple[float, float, list[int]]:
     """Wall and CPU seconds of reading ``files``, and the indices of the files refused with a
@@ -178,6 +218,8 @@ def load_benchmark(folders: Sequence[str | Path], out: str | Path | None = None,
                 else:
                     os.environ["IMULOCO_CACHE"] = saved
         rec["load_avg"] = round(os.getloadavg()[0], 2)
+        if old is not None:
+            rec["old_max_abs_diff"], rec["old_mismatched"] = compare_readers(files, old, progress)
         records.append(rec)
     records.append(_total(records))
     if out is not None:
@@ -198,6 +240,9 @@ def _total(records: list[dict[str, Any]]) -> dict[str, Any]:
         if f"{way}_s" in tot:
             tot[f"{way}_fps"] = round(tot[f"{way}_frames"] / tot[f"{way}_s"])
     tot["load_avg"] = records[-1]["load_avg"]
+    if "old_max_abs_diff" in records[0]:
+        tot["old_max_abs_diff"] = max(r["old_max_abs_diff"] for r in records)
+        tot["old_mismatched"] = sum(r["old_mismatched"] for r in records)
     return tot
 
 
@@ -211,7 +256,8 @@ def table(records: list[dict[str, Any]], against: str | None = None) -> str:
         for w in ways]
     head += (["arrow speed / numpy's"] if "arrow" in ways else []) + [
         "reader speed / numpy's", "warm / cold speed"] + (
-        ["reader speed / old's", "old refused"] if "old" in ways else []) + ["load avg"]
+        ["reader speed / old's", "old refused", "max abs diff to old's Motions",
+         "clips read differently"] if "old" in ways else []) + ["load avg"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in records:
         def fps(way: str, r: dict[str, Any] = r) -> float:
@@ -224,6 +270,8 @@ def table(records: list[dict[str, Any]], against: str | None = None) -> str:
         row += [f"{fps('reader') / fps('numpy'):.2f}x", f"{fps('warm') / fps('cold'):.1f}x"]
         if "old" in ways:
             row += [f"{fps('reader') / fps('old'):.2f}x", f"{r['old_refused']} clips"]
+            row += ([f"{r['old_max_abs_diff']:.3g}", str(r["old_mismatched"])]
+                    if "old_max_abs_diff" in r else ["", ""])
         row.append(f"{r['load_avg']:.1f}")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)

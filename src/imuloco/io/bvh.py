@@ -47,11 +47,11 @@ from imuloco.io.upaxis import (
     check_up,
     median,
     resolve_up,
-    spread_frames,
+    spread_index,
     to_y_up,
 )
 from imuloco.ops.kinematics import joint_positions
-from imuloco.ops.rotations import IDENTITY, from_euler, qmul, qrot, to_euler
+from imuloco.ops.rotations import IDENTITY, euler_components, qmul, qrot, to_euler
 
 # Metres per file unit. "cmu": the CMU motion capture unit, (1 / 0.45) inch.
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
@@ -60,7 +60,8 @@ _CANON = {c.lower(): c for c in CHANNELS}  # "XROTATION" and "XRotation" are see
 MIN_FPS, MAX_FPS = 1.0, 1000.0  # plausible frame rates; others are corrupt headers
 MAX_FRAMES = 10_000_000  # 23 hours at 120 fps
 MAX_JOINTS, MAX_DEPTH = 2_000, 256  # rigs with face and finger bones have a few hundred
-# The fast reading takes "\n" and "\r\n" only; str.splitlines also breaks at these.
+# The fast reading takes "\n" and "\r\n" only; str.splitlines also breaks at these (ASCII
+# ones first).
 _ODD_BREAKS = "\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029"
 _MOTION = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
 _HEADERS = re.compile(r"(?:[ \t]*\r?\n)*[ \t]*Frames[ \t]*:[ \t]*(\S+)[ \t]*\r?\n"
@@ -238,10 +239,10 @@ def read_bvh(path: str | Path, unit: str = "auto", fold_static_root: bool = True
     up = check_up(up)
     if root_offset not in ("auto", "replace", "add"):
         raise ValueError(f"root_offset must be 'auto', 'replace' or 'add', got {root_offset!r}")
-    joints, fps, data = parse_bvh(path, _decode(path))
+    joints, fps, data, extremes = _parse(path, _decode(path))
     check_skip(skip_frames, len(data), path)
     motion, scale = _build_motion(path, joints, data[skip_frames:], fps, UNITS.get(unit),
-                                  fold_static_root)
+                                  fold_static_root, None if skip_frames else extremes)
     up = resolve_up(motion, up)
     motion = to_y_up(motion, up, path)
     # The root's OFFSET on the axes its position channels replace (see the module).
@@ -260,7 +261,14 @@ def parse_bvh(path: Path, text: str) -> tuple[list[_Joint], float, np.ndarray]:
     than ``\n`` and ``\r\n``) goes to the line-by-line reading, which names the line and
     field at fault.
     """
-    m = None if _odd_breaks(text) else _MOTION.search(text)
+    return _parse(path, text)[:3]
+
+
+def _parse(path: Path, text: str
+           ) -> tuple[list[_Joint], float, np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+    """:func:`parse_bvh`, and each channel's highest and lowest value (C,) when the fast reading
+    found them (for :func:`_build_motion`)."""
+    m = None if _odd_breaks(text) else _motion_line(text)
     hierarchy = None if m is None else _memo_hierarchy(path, text[:m.start()])
     if hierarchy is not None:
         joints, motion_line = hierarchy
@@ -274,7 +282,7 @@ def parse_bvh(path: Path, text: str) -> tuple[list[_Joint], float, np.ndarray]:
         raise FormatError(path, max(len(lines), 1), "file ends early: expected a MOTION line "
                           "after the HIERARCHY")
     joints = _parse_hierarchy(_Tokens(path, lines[:motion_at]))
-    return joints, *_parse_motion(path, lines, motion_at, joints)
+    return joints, *_parse_motion(path, lines, motion_at, joints), None
 
 
 _HIERARCHIES: dict[str, tuple[list[_Joint], int]] = {}
@@ -294,27 +302,44 @@ def _memo_hierarchy(path: Path, head: str) -> tuple[list[_Joint], int] | None:
     return _HIERARCHIES[head]
 
 
+def _motion_line(text: str) -> re.Match[str] | None:
+    """``_MOTION.search(text)``, the first MOTION line, looked for where the word is (a
+    regular expression tried at every line start costs more than the rest of the header)."""
+    at = text.find("MOTION")
+    while at >= 0:
+        m = _MOTION.match(text, text.rfind("\n", 0, at) + 1)
+        if m is not None:
+            return m
+        at = text.find("MOTION", at + 1)
+    return None
+
+
 def _odd_breaks(text: str) -> bool:
     """Whether ``text`` breaks lines other than by ``\\n`` or ``\\r\\n``."""
-    if any(c in text for c in _ODD_BREAKS):
+    if any(map(text.__contains__, _ODD_BREAKS[:5] if text.isascii() else _ODD_BREAKS)):
         return True
     return "\r" in text and text.count("\r") != text.count("\r\n")
 
 
 def _parse_motion_fast(path: Path, text: str, start: int, motion_line: int,
-                       joints: list[_Joint]) -> tuple[float, np.ndarray] | None:
-    """Frames per second and values (T, C) of the MOTION block after ``text[start]``, or None
-    when the block needs the line-by-line reading (which then says what is wrong)."""
+                       joints: list[_Joint]
+                       ) -> tuple[float, np.ndarray, tuple[np.ndarray, np.ndarray]] | None:
+    """Frames per second, values (T, C) and each channel's highest and lowest value (C,) of the
+    MOTION block after ``text[start]``, or None when the block needs the line-by-line reading
+    (which then says what is wrong)."""
     h = _HEADERS.match(text, start)
     if h is None:
         return None
     frames_line = motion_line + text.count("\n", start, h.start(1))
     frames = _frame_count(path, frames_line, h.group(1))
     fps = frame_rate(path, motion_line + text.count("\n", start, h.start(2)), h.group(2))
-    data = read_grid(text[h.end():], frames, _width(path, motion_line, joints))
-    if data is None or not (data.max() <= _MAX_ABS and data.min() >= -_MAX_ABS):
+    data = read_grid(text, frames, _width(path, motion_line, joints), start=h.end())
+    if data is None:
+        return None
+    high, low = data.max(axis=0), data.min(axis=0)
+    if not (high.max() <= _MAX_ABS and low.min() >= -_MAX_ABS):
         return None  # NaN fails the comparisons too
-    return fps, data
+    return fps, data, (high, low)
 
 
 def _frame_count(path: Path, line: int, token: str) -> int:
@@ -340,8 +365,8 @@ def _offset_is_added(motion: Motion, shift: np.ndarray) -> bool:
     joint nearer the floor (height 0) over up to 64 frames than leaving it out does."""
     if abs(shift[1]) < 1e-6:
         return False
-    sub, sk = spread_frames(motion, 64), motion.skeleton
-    heights = joint_positions(sub.rotations, sub.root, sk.offsets, sk.parents,
+    idx, sk = spread_index(motion.num_frames, 64), motion.skeleton
+    heights = joint_positions(motion.rotations[idx], motion.root[idx], sk.offsets, sk.parents,
                               list(range(sk.num_joints)))[..., 1]  # (T, J)
     lowest = float(median(heights.min(axis=1)))
     return abs(lowest + shift[1]) < abs(lowest)
@@ -442,8 +467,11 @@ class _Layout:
     pos_joint, pos_axis, pos_col : (P,) joint, axis (0-2) and column of each position channel.
     pos_slot : (P,) each position channel's joint's row in ``translating``.
     translating : the joints with position channels, ascending.
-    by_order : (Euler order, joints (K,), columns (K, len(order))) of the rotation channels.
+    by_order : (Euler order, joints (K,), columns (len(order), K)) of the rotation channels.
+    unrotated : the joints without rotation channels.
+    foldable : (J,) whether a joint has a single child, the next joint, with position channels.
     offsets : (J, 3) the OFFSET lines; names, parents (J,) as in the file.
+    end_joints, end_sites : the joints with an End Site, and their offsets (E, 3).
     """
 
     pos_joint: np.ndarray
@@ -452,9 +480,13 @@ class _Layout:
     pos_slot: np.ndarray
     translating: list[int]
     by_order: list[tuple[str, np.ndarray, np.ndarray]]
+    unrotated: np.ndarray
+    foldable: list[bool]
     offsets: np.ndarray
     names: list[str]
     parents: np.ndarray
+    end_joints: list[int]
+    end_sites: np.ndarray
 
 
 _LAYOUTS: dict[int, tuple[list[_Joint], _Layout]] = {}
@@ -485,44 +517,64 @@ def _layout(joints: list[_Joint]) -> _Layout:
             cols.append(rot_cols)
         col += len(j.channels)
     translating = sorted(set(pos_joint))
+    parents = np.array([j.parent for j in joints], dtype=np.int64)
+    rotated = {k for ks, _ in by_order.values() for k in ks}
+    ends = [k for k, j in enumerate(joints) if j.end_site is not None]
     layout = _Layout(np.array(pos_joint, dtype=np.int64), np.array(pos_axis, dtype=np.int64),
                      np.array(pos_col, dtype=np.int64),
                      np.array([translating.index(k) for k in pos_joint], dtype=np.int64),
                      translating,
-                     [(order, np.array(ks), np.array(cols)) for order, (ks, cols)
+                     [(order, np.array(ks), np.array(cols).T) for order, (ks, cols)
                       in by_order.items()],
+                     np.array([k for k in range(len(joints)) if k not in rotated], dtype=np.int64),
+                     [np.count_nonzero(parents == k) == 1 and k + 1 in translating
+                      for k in range(len(joints))],
                      np.array([j.offset for j in joints]).reshape(-1, 3),
-                     [j.name for j in joints], np.array([j.parent for j in joints]))
+                     [j.name for j in joints], parents,
+                     ends, np.array([joints[k].end_site for k in ends]).reshape(-1, 3))
     if len(_LAYOUTS) >= 64:
         _LAYOUTS.clear()
     _LAYOUTS[id(joints)] = joints, layout
     return layout
 
 
+def _span(index: np.ndarray) -> np.ndarray | slice:
+    """``index`` (ascending) as a slice when it is a run of consecutive numbers: assigning
+    through a slice costs less than through an index array."""
+    if len(index) and index[-1] - index[0] == len(index) - 1:
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
+
+
 def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float,
-                  scale: float | None, fold_static_root: bool) -> tuple[Motion, float]:
-    """The Motion of channel values ``data`` (T, C), and the metres per file unit used.
+                  scale: float | None, fold_static_root: bool,
+                  extremes: tuple[np.ndarray, np.ndarray] | None = None
+                  ) -> tuple[Motion, float]:
+    """The Motion of channel values ``data`` (T, C), and the metres per file unit used
+    (``extremes``: each channel's highest and lowest value, when known).
 
     Only what varies is computed per frame: rotations of joints whose angles never change are
     converted once, and positions per frame only for the root's chain (the folding); every other
     joint's position channels must be constant and become its offset."""
     t, n, lay = data.shape[0], len(joints), _layout(joints)
-    high, low = data.max(axis=0), data.min(axis=0)  # (C,) each channel's extremes
+    high, low = extremes or (data.max(axis=0), data.min(axis=0))  # (C,) channel extremes
     offsets = lay.offsets.copy()  # (J, 3), position channels' first values
     offsets[lay.pos_joint, lay.pos_axis] = data[0, lay.pos_col]
     local_rot = np.empty((t, n, 4))
-    local_rot[:] = IDENTITY
+    if len(lay.unrotated):
+        local_rot[:, lay.unrotated] = IDENTITY
     for order, ks, cols in lay.by_order:
-        # Joints whose angles never change are converted once: their first frame's angles go
-        # after every frame's of the others, in one call (a call's fixed cost is that of about
-        # a thousand angles).
-        still = np.all(high[cols] == low[cols], axis=1)  # (K,)
-        angles = np.concatenate([data[:, cols[~still]].reshape(-1, len(order)),
-                                 data[0, cols[still]]])
-        q = from_euler(angles, order)
-        per_frame = t * np.count_nonzero(~still)
-        local_rot[:, ks[~still]] = q[:per_frame].reshape(t, -1, 4)
-        local_rot[:, ks[still]] = q[per_frame:]
+        # from_euler's arithmetic on angles laid out (axis, ...) by one gather, its components
+        # written straight into place; joints whose angles never change are converted once.
+        still = np.all(high[cols] == low[cols], axis=0)  # (K,)
+        for pick, angles in ((~still, lambda c: data[:, c].swapaxes(0, 1)),  # (3, T, K')
+                             (still, lambda c: data[0, c])):  # (3, K'')
+            if pick.any():
+                half = angles(cols[:, pick]) * (np.pi / 360.0)
+                parts = euler_components(np.sin(half), np.cos(half), order)
+                where = _span(ks[pick])
+                for k, part in enumerate(parts):
+                    local_rot[:, where, k] = part
 
     def path_of(k: int) -> np.ndarray:
         """Joint ``k``'s position in its parent's frame in every frame, (T, 3)."""
@@ -537,18 +589,14 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
     bottom[lay.pos_slot, lay.pos_axis] = low[lay.pos_col]
     moving = dict(zip(translating, _moving(top, bottom)))
     first, root, root_rot = 0, path_of(0), local_rot[:, 0]
-    while fold_static_root and first + 1 < n:
+    while fold_static_root and first + 1 < n and lay.foldable[first]:
         # Fold the root into its single child when that child has position channels and
         # either it moves (its translation must be kept: "applied") or the root never moves
         # (a floor marker such as joint_Root); the child's world transform is the root's
         # transform applied to its own.
         child = first + 1
-        if (np.count_nonzero(parents == first) != 1
-                or not any(c.endswith("position") for c in joints[child].channels)):
-            break
-        static_root = (np.ptp(root, axis=0).max() == 0.0
-                       and np.ptp(root_rot, axis=0).max() == 0.0)
-        if not (static_root or moving[child]):
+        if not (moving[child] or (np.ptp(root, axis=0).max() == 0.0
+                                  and np.ptp(root_rot, axis=0).max() == 0.0)):
             break
         root = root + qrot(root_rot, path_of(child))
         root_rot = local_rot[:, child] = qmul(root_rot, local_rot[:, child])
@@ -562,11 +610,12 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
     offsets = offsets[first:]
     offsets[0] = 0.0
     sk_parents = np.where(parents[first:] >= 0, parents[first:] - first, -1)
-    parts = cached_body_map(tuple(names[first:]))
+    kept = tuple(names[first:])
+    parts = cached_body_map(kept)
     if scale is None:
-        scale = _guess_scale(names[first:], sk_parents, offsets, parts)
-    end_sites = {k - first: j.end_site * scale for k, j in enumerate(joints)
-                 if j.end_site is not None and k >= first}
+        scale = _memo_scale(kept, sk_parents.tobytes(), offsets.tobytes())
+    sites = lay.end_sites * scale
+    end_sites = {k - first: sites[i] for i, k in enumerate(lay.end_joints) if k >= first}
     try:
         skeleton = Skeleton(names[first:], sk_parents, offsets * scale, end_sites, dict(parts))
         motion = Motion(skeleton, local_rot[:, first:], root * scale, fps, path.stem)
@@ -587,6 +636,15 @@ def cached_body_map(names: tuple[str, ...]) -> dict[str, str]:
     """The body map of joint ``names`` (memoised: a folder's clips share one rig); callers
     copy it before handing it on."""
     return resolve_body_map(list(names), strict=False)
+
+
+@functools.lru_cache(maxsize=256)
+def _memo_scale(names: tuple[str, ...], parents: bytes, offsets: bytes) -> float:
+    """:func:`_guess_scale` of a rig given as joint names, parents (int64 bytes) and offsets
+    (float64 bytes), memoised: a folder's clips share their rig and often its offsets."""
+    return _guess_scale(list(names), np.frombuffer(parents, dtype=np.int64),
+                        np.frombuffer(offsets, dtype=np.float64).reshape(-1, 3),
+                        cached_body_map(names))
 
 
 def _guess_scale(names: list[str], parents: np.ndarray, offsets: np.ndarray,

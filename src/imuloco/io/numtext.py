@@ -38,15 +38,18 @@ def _arrow() -> tuple[ModuleType, ModuleType] | None:
     return pyarrow, kernels
 
 
-def read_grid(text: str, rows: int, width: int) -> np.ndarray | None:
-    """The numbers of ``text`` as a (``rows``, ``width``) array: ``rows`` lines that are not
-    blank, each of ``width`` numbers separated by spaces or tabs (lines end in ``\n`` or
+def read_grid(text: str, rows: int, width: int, start: int = 0) -> np.ndarray | None:
+    """The numbers of ``text[start:]`` as a (``rows``, ``width``) array: ``rows`` lines that are
+    not blank, each of ``width`` numbers separated by spaces or tabs (lines end in ``\n`` or
     ``\r\n``; no other line breaks). None when the text is not such a grid or a number does
-    not parse; the numbers are not checked to be finite."""
+    not parse; the numbers are not checked to be finite. (``start`` spares the caller a copy
+    of the text after its header.)"""
     arrow, data = _arrow(), None
+    if arrow is not None and not text.isascii():
+        text, start = text[start:], 0
     if arrow is not None and text.isascii():
         try:
-            data = _arrow_grid(*arrow, text, rows, width)
+            data = _arrow_grid(*arrow, text, start, rows, width)
         except arrow[0].ArrowException:  # a token that is not a number, more than 2**31 tokens
             data = None
     if data is not None:
@@ -54,32 +57,66 @@ def read_grid(text: str, rows: int, width: int) -> np.ndarray | None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # numpy warns of an empty text
         try:
-            data = np.loadtxt(io.StringIO(text), dtype=np.float64, comments=None, ndmin=2)
+            data = np.loadtxt(io.StringIO(text[start:]), dtype=np.float64, comments=None,
+                              ndmin=2)
         except (ValueError, Warning):
             return None
     return data if data.shape == (rows, width) else None
 
 
-def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, rows: int, width: int
+def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, start: int, rows: int, width: int
                 ) -> np.ndarray | None:
-    """:func:`read_grid` by Arrow kernels: lines, trimmed, split at whitespace (each line's
-    count checked), the tokens cast to float64. None also for blank lines between rows (left
-    to numpy); an ArrowException for a token that is not a number."""
+    """:func:`read_grid` by Arrow's cast: the tokens are found by numpy on the bytes (where a
+    byte that is no space follows one that is), each line's count checked against the line
+    breaks, and the text between one token's start and the next's handed to Arrow as a string
+    array without copying, trimmed of its trailing whitespace and cast to float64. (Arrow's
+    own split kernels cost twice the cast, building a list of strings per line.) None also
+    for blank lines between rows (left to numpy) and control characters other than tab, CR
+    and LF; an ArrowException for a token that is not a number."""
     raw = text.encode("ascii")
-    whole = pa.Array.from_buffers(pa.large_string(), 1, [
-        None, pa.py_buffer(np.array([0, len(raw)], dtype=np.int64)), pa.py_buffer(raw)])
-    lines = pc.call_function("list_flatten", [pc.call_function(
-        "split_pattern", [whole], pc.SplitPatternOptions("\n"))])
-    lines = pc.call_function("ascii_trim_whitespace", [lines])
-    blank = _values(pc.call_function("binary_length", [lines])) == 0
-    if len(blank) < rows or blank[:rows].any() or not blank[rows:].all():
+    byte = np.frombuffer(raw, dtype=np.uint8)[start:]
+    space = byte <= 32  # tab, LF, CR and space: other control characters are refused here
+    lf = np.count_nonzero(byte == 10)
+    control = np.count_nonzero(byte < 32)
+    if control != lf and control != (
+            lf + np.count_nonzero(byte == 9) + np.count_nonzero(byte == 13)):
         return None
-    tokens = pc.call_function("ascii_split_whitespace", [lines])  # a blank line has one ""
-    if not np.all(_values(pc.call_function("list_value_length", [tokens]))[:rows] == width):
+    # where each token begins, and after the last one where it ends: token i is the text from
+    # bounds[i] to bounds[i + 1] (in byte, then in raw) less its trailing whitespace
+    edge = np.flatnonzero(space[:-1] > space[1:])
+    first = 0 if len(byte) and not space[0] else 1
+    bounds = np.empty(len(edge) + 2 - first, dtype=np.int64)
+    bounds[0] = 0
+    np.add(edge, 1, out=bounds[1 - first:-1])
+    end = len(byte)  # after the last token (bytes.rstrip would copy the text)
+    while end and byte[end - 1] <= 32:
+        end -= 1
+    bounds[-1] = end
+    starts = bounds[:-1]
+    if len(starts) != rows * width or not _one_row_a_line(byte, starts, rows, width, lf):
         return None
-    tokens = pc.call_function("list_flatten", [tokens]).slice(0, rows * width)
+    bounds += start
+    tokens = pa.Array.from_buffers(pa.large_string(), len(starts), [
+        None, pa.py_buffer(bounds), pa.py_buffer(raw)])
+    tokens = pc.call_function("ascii_rtrim_whitespace", [tokens])
     numbers = pc.call_function("cast", [tokens], pc.CastOptions.safe(pa.float64()))
     return _values(numbers).reshape(rows, width)
+
+
+def _one_row_a_line(byte: np.ndarray, starts: np.ndarray, rows: int, width: int, lf: int
+                    ) -> bool:
+    """Whether the tokens beginning at ``starts`` (``rows * width`` of them) of the text
+    ``byte`` make ``rows`` lines of ``width`` tokens with no blank line between them (and only
+    whitespace after them); ``lf``: the text's count of line feeds."""
+    heads = starts[width::width]  # (rows - 1,) each later row's first token
+    if np.all(byte[heads - 1] == 10):  # right after a line break (no indent): the common case
+        # and the other gaps between the rows' tokens hold no line break
+        return lf - np.count_nonzero(byte[starts[-1]:] == 10) == rows - 1
+    # tokens before each line break: (k + 1) * width before the k-th of the first rows - 1,
+    # all of them from the last row's on
+    before = np.searchsorted(starts, np.flatnonzero(byte == 10)[:rows])
+    return (np.array_equal(before[:rows - 1], np.arange(width, rows * width, width))
+            and (len(before) < rows or before[rows - 1] == len(starts)))
 
 
 def _values(array) -> np.ndarray:

@@ -38,13 +38,14 @@ def check_up(up: str) -> str:
 
 def spread_frames(motion: Motion, n: int) -> Motion:
     """At most ``n`` frames of ``motion``, evenly spread over it (for cheap checks)."""
-    idx = _spread(motion.num_frames, n)
+    idx = spread_index(motion.num_frames, n)
     return Motion(motion.skeleton, motion.rotations[idx], motion.root[idx], motion.fps)
 
 
 @functools.lru_cache(maxsize=256)
-def _spread(frames: int, n: int) -> np.ndarray:
-    """The indices of :func:`spread_frames` (memoised: clips of a folder share lengths)."""
+def spread_index(frames: int, n: int) -> np.ndarray:
+    """The indices of :func:`spread_frames`: at most ``n`` of ``frames``, evenly spread
+    (memoised: clips of a folder share lengths; read only)."""
     idx = np.unique(np.linspace(0, frames - 1, n).astype(int))
     idx.flags.writeable = False
     return idx
@@ -65,8 +66,8 @@ def detect_up(motion: Motion) -> str:
                    if f"left_{p}" in parts and f"right_{p}" in parts), None)
     if top is None or bottom is None:
         return "y"
-    sub, sk = spread_frames(motion, _DETECT_FRAMES), motion.skeleton
-    pos = joint_positions(sub.rotations, sub.root, sk.offsets, sk.parents,
+    idx, sk = spread_index(motion.num_frames, _DETECT_FRAMES), motion.skeleton
+    pos = joint_positions(motion.rotations[idx], motion.root[idx], sk.offsets, sk.parents,
                           [sk.part(p) for p in [top] + bottom])  # (T, 3, 3)
     up = median(pos[:, 0] - (pos[:, 1] + pos[:, 2]) / 2)  # (3,) x, y, z; legs' mean
     return "z" if up[2] > up[1] else "y"

@@ -45,45 +45,53 @@ def joint_positions(rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray
                     parents: np.ndarray, joints: list[int]) -> np.ndarray:
     """World positions of a few ``joints`` only, from the chains that lead to them: cheaper
     than :func:`fk` when they are few (the readers' up-axis and floor checks). The chains'
-    joints are taken a tree level at a time (one matrix product for all joints at a depth).
+    joints are taken a tree level at a time: one product of 4x4 rigid transforms (rotation and
+    offset) for all joints at a depth.
 
     rotations : (..., J, 4); root : (..., 3); offsets : (J, 3); parents : (J,) -> (..., K, 3).
     """
     order, levels, picks = _chains(np.asarray(parents, dtype=np.int64).tobytes(), tuple(joints))
     local = to_matrix(np.asarray(rotations, dtype=np.float64)[..., order, :])  # (..., N, 3, 3)
-    glob = np.empty_like(local)
-    pos = np.empty(local.shape[:-1])  # (..., N, 3)
-    glob[..., :1, :, :] = local[..., :1, :, :]  # the root
-    pos[..., 0, :] = root
+    pose = np.zeros(local.shape[:-2] + (4, 4))  # each joint's transform, local then world
+    pose[..., :3, :3] = local
+    pose[..., :3, 3] = np.asarray(offsets, dtype=np.float64)[order]
+    pose[..., 0, :3, 3] = root
+    pose[..., 3, 3] = 1.0
     for here, up in levels:
-        glob[..., here, :, :] = glob[..., up, :, :] @ local[..., here, :, :]
-        pos[..., here, :] = pos[..., up, :] + (glob[..., up, :, :]
-                                               @ offsets[order[here], :, None])[..., 0]
-    return pos[..., picks, :]
+        pose[..., here, :, :] = pose[..., up, :, :] @ pose[..., here, :, :]
+    return pose[..., :3, 3][..., picks, :]
+
+
+def _run(index: list[int]) -> np.ndarray | slice:
+    """``index`` as a slice when it is a run of consecutive numbers, or one number repeated
+    (a slice of one, which broadcasts): cheaper to index by than an index array."""
+    if index == list(range(index[0], index[0] + len(index))) or len(set(index)) == 1:
+        return slice(index[0], index[0] + (1 if len(set(index)) == 1 else len(index)))
+    return np.array(index)
 
 
 @functools.lru_cache(maxsize=64)
 def _chains(parents: bytes, joints: tuple[int, ...]
-            ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
+            ) -> tuple[np.ndarray, list[tuple[slice, np.ndarray | slice]], np.ndarray]:
     """For :func:`joint_positions` on the tree ``parents`` (int64 bytes): the joints on the
-    chains from the root to ``joints`` (ascending: the root first, parents before children),
-    each tree level below the root as (its joints, their parents) by index into them, and the
-    index of each of ``joints``. Memoised: a folder's clips share one rig."""
+    chains from the root to ``joints``, by depth (the root first, each tree level a run), each
+    level below the root as (its run, its joints' parents) by index into them, and the index of
+    each of ``joints``. Memoised: a folder's clips share one rig."""
     up = np.frombuffer(parents, dtype=np.int64)
     needed: set[int] = set()
     for j in joints:
         while j >= 0 and j not in needed:
             needed.add(j)
             j = int(up[j])
-    order = sorted(needed)
+    depth: dict[int, int] = {}
+    for j in sorted(needed):  # parents come first
+        depth[j] = depth[int(up[j])] + 1 if up[j] >= 0 else 0
+    order = sorted(needed, key=lambda j: (depth[j], j))
     slot = {j: i for i, j in enumerate(order)}
-    depth = {j: 0 for j in order}
-    for j in order[1:]:  # parents come first
-        depth[j] = depth[int(up[j])] + 1
     levels = []
     for level in range(1, max(depth.values(), default=0) + 1):
         here = [slot[j] for j in order if depth[j] == level]
-        levels.append((np.array(here), np.array([slot[int(up[order[i]])] for i in here])))
+        levels.append((_run(here), _run([slot[int(up[order[i]])] for i in here])))
     return np.array(order, dtype=np.int64), levels, np.array([slot[j] for j in joints])
 
 

@@ -99,17 +99,34 @@ def from_euler(angles: np.ndarray, order: str, degrees: bool = True) -> np.ndarr
     The product of the axis rotations, first axis outermost, in numpy: the same numbers as
     scipy's ``Rotation.from_euler`` (bit for bit but the sign of zeros, measured) at a tenth of
     its time (scipy 1.17 spends ~1 us a rotation even batched, which dominated reading motion
-    files). Each factor ``cos + sin e_axis`` multiplies in as ``q cos + (q e_axis) sin``, where
-    ``q e_axis`` is a signed permutation of q's components: the products of :func:`qmul`
-    without its zeros, one component array at a time (known zeros are skipped)."""
-    order = order.upper()
-    if not order or len(order) > 3 or any(a not in "XYZ" for a in order):
-        raise ValueError(f"order must be 1 to 3 of the axes X, Y, Z, got {order!r}")
+    files); see :func:`euler_components`."""
+    order = check_order(order)
     half = np.asarray(angles, dtype=np.float64) * (np.pi / 360.0 if degrees else 0.5)
     if half.shape[-1:] != (len(order),):
         raise ValueError(f"angles must end in an axis of {len(order)}, got {half.shape}")
     half = np.ascontiguousarray(np.moveaxis(half, -1, 0))  # (len(order), ...)
-    sin, cos = np.sin(half), np.cos(half)
+    out = np.empty(half.shape[1:] + (4,))
+    for k, part in enumerate(euler_components(np.sin(half), np.cos(half), order)):
+        out[..., k] = part
+    return out
+
+
+def check_order(order: str) -> str:
+    """An Euler ``order`` in capitals, 1 to 3 of the axes X, Y, Z; else a ValueError."""
+    order = order.upper()
+    if not order or len(order) > 3 or any(a not in "XYZ" for a in order):
+        raise ValueError(f"order must be 1 to 3 of the axes X, Y, Z, got {order!r}")
+    return order
+
+
+def euler_components(sin: np.ndarray, cos: np.ndarray, order: str
+                     ) -> list[np.ndarray | float]:
+    """The quaternion components x, y, z, w of intrinsic Euler rotations, given the sines and
+    cosines of the half angles, ``sin`` and ``cos`` (len(order), ...) (0.0 for a component
+    known to be zero): the core of :func:`from_euler`, for callers that lay the angles out
+    themselves. Each factor ``cos + sin e_axis`` multiplies in as ``q cos + (q e_axis) sin``,
+    where ``q e_axis`` is a signed permutation of q's components: the products of
+    :func:`qmul` without its zeros, one component array at a time."""
     q: list[np.ndarray | None] = [None, None, None, cos[0]]  # x, y, z, w; None is zero
     q["XYZ".index(order[0])] = sin[0]
     for i, axis in enumerate(order[1:], start=1):
@@ -121,11 +138,7 @@ def from_euler(angles: np.ndarray, order: str, degrees: bool = True) -> np.ndarr
             bs = None if b is None else b * (s if sign[k] > 0 else minus_s)
             new.append(bs if a is None else a * c if bs is None else a * c + bs)
         q = new
-    out = np.zeros(half.shape[1:] + (4,))
-    for k in range(4):
-        if q[k] is not None:
-            out[..., k] = q[k]
-    return out
+    return [0.0 if part is None else part for part in q]
 
 
 def to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
