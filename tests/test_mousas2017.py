@@ -447,12 +447,17 @@ def test_compiled_step_is_the_numpy_step(fitted, reps):
     out = _run(model.stream(engine="numba"), sig)
     assert model.lower_.num_states > 5000 or reps == 1
     for t, (a, b) in enumerate(zip(ref, out)):
-        assert a[2] == b[2], f"phase at step {t}"
-        for name, u, v in zip(("alpha", "alpha_up", "-", "x", "y_bar", "variance",
-                               "contacts", "rotations", "root"), a, b):
-            if name != "-":
-                np.testing.assert_allclose(v, u, rtol=1e-9, atol=1e-12,
-                                           err_msg=f"{name} at step {t}")
+        _assert_same_step(a, b, t)
+
+
+def _assert_same_step(a, b, t: int) -> None:
+    """Two :func:`_run` records of step t: the same phase, the rest equal to 1e-9."""
+    assert a[2] == b[2], f"phase at step {t}"
+    for name, u, v in zip(("alpha", "alpha_up", "-", "x", "y_bar", "variance",
+                           "contacts", "rotations", "root"), a, b):
+        if name != "-":
+            np.testing.assert_allclose(v, u, rtol=1e-9, atol=1e-12,
+                                       err_msg=f"{name} at step {t}")
 
 
 def test_compiled_step_float32_and_the_offline_path(fitted):
@@ -492,12 +497,7 @@ def test_compiled_beam_step_is_the_numpy_beam_step(fitted, reps, width):
     for t, s in enumerate(sig):
         ref, out = _run(ref_st, [s])[0], _run(out_st, [s])[0]
         np.testing.assert_array_equal(out_st._beam.seg, ref_st._beam.seg, err_msg=f"step {t}")
-        assert ref[2] == out[2], f"phase at step {t}"
-        for name, u, v in zip(("alpha", "alpha_up", "-", "x", "y_bar", "variance",
-                               "contacts", "rotations", "root"), ref, out):
-            if name != "-":
-                np.testing.assert_allclose(v, u, rtol=1e-9, atol=1e-12,
-                                           err_msg=f"{name} at step {t}")
+        _assert_same_step(ref, out, t)
 
 
 def test_engine_without_numba(fitted, monkeypatch):

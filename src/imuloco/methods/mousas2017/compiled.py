@@ -44,14 +44,12 @@ _jit_max = njit(cache=True, nogil=True, error_model="numpy",
 
 
 # ---- the lower level's forward step --------------------------------------------------------
-@_jit_max
-def emission(b, y, prec, quad, group_start, group_count, clamp):
-    """In place: ``b`` (N,) holds ``m_i . y + c_i`` (:meth:`.model.FrameStates.log_emission`
-    before its quadratic term); subtracts each group's ``y' P_g y / 2``, then the maximum, and
-    raises values below ``clamp`` to it. y : (dy,) float64; prec : (G, dy, dy); quad : (G,)
-    scratch of b's dtype."""
-    num_g, dy = prec.shape[0], prec.shape[1]
-    for g in range(num_g):
+@_jit
+def _quad(prec, y, quad):
+    """Each group's ``y' P_g y / 2`` into ``quad`` (G,); prec : (G, dy, dy); y : (dy,) or
+    longer (its first dy entries)."""
+    dy = prec.shape[1]
+    for g in range(prec.shape[0]):
         q = 0.0
         for d in range(dy):
             s = 0.0
@@ -59,6 +57,16 @@ def emission(b, y, prec, quad, group_start, group_count, clamp):
                 s += prec[g, d, e] * y[e]
             q += s * (0.5 * y[d])
         quad[g] = q
+
+
+@_jit_max
+def emission(b, y, prec, quad, group_start, group_count, clamp):
+    """In place: ``b`` (N,) holds ``m_i . y + c_i`` (:meth:`.model.FrameStates.log_emission`
+    before its quadratic term); subtracts each group's ``y' P_g y / 2``, then the maximum, and
+    raises values below ``clamp`` to it. y : (dy,) float64; prec : (G, dy, dy); quad : (G,)
+    scratch of b's dtype."""
+    num_g = prec.shape[0]
+    _quad(prec, y, quad)
     top = b[0] - quad[0]
     for g in range(num_g):
         q32 = quad[g]
@@ -185,6 +193,17 @@ def _upper(alpha_up, a_up, bu, has_y, step_up, group_phase, pp):
 
 
 @_jit
+def _top(w, top_k, tie_rtol):
+    """The K = min(top_k, n) largest of the segment masses w (n,) (:func:`_largest`) and
+    their sum."""
+    top = _largest(w, min(top_k, w.size), tie_rtol)
+    tot = 0.0
+    for s in top:
+        tot += w[s]
+    return top, tot
+
+
+@_jit
 def _blend(frames, rows, tot, g0, has_y, mu_x, mu_y, reg, cond_var, y, x, y_bar, variance):
     """Eq. 10-13 over K segments of one block: ``frames`` (K, L) their frames' forward
     probabilities, summing to ``tot``; ``rows`` (K, L) their frame states; g0 the block's
@@ -248,11 +267,8 @@ def interpolate(alpha, alpha_up, a_up, bu, has_y, step_up, group_phase, phase_bl
         if w.max() > 0:
             break
     st, big_h, length, g0 = blocks[blk, 0], blocks[blk, 1], blocks[blk, 2], blocks[blk, 3]
-    k = min(top_k, big_h)
-    top = _largest(w, k, tie_rtol)
-    tot = 0.0
-    for s in top:
-        tot += w[s]
+    top, tot = _top(w, top_k, tie_rtol)
+    k = top.size
     frames = np.empty((k, length))
     rows = np.empty((k, length), dtype=np.int64)
     for i in range(k):
@@ -290,11 +306,8 @@ def interpolate_beam(seg, seg_alpha, seg_block, alpha_up, a_up, bu, has_y, step_
         if w.size and w.max() > 0:
             break
     st, big_h, length, g0 = blocks[blk, 0], blocks[blk, 1], blocks[blk, 2], blocks[blk, 3]
-    k = min(top_k, w.size)
-    top = _largest(w, k, tie_rtol)
-    tot = 0.0
-    for i in top:
-        tot += w[i]
+    top, tot = _top(w, top_k, tie_rtol)
+    k = top.size
     frames = np.empty((k, length))
     rows = np.empty((k, length), dtype=np.int64)
     for i in range(k):
@@ -560,14 +573,7 @@ def beam_step(seg, alpha, has_y, y_aug, prec, quad, lin, first_lin, group, first
     a = pred
     if has_y:
         dy = prec.shape[1]
-        for g in range(num_g):
-            q = 0.0
-            for d in range(dy):
-                t = 0.0
-                for e in range(dy):
-                    t += prec[g, d, e] * y_aug[e]
-                q += t * (0.5 * y_aug[d])
-            quad[g] = q
+        _quad(prec, y_aug, quad)
         top = -np.inf
         for r in range(n):
             s = seg[r]
