@@ -1,6 +1,6 @@
 """Where a real shin phone's signals differ from the virtual sensors the models train on.
 
-    python benchmarks/sim_to_real.py [--data ../shared/data] [-o TABLE.md]
+    python benchmarks/sim_to_real.py [--data ../shared/data] [-o TABLE.md] [--foot]
 
 The real ``realworld-shin`` walk (without its first and last 10 s) against clean virtual
 right-ankle sensors on 9 straight walks of ``bandai-namco-2`` and of ``cmu-iclone``, all
@@ -10,6 +10,12 @@ the real signals' standard deviation per anatomical axis (m/s², rad/s) and the 
 virtual for each motion set, then how much the virtual acceleration's spread (8 Hz band,
 norm of the three axes) moves with where on the shank the sensor sits. A measurement to steer
 the virtual sensors, never a fit: nothing here changes a constant.
+
+``--foot`` measures the shoe sensors instead: 8 right-foot trials of ``real-imu/ipol-gait`` and
+of ``real-imu/pyshoe-vicon``, in their makers' axes and calibrated, against clean virtual
+right-foot sensors on 6 walks of ``bandai-namco-2`` (mean and standard deviation per axis,
+< 8 Hz), then the share of frames the shipped foot model flags unreliable and its median
+predicted error, both ways.
 """
 
 from __future__ import annotations
@@ -53,12 +59,56 @@ def virtual(files: list[tuple[Path, int]], fraction: float | None = None) -> lis
                                 noise="clean", seed=0))[0] for f, skip in files]
 
 
+def foot_table(data: Path) -> list[str]:
+    """The ``--foot`` tables (module docstring)."""
+    from imuloco.app.pipeline import reconstruct_recording, shipped_model
+    from imuloco.io.motionfile import read_motion
+    from imuloco.io.realimu import read_trials
+    from imuloco.methods import load_model
+    from imuloco.sensors.calibration import calibrate
+    from imuloco.sensors.simulate import simulate
+
+    def stats(rec) -> np.ndarray:  # mean (6,) and std (6,) below 8 Hz
+        rate = 1.0 / np.median(np.diff(rec.times))
+        sos = butter(4, 8.0, fs=rate, output="sos")
+        x = sosfiltfilt(sos, np.concatenate([rec.acc[:, 0], rec.gyro[:, 0]], 1), axis=0)
+        return np.r_[x.mean(0), x.std(0)]
+
+    model = load_model(shipped_model("learned", "right_foot"))
+    head = ["acc x", "acc y", "acc z", "gyro x", "gyro y", "gyro z"]
+    lines = ["| source | axes | " + " | ".join(f"{a} mean" for a in head) + " | "
+             + " | ".join(f"{a} std" for a in head) + " | flagged % | predicted cm |",
+             "|---|---|" + "---:|" * 14]
+    for name in ("ipol-gait", "pyshoe-vicon"):
+        recs = [t.recording.select(["right_foot"]) for t in
+                read_trials(data / "real-imu" / name, limit=8)]
+        for axes, cal in (("maker's", False), ("calibrated", True)):
+            rows, flagged, predicted = [], [], []
+            for rec in recs:
+                rows.append(stats(calibrate(rec)[0] if cal else rec))
+                _, info = reconstruct_recording(rec, model, calibrate=cal)
+                flagged.append(np.mean(info["confidence"].unreliable))
+                predicted.append(np.median(info["confidence"].error_m))
+            lines.append(f"| {name} ({len(recs)} trials) | {axes} | "
+                         + " | ".join(f"{v:.2f}" for v in np.mean(rows, 0))
+                         + f" | {100 * np.mean(flagged):.0f} | {100 * np.median(predicted):.1f} |")
+    walks = sorted((data / "bandai-namco-2").glob("*_walk_normal_*.bvh"))[:6]
+    virt = [stats(simulate(read_motion(f), ["right_foot"], rate=100.0, noise="clean", seed=0))
+            for f in walks]
+    lines.append(f"| virtual, bandai-namco-2 ({len(walks)} walks) | foot's | "
+                 + " | ".join(f"{v:.2f}" for v in np.mean(virt, 0)) + " | | |")
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", type=Path, default=Path("../shared/data"))
     ap.add_argument("-o", "--output", type=Path, help="also write the table to this file")
+    ap.add_argument("--foot", action="store_true", help="the shoe sensors (module docstring)")
     args = ap.parse_args()
     logging.disable(logging.WARNING)  # the real log's sampling gaps are reported, not errors
+    if args.foot:
+        return write("\n".join(foot_table(args.data)), args.output)
     from imuloco.app.pipeline import calibrated
     from imuloco.sensors.reallog import read_log
 
@@ -88,12 +138,16 @@ def main() -> None:
              for fraction in (0.35, 0.5, 0.65, 0.8)]
     lines.append("| acceleration spread, bandai-namco-2 walks, < 8 Hz, m/s² | "
                  + " | ".join(f"{v:.2f}" for v in norms) + " |")
-    table = "\n".join(lines)
+    write("\n".join(lines), args.output)
+
+
+def write(table: str, output: Path | None) -> None:
+    """Print ``table`` and write it to ``output`` when given."""
     print(table)
-    if args.output:
+    if output:
         from imuloco.io.atomic import atomic_write
 
-        with atomic_write(args.output, "w") as f:
+        with atomic_write(output, "w") as f:
             f.write(table + "\n")
 
 

@@ -127,3 +127,53 @@ def test_anatomical_axes_during_walks(sample_db, name):
         z = qrot(q, np.array([0.0, 0.0, 1.0]))
         assert np.mean(np.sum(x * left, -1)) > 0.8
         assert np.mean(np.sum(z * forward, -1)) > 0.7
+
+
+@pytest.fixture(scope="module")
+def foot_walks(sample_db):
+    pytest.importorskip("gaitmap")
+    return [simulate(m, [foot], 100.0, "clean") for m in sample_db.where(content="walk").clips
+            for foot in ("right_foot", "left_foot")]
+
+
+def test_recovers_random_foot_mountings(foot_walks):
+    """A shoe sensor in any orientation: up from the resting foot, forward from its strides.
+    What is left is mostly the mocap foot's toe-out (its bones against the walking direction),
+    which the calibration does not know."""
+    rng = np.random.default_rng(1)
+    errors = []
+    for rec in foot_walks:
+        base = estimate_mounting(rec)
+        assert base.up_source == "stances" and base.swings >= 3
+        rot = from_rotvec(rng.normal(size=3) * 1.5)
+        est = estimate_mounting(_turned(rec, rot))
+        # turns with the sensor (to 2 degrees: gaitmap's ZUPT filter is not exactly invariant)
+        assert np.degrees(geodesic(est.rotation, qmul(base.rotation, rot))) < 2.0
+        errors.append(np.degrees(geodesic(est.rotation, rot)))
+    # a flipped slope or forward axis would be 80-180 degrees off
+    assert np.median(errors) < 10.0 and max(errors) < 30.0, np.round(errors, 1)
+
+
+def test_a_foot_that_never_walks_is_refused():
+    pytest.importorskip("gaitmap")
+    t = np.arange(500) * 0.01
+    acc = np.tile([0.0, 0.0, 9.81], (500, 1, 1))
+    rec = Recording(t, acc, np.zeros_like(acc), ["left_foot"])
+    with pytest.raises(ValueError, match="left_foot: a foot sensor is calibrated from walking"):
+        calibrate(rec)
+
+
+@pytest.mark.shared
+def test_real_foot_sensors_turn_about_their_calibrated_medio_lateral_axis(shared_dir):
+    """Real shoe IMUs (ipol-gait, pyshoe-vicon) come in their makers' axes; calibrated, the
+    foot's swing turns it about x, as on the virtual foot sensors the models learn from."""
+    pytest.importorskip("gaitmap")
+    from imuloco.io.realimu import read_trials
+
+    for name in ("ipol-gait", "pyshoe-vicon"):
+        for trial in read_trials(shared_dir.parent / "real-imu" / name, limit=2):
+            rec = trial.recording.select(["right_foot"])
+            cal, (mount,) = calibrate(rec)
+            share = np.mean(cal.gyro[:, 0] ** 2, axis=0)
+            assert share[0] > 0.6 * share.sum(), (name, trial.name, share)
+            assert mount.swings >= 4

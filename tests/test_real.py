@@ -17,7 +17,8 @@ from imuloco.io.realimu import detect_layout, read_trials
 
 pytest.importorskip("gaitmap")
 pytest.importorskip("mobgap")
-from imuloco.evaluate.sensorgait import foot_gait, lower_back_gait, sensor_gait, swings
+from imuloco.evaluate.sensorgait import foot_gait, lower_back_gait, sensor_gait
+from imuloco.sensors.foottrack import swings
 
 DEMO = "dataset-2_walk_normal_001"
 
@@ -242,28 +243,48 @@ def test_to_height_scales_every_length_and_speed(demo_clip):
         to_height(demo_clip, 175.0)  # centimetres
 
 
-def test_reconstruct_file_height_and_foot_gait(tmp_path, demo_rec, demo_clip, sample_db):
+def test_reconstruct_file_height_and_foot_gait(tmp_path, demo_rec, demo_clip):
     """A foot sensor: the report's gait comes from the sensor's signal (ZUPT strides), the
-    motion from a baseline fitted on the fly for right_foot (no shipped model), scaled to
-    --height."""
+    motion from the shipped foot model, scaled to --height."""
     from imuloco.app.pipeline import choose_method, reconstruct_file
     from imuloco.evaluate.gait import stature
     from imuloco.io.sensorlog import write_generic_csv
 
     rec = demo_rec.select(["right_foot"])
     path = write_generic_csv(rec, tmp_path / "foot.csv")
-    fitted, note = choose_method(placement="right_foot", db=sample_db)
-    assert "on the fly" in note and fitted.placements_ == ["right_foot"]
+    fitted, note = choose_method(placement="right_foot")
+    assert "learned_right_foot.npz" in note and fitted.placements_ == ["right_foot"]
     motion, report = reconstruct_file(path, fitted=fitted, placement="right_foot",
                                       height=1.9)
     assert stature(motion.skeleton) == pytest.approx(1.9)
     assert report["height_m"] == 1.9
+    assert report["calibration"][0]["up_from"] == "stances"
     assert "right_foot sensor" in report["gait_source"] and report["gait_note"] is None
     truth = gait_parameters(demo_clip)
     assert report["gait"]["stride_length_m"] == pytest.approx(truth["stride_length_m"],
                                                               rel=0.05)
     assert len(report["strides"]) >= 3 and report["strides"][0]["foot"] == "right"
     json.dumps(report.to_json())
+
+
+def test_a_shoe_sensor_in_its_makers_axes_reconstructs_as_one_in_the_foot_s(demo_rec):
+    """Real shoe IMUs come in their own axes: calibrated, the foot model's motion is the one
+    it gives for a sensor in the foot's frame; fed as it is, the model is lost."""
+    from imuloco.app.pipeline import choose_method, reconstruct_recording
+    from imuloco.core.recording import Recording
+    from imuloco.evaluate.metrics import mpjpe
+    from imuloco.ops.rotations import from_rotvec, qrot
+
+    fitted, _ = choose_method(placement="left_foot")
+    rec = demo_rec.select(["left_foot"])
+    turn = from_rotvec(np.array([2.2, -0.4, 1.1]))  # a sensor lying on its side, turned
+    turned = Recording(rec.times, qrot(turn, rec.acc), qrot(turn, rec.gyro), ["left_foot"])
+    ref, _ = reconstruct_recording(rec, fitted, calibrate=False, pin=False)
+    cal, info = reconstruct_recording(turned, fitted, pin=False)
+    raw, _ = reconstruct_recording(turned, fitted, calibrate=False, pin=False)
+    assert info["calibration"][0]["up_from"] == "stances"
+    near, lost = mpjpe(ref, cal), mpjpe(ref, raw)  # cm
+    assert near < 1.5 and lost > 4 * near, (near, lost)  # measured: 0.25 and 8.5 cm
 
 
 def test_a_model_refuses_a_placement_it_does_not_know(tmp_path, ridge_without_demo_clip):

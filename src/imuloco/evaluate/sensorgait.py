@@ -1,18 +1,11 @@
 """Gait measured from one sensor's raw signal, by the method that suits where it is worn.
 
-- Foot (``right_foot``, ``left_foot``; on the shoe over the instep): the foot swings while
-  the gyroscope norm's 50 ms window maximum exceeds 100 deg/s for at least 0.2 s; between two
-  swings is one stance, and its stillest moment the foot's rest. Brief dips inside a swing
-  are bridged, but never between two runs each as long as a swing: a jogging foot's stance
-  dips under the threshold for tens of ms only. A zero-velocity-update Kalman
-  filter with Rauch-Tung-Striebel smoothing (gaitmap's ``RtsKalman``) gives the foot's 3-D
-  path, with gaitmap's default ZUPTs (the gyroscope's norm under 34 deg/s over 50 ms) or-ed
-  with one at each stance's stillest moment (its ``StrideEventZuptDetector``): some walkers'
-  feet never get under 34 deg/s (their stance minimum is 40-60 deg/s), and without it their
-  stances went unnoticed and two strides counted as one. A stride's length is the horizontal
-  distance between the foot's rest positions (Rampp et al. 2015). Initial and terminal
-  contacts come from gaitmap's ``HerzerEventDetection`` (Rampp's gyroscope events refined with
-  the forward acceleration) on strides segmented at the swings' starts. gaitmap's Barth DTW
+- Foot (``right_foot``, ``left_foot``; on the shoe over the instep): the swings, the stances'
+  rest moments and the foot's zero-velocity-update path of :func:`imuloco.sensors.foottrack.
+  foot_track` (gaitmap's ``RtsKalman``). A stride's length is the horizontal distance between
+  the foot's rest positions (Rampp et al. 2015). Initial and terminal contacts come from
+  gaitmap's ``HerzerEventDetection`` (Rampp's gyroscope events refined with the forward
+  acceleration) on strides segmented at the swings' starts. gaitmap's Barth DTW
   segmentation and Rampp event detection live in ``gaitmap_mad`` (AGPL-3.0), which this MIT
   package does not depend on; the swings need no template.
 - Lower back (``lower_back``, L5): Mobilise-D's algorithms from ``mobgap`` (Iluz gait sequence
@@ -34,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imuloco.errors import MissingExtraError, UnknownNameError
+from imuloco.sensors.foottrack import NoWalking, foot_track, uniform
 
 FOOT_PLACEMENTS = ("right_foot", "left_foot")
 LOWER_BACK = "lower_back"
@@ -41,16 +35,7 @@ LOWER_BACK = "lower_back"
 # Biomechanics and Motor Control of Human Movement, Fig. 4.1), when the sensor's height is
 # not measured.
 L5_HEIGHT_RATIO = 0.530
-ZUPT_WINDOW_S, ZUPT_GYRO_DPS = 0.05, 34.0  # gaitmap RtsKalman's default ZUPT detector
 MIN_STRIDES = 2
-# the shortest swing: ~0.3 s even in sprinting (about 40 % of a 0.7 s stride; Novacheck 1998,
-# The biomechanics of running, Gait & Posture 7); 0.2 s leaves a margin
-SHORTEST_SWING_S = 0.3
-MIN_SWING_S = 0.2  # fewer and no stride length or cadence is defined
-# The foot swings while the gyroscope norm's 50 ms window maximum exceeds this for at least
-# MIN_SWING_S (gaps within a swing bridged, see _bridged): three times the ZUPT detector's
-# still threshold, far under the foot's mid-swing angular velocity of several hundred deg/s.
-SWING_DPS = 3 * ZUPT_GYRO_DPS
 
 
 @dataclass
@@ -137,94 +122,8 @@ def not_measured(placement: str, method: str, reason: str) -> SensorGait:
     return SensorGait(placement, method, measured=False, reason=reason)
 
 
-def _uniform(times: np.ndarray, x: np.ndarray) -> tuple[float, np.ndarray]:
-    """Rate (Hz) and ``x`` (T, C) resampled onto a uniform grid at the mean rate."""
-    from imuloco.ops.filters import resample_linear
-
-    rate = (len(times) - 1) / (times[-1] - times[0])
-    t = times[0] + np.arange(len(times)) / rate
-    return rate, resample_linear(times, x, t)
-
-
-def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Starts and stops (exclusive) of the True runs of a 1-D mask."""
-    from imuloco.phases.contacts import runs
-
-    starts, stops, vals = runs(mask)
-    return starts[vals], stops[vals]
-
-
-def _gaitmap():
-    try:
-        import gaitmap  # noqa: F401
-    except ImportError as e:
-        raise MissingExtraError("foot-sensor gait", f"gaitmap ({e})", "gait") from None
-
-
 FOOT_METHOD = ("gaitmap RtsKalman ZUPT trajectory (one ZUPT per stance at least), strides "
                "from swing to swing, HerzerEventDetection contacts")
-
-
-def _bridged(starts: np.ndarray, stops: np.ndarray, max_gap: int, min_length: int,
-             whole: int) -> tuple[np.ndarray, np.ndarray]:
-    """Runs (sample starts, exclusive stops) joined across gaps of at most ``max_gap``, then
-    those shorter than ``min_length`` dropped.
-
-    A gap between two runs of ``whole`` samples or more (each as long as a swing) is never
-    bridged: a foot swings once per stride, so the dip between them is a stance, however
-    brief (a jogging foot's gyroscope stays under the threshold for 10-65 ms only). Shorter
-    runs are pieces of a swing (a push-off before toe off, the foot's slap after heel strike)
-    and join the run after them first: the push-off belongs to the swing it starts.
-    """
-    out: list[list[int]] = []
-    for a, b in zip(starts[::-1].tolist(), stops[::-1].tolist()):
-        if out and out[-1][0] - b <= max_gap and min(b - a, out[-1][1] - out[-1][0]) < whole:
-            out[-1][0] = a
-        else:
-            out.append([a, b])
-    kept = np.array([r for r in out[::-1] if r[1] - r[0] >= min_length], int).reshape(-1, 2)
-    return kept[:, 0], kept[:, 1]
-
-
-def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
-    """The foot's swings and the stillest moment of each stance around them.
-
-    gyro_dps : ndarray, shape (T, 3), deg/s on a uniform grid at ``rate`` Hz.
-
-    Returns ``starts`` (K,), the samples where the swings start, and ``moments`` (K + 1,):
-    the minimum of the gyroscope norm's 50 ms window maximum (the ZUPT detector's measure)
-    before the first swing, between two swings and after the last one.
-    """
-    from scipy.ndimage import maximum_filter1d
-
-    window = max(1, round(ZUPT_WINDOW_S * rate))
-    energy = maximum_filter1d(np.linalg.norm(gyro_dps, axis=1), window)
-    above = energy > SWING_DPS
-    above[[0, -1]] = False  # a stance (however short) before the first and after the last
-    starts, stops = _bridged(*_runs(above), window, round(MIN_SWING_S * rate),
-                             round(SHORTEST_SWING_S * rate))
-    bounds = np.concatenate([[0], starts, [len(energy)]])
-    lows = np.concatenate([[0], stops, [len(energy)]])
-    moments = np.array([lo + int(np.argmin(energy[lo:hi])) for lo, hi in
-                        zip(lows[:-1], bounds[1:])], int)
-    return starts, moments
-
-
-def _zupt_detector(mv: np.ndarray):
-    """gaitmap's default ZUPT detector or-ed with one ZUPT at each stance's stillest moment
-    ``mv`` (samples), and the stride list of ``min_vel`` events the latter reads."""
-    import pandas as pd
-    from gaitmap.zupt_detection import (
-        ComboZuptDetector,
-        NormZuptDetector,
-        StrideEventZuptDetector,
-    )
-
-    strides = pd.DataFrame({"s_id": np.arange(max(len(mv) - 1, 0)), "start": mv[:-1],
-                            "end": mv[1:], "min_vel": mv[:-1]}).set_index("s_id")
-    combo = ComboZuptDetector([("norm", NormZuptDetector()), ("stance", StrideEventZuptDetector(
-        half_region_size_s=ZUPT_WINDOW_S / 2))], operation="or")
-    return combo, strides
 
 
 def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = "right",
@@ -237,75 +136,29 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
     acc, gyro : ndarray, shape (T, 3), m/s² (+9.81 up at rest) and rad/s, in any sensor axes.
     foot : ``"right"`` or ``"left"``.
     """
+    placement = placement or f"{foot}_foot"
+    try:
+        track = foot_track(times, acc, gyro)  # checks that gaitmap is installed
+    except NoWalking as e:
+        return not_measured(placement, FOOT_METHOD, str(e))
     import pandas as pd
-
-    _gaitmap()
     from gaitmap.event_detection import HerzerEventDetection
-    from gaitmap.preprocessing.sensor_alignment import align_dataset_to_gravity
-    from gaitmap.trajectory_reconstruction import RtsKalman
     from gaitmap.utils.coordinate_conversion import (
         convert_left_foot_to_fbf,
         convert_right_foot_to_fbf,
     )
 
-    placement = placement or f"{foot}_foot"
-    times = np.asarray(times, float)
-    if len(times) < 2 or times[-1] - times[0] < 2.0:
-        return not_measured(placement, FOOT_METHOD, "the recording is shorter than 2 s, "
-                            "less than one stride")
-    rate, x = _uniform(times, np.concatenate([acc, np.degrees(gyro)], axis=1))
-    cols = ["acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z"]
-    data = pd.DataFrame(x, columns=cols)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # gaitmap warns when few still windows are found
-        # gravity from gaitmap's defaults (standing: 0.7 s under 2.5 deg/s), else from the
-        # ZUPT detector's foot-flat moments (50 ms under 34 deg/s), else from a foot never
-        # that still: its stances' stillest moments (50 ms under SWING_DPS)
-        for still in ({}, {"window_length_s": ZUPT_WINDOW_S, "static_signal_th": ZUPT_GYRO_DPS},
-                      {"window_length_s": ZUPT_WINDOW_S, "static_signal_th": SWING_DPS}):
-            try:
-                data = align_dataset_to_gravity(data, rate, **still)
-                break
-            except ValueError:
-                continue
-        else:
-            return not_measured(placement, FOOT_METHOD, "the foot is never still: no stance, "
-                                "so no walking")
-        starts, rest = swings(data[cols[3:]].to_numpy(), rate)
-        if len(starts) < MIN_STRIDES:
-            return not_measured(placement, FOOT_METHOD, f"{len(starts)} swing(s) found: no "
-                                "walking (a foot sensor needs at least 2 strides)")
-        zupt, moments = _zupt_detector(rest)
-        kalman = RtsKalman(zupt_detector=zupt).estimate(data, sampling_rate_hz=rate,
-                                                        stride_event_list=moments)
-    pos = kalman.position_.to_numpy()[1:]  # gaitmap prepends the initial state
-    ori = kalman.orientation_.to_numpy()[1:]
-    t = times[0] + np.arange(len(data)) / rate
-    # the sensor's forward axis: stride displacements seen from the sensor at rest, gravity
-    # already along its z (a fixed mounting yaw, the median over strides)
-    from scipy.spatial.transform import Rotation
-
-    disp = np.diff(pos[rest], axis=0)
-    local = Rotation.from_quat(ori[rest[:-1]]).inv().apply(disp)
-    keep = np.linalg.norm(disp[:, :2], axis=1) > 0.2  # strides, not shuffles (0.2 m)
-    if not keep.any():
-        return not_measured(placement, FOOT_METHOD, "the foot never moved more than 0.2 m "
-                            "between two stances: no walking")
-    yaw = float(np.median(np.arctan2(local[keep, 1], local[keep, 0])))
-    turn = Rotation.from_euler("z", -yaw)
-    fsf = data.copy()
-    fsf[cols[:3]] = turn.apply(data[cols[:3]].to_numpy())
-    fsf[cols[3:]] = turn.apply(data[cols[3:]].to_numpy())
+    starts, rest, pos, t, fsf = track.starts, track.rest, track.path, track.times, track.level
     fbf = (convert_right_foot_to_fbf if foot == "right" else convert_left_foot_to_fbf)(fsf)
     # segmented strides from the start of one swing (heel off, just before toe off) to the
     # next; the last swing's is one typical stride long (its contact counts too)
-    ends = np.append(starts[1:], min(len(data) - 1, starts[-1] + int(np.median(np.diff(starts)))))
+    ends = np.append(starts[1:], min(len(fsf) - 1, starts[-1] + int(np.median(np.diff(starts)))))
     seg = pd.DataFrame({"s_id": np.arange(len(starts)), "start": starts,
                         "end": ends}).set_index("s_id")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ev = HerzerEventDetection(enforce_consistency=False, detect_only=("ic", "tc")).detect(
-            fbf, stride_list=seg, sampling_rate_hz=rate).annotated_original_event_list_
+            fbf, stride_list=seg, sampling_rate_hz=track.rate).annotated_original_event_list_
     ic = ev["ic"].to_numpy(float)
     tc = ev["tc"].to_numpy(float)
     rows = []
@@ -355,7 +208,7 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
     if len(times) < 2 or times[-1] - times[0] < 3.0:
         return not_measured(LOWER_BACK, BACK_METHOD, "the recording is shorter than 3 s, "
                             "too short for a walking bout")
-    rate, x = _uniform(times, np.concatenate([acc, np.degrees(gyro)], axis=1))
+    rate, x = uniform(times, np.concatenate([acc, np.degrees(gyro)], axis=1))
     a, w = x[:, :3], x[:, 3:]
     up = a.mean(axis=0)
     up /= np.linalg.norm(up)

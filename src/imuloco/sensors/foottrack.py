@@ -1,0 +1,212 @@
+"""A foot sensor's swings and path, and the level frame it walks in.
+
+The foot swings while the gyroscope norm's 50 ms window maximum exceeds 100 deg/s for at least
+0.2 s (:func:`swings`); between two swings is one stance, and its stillest moment the foot's
+rest. A zero-velocity-update Kalman filter with Rauch-Tung-Striebel smoothing (gaitmap's
+``RtsKalman``) gives the foot's 3-D path, with gaitmap's default ZUPTs (the gyroscope's norm
+under 34 deg/s over 50 ms) or-ed with one at each stance's stillest moment: some walkers' feet
+never get under 34 deg/s (their stance minimum is 40-60 deg/s).
+
+:func:`foot_track` also finds how the sensor sits on the shoe, in any orientation: gravity at
+rest gives up (gaitmap's ``align_dataset_to_gravity``), and the strides' displacement seen from
+the sensor at rest gives forward. Both the foot's gait (:mod:`imuloco.evaluate.sensorgait`)
+and the foot's sensor-to-segment calibration (:mod:`imuloco.sensors.calibration`) read it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imuloco.errors import MissingExtraError
+
+ZUPT_WINDOW_S, ZUPT_GYRO_DPS = 0.05, 34.0  # gaitmap RtsKalman's default ZUPT detector
+# the shortest swing: ~0.3 s even in sprinting (about 40 % of a 0.7 s stride; Novacheck 1998,
+# The biomechanics of running, Gait & Posture 7); 0.2 s leaves a margin
+SHORTEST_SWING_S = 0.3
+MIN_SWING_S = 0.2  # fewer and no stride length or cadence is defined
+# The foot swings while the gyroscope norm's 50 ms window maximum exceeds this for at least
+# MIN_SWING_S (gaps within a swing bridged, see _bridged): three times the ZUPT detector's
+# still threshold, far under the foot's mid-swing angular velocity of several hundred deg/s.
+SWING_DPS = 3 * ZUPT_GYRO_DPS
+
+
+def uniform(times: np.ndarray, x: np.ndarray) -> tuple[float, np.ndarray]:
+    """Rate (Hz) and ``x`` (T, C) resampled onto a uniform grid at the mean rate."""
+    from imuloco.ops.filters import resample_linear
+
+    rate = (len(times) - 1) / (times[-1] - times[0])
+    t = times[0] + np.arange(len(times)) / rate
+    return rate, resample_linear(times, x, t)
+
+
+def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Starts and stops (exclusive) of the True runs of a 1-D mask."""
+    from imuloco.phases.contacts import runs
+
+    starts, stops, vals = runs(mask)
+    return starts[vals], stops[vals]
+
+
+def _gaitmap():
+    try:
+        import gaitmap  # noqa: F401
+    except ImportError as e:
+        raise MissingExtraError("foot-sensor gait", f"gaitmap ({e})", "gait") from None
+
+
+def _bridged(starts: np.ndarray, stops: np.ndarray, max_gap: int, min_length: int,
+             whole: int) -> tuple[np.ndarray, np.ndarray]:
+    """Runs (sample starts, exclusive stops) joined across gaps of at most ``max_gap``, then
+    those shorter than ``min_length`` dropped.
+
+    A gap between two runs of ``whole`` samples or more (each as long as a swing) is never
+    bridged: a foot swings once per stride, so the dip between them is a stance, however
+    brief (a jogging foot's gyroscope stays under the threshold for 10-65 ms only). Shorter
+    runs are pieces of a swing (a push-off before toe off, the foot's slap after heel strike)
+    and join the run after them first: the push-off belongs to the swing it starts.
+    """
+    out: list[list[int]] = []
+    for a, b in zip(starts[::-1].tolist(), stops[::-1].tolist()):
+        if out and out[-1][0] - b <= max_gap and min(b - a, out[-1][1] - out[-1][0]) < whole:
+            out[-1][0] = a
+        else:
+            out.append([a, b])
+    kept = np.array([r for r in out[::-1] if r[1] - r[0] >= min_length], int).reshape(-1, 2)
+    return kept[:, 0], kept[:, 1]
+
+
+def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """The foot's swings and the stillest moment of each stance around them.
+
+    gyro_dps : ndarray, shape (T, 3), deg/s on a uniform grid at ``rate`` Hz.
+
+    Returns ``starts`` (K,), the samples where the swings start, and ``moments`` (K + 1,):
+    the minimum of the gyroscope norm's 50 ms window maximum (the ZUPT detector's measure)
+    before the first swing, between two swings and after the last one.
+    """
+    from scipy.ndimage import maximum_filter1d
+
+    window = max(1, round(ZUPT_WINDOW_S * rate))
+    energy = maximum_filter1d(np.linalg.norm(gyro_dps, axis=1), window)
+    above = energy > SWING_DPS
+    above[[0, -1]] = False  # a stance (however short) before the first and after the last
+    starts, stops = _bridged(*_runs(above), window, round(MIN_SWING_S * rate),
+                             round(SHORTEST_SWING_S * rate))
+    bounds = np.concatenate([[0], starts, [len(energy)]])
+    lows = np.concatenate([[0], stops, [len(energy)]])
+    moments = np.array([lo + int(np.argmin(energy[lo:hi])) for lo, hi in
+                        zip(lows[:-1], bounds[1:])], int)
+    return starts, moments
+
+
+def _zupt_detector(mv: np.ndarray):
+    """gaitmap's default ZUPT detector or-ed with one ZUPT at each stance's stillest moment
+    ``mv`` (samples), and the stride list of ``min_vel`` events the latter reads."""
+    import pandas as pd
+    from gaitmap.zupt_detection import (
+        ComboZuptDetector,
+        NormZuptDetector,
+        StrideEventZuptDetector,
+    )
+
+    strides = pd.DataFrame({"s_id": np.arange(max(len(mv) - 1, 0)), "start": mv[:-1],
+                            "end": mv[1:], "min_vel": mv[:-1]}).set_index("s_id")
+    combo = ComboZuptDetector([("norm", NormZuptDetector()), ("stance", StrideEventZuptDetector(
+        half_region_size_s=ZUPT_WINDOW_S / 2))], operation="or")
+    return combo, strides
+
+
+class NoWalking(ValueError):
+    """The recording shows no walking a foot track can be built from (the message says why)."""
+
+
+@dataclass
+class FootTrack:
+    """A foot sensor's walk, on a uniform grid.
+
+    Attributes
+    ----------
+    rate : Hz of the grid; ``times`` (T,) its instants, seconds.
+    level : DataFrame (T, 6), ``acc_x..gyr_z`` in m/s² and deg/s in the level frame: x
+        forward (the walking direction), y left, z up (gaitmap's foot sensor frame).
+    rotation : ndarray (4,), quaternion x, y, z, w from the sensor's axes to the level frame.
+    starts : ndarray (K,), samples where the swings start; ``rest`` (K + 1,) the stances'
+        stillest moments (:func:`swings`).
+    path, orientation : ndarray (T, 3) metres (z up, x and y on the floor, heading of the
+        first sample) and (T, 4), the foot's ZUPT trajectory.
+    """
+
+    rate: float
+    times: np.ndarray
+    level: object
+    rotation: np.ndarray
+    starts: np.ndarray
+    rest: np.ndarray
+    path: np.ndarray
+    orientation: np.ndarray
+
+
+def foot_track(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray) -> FootTrack:
+    """The foot's swings, path and level frame (module docstring); :class:`NoWalking` when the
+    recording has none.
+
+    times : ndarray (T,), seconds; acc, gyro : ndarray (T, 3), m/s² (+9.81 up at rest) and
+    rad/s, in any sensor axes.
+    """
+    import pandas as pd
+
+    _gaitmap()
+    import warnings
+
+    from gaitmap.preprocessing.sensor_alignment import align_dataset_to_gravity
+    from gaitmap.trajectory_reconstruction import RtsKalman
+    from scipy.spatial.transform import Rotation
+
+    times = np.asarray(times, float)
+    if len(times) < 2 or times[-1] - times[0] < 2.0:
+        raise NoWalking("the recording is shorter than 2 s, less than one stride")
+    rate, x = uniform(times, np.concatenate([acc, np.degrees(gyro)], axis=1))
+    cols = ["acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z"]
+    raw = pd.DataFrame(x, columns=cols)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # gaitmap warns when few still windows are found
+        # gravity from gaitmap's defaults (standing: 0.7 s under 2.5 deg/s), else from the
+        # ZUPT detector's foot-flat moments (50 ms under 34 deg/s), else from a foot never
+        # that still: its stances' stillest moments (50 ms under SWING_DPS)
+        for still in ({}, {"window_length_s": ZUPT_WINDOW_S, "static_signal_th": ZUPT_GYRO_DPS},
+                      {"window_length_s": ZUPT_WINDOW_S, "static_signal_th": SWING_DPS}):
+            try:
+                data = align_dataset_to_gravity(raw, rate, **still)
+                break
+            except ValueError:
+                continue
+        else:
+            raise NoWalking("the foot is never still: no stance, so no walking")
+        starts, rest = swings(data[cols[3:]].to_numpy(), rate)
+        if len(starts) < 2:
+            raise NoWalking(f"{len(starts)} swing(s) found: no walking (a foot sensor needs at "
+                            "least 2 strides)")
+        zupt, moments = _zupt_detector(rest)
+        kalman = RtsKalman(zupt_detector=zupt).estimate(data, sampling_rate_hz=rate,
+                                                        stride_event_list=moments)
+    pos = kalman.position_.to_numpy()[1:]  # gaitmap prepends the initial state
+    ori = kalman.orientation_.to_numpy()[1:]
+    # the sensor's forward axis: stride displacements seen from the sensor at rest, gravity
+    # already along its z (a fixed mounting yaw, the median over strides)
+    disp = np.diff(pos[rest], axis=0)
+    local = Rotation.from_quat(ori[rest[:-1]]).inv().apply(disp)
+    keep = np.linalg.norm(disp[:, :2], axis=1) > 0.2  # strides, not shuffles (0.2 m)
+    if not keep.any():
+        raise NoWalking("the foot never moved more than 0.2 m between two stances: no walking")
+    yaw = float(np.median(np.arctan2(local[keep, 1], local[keep, 0])))
+    turn = Rotation.from_euler("z", -yaw)
+    level = data.copy()
+    level[cols[:3]] = turn.apply(data[cols[:3]].to_numpy())
+    level[cols[3:]] = turn.apply(data[cols[3:]].to_numpy())
+    # gaitmap rotates the data without returning its rotation: recover it from both copies
+    # (exact, a rotation maps every sample the same way)
+    grav, _ = Rotation.align_vectors(data.to_numpy().reshape(-1, 3), x.reshape(-1, 3))
+    t = times[0] + np.arange(len(data)) / rate
+    return FootTrack(rate, t, level, (turn * grav).as_quat(), starts, rest, pos, ori)
