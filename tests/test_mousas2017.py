@@ -447,12 +447,17 @@ def test_compiled_step_is_the_numpy_step(fitted, reps):
     out = _run(model.stream(engine="numba"), sig)
     assert model.lower_.num_states > 5000 or reps == 1
     for t, (a, b) in enumerate(zip(ref, out)):
-        assert a[2] == b[2], f"phase at step {t}"
-        for name, u, v in zip(("alpha", "alpha_up", "-", "x", "y_bar", "variance",
-                               "contacts", "rotations", "root"), a, b):
-            if name != "-":
-                np.testing.assert_allclose(v, u, rtol=1e-9, atol=1e-12,
-                                           err_msg=f"{name} at step {t}")
+        _assert_same_step(a, b, t)
+
+
+def _assert_same_step(a, b, t: int) -> None:
+    """Two :func:`_run` records of step t: the same phase, the rest equal to 1e-9."""
+    assert a[2] == b[2], f"phase at step {t}"
+    for name, u, v in zip(("alpha", "alpha_up", "-", "x", "y_bar", "variance",
+                           "contacts", "rotations", "root"), a, b):
+        if name != "-":
+            np.testing.assert_allclose(v, u, rtol=1e-9, atol=1e-12,
+                                       err_msg=f"{name} at step {t}")
 
 
 def test_compiled_step_float32_and_the_offline_path(fitted):
@@ -476,15 +481,23 @@ def test_compiled_step_float32_and_the_offline_path(fitted):
     np.testing.assert_allclose(recs[1].root, recs[0].root, atol=1e-5)
 
 
-def test_compiled_step_with_a_beam(fitted):
-    """With a beam the forward step is the beam's (numpy) and the pose is compiled: the same
-    output as the numpy engine's."""
+@pytest.mark.parametrize("reps, width", [(1, 8), (12, 48), (12, 700)])
+def test_compiled_beam_step_is_the_numpy_beam_step(fitted, reps, width):
+    """With a beam, engine=numba (:func:`.compiled.beam_step`) computes the numpy beam step's
+    kept segments, forward variables, phase, interpolation and pose: in float64 to 1e-9, on
+    the sample's model and one 12 times larger, with missing samples; beams that prune (the
+    wider one lets hundreds of segments enter a step)."""
     model, _, test = fitted
-    sig = test.signals[:40]
-    for a, b in zip(_run(model.stream(beam=8, engine="numpy"), sig),
-                    _run(model.stream(beam=8, engine="numba"), sig)):
-        np.testing.assert_allclose(b[7], a[7], atol=1e-9)
-        np.testing.assert_allclose(b[8], a[8], atol=1e-9)
+    model = _as_float64(_enlarged(model, reps) if reps > 1 else model)
+    assert model.lower_.counts.sum() > width
+    sig = test.signals[:90].copy()
+    sig[40:48] = np.nan
+    ref_st, out_st = model.stream(beam=width, engine="numpy"), model.stream(beam=width,
+                                                                             engine="numba")
+    for t, s in enumerate(sig):
+        ref, out = _run(ref_st, [s])[0], _run(out_st, [s])[0]
+        np.testing.assert_array_equal(out_st._beam.seg, ref_st._beam.seg, err_msg=f"step {t}")
+        _assert_same_step(ref, out, t)
 
 
 def test_engine_without_numba(fitted, monkeypatch):
@@ -535,3 +548,22 @@ def test_a_cold_numba_cache_is_announced(tmp_path, caplog):
     with caplog.at_level("WARNING"):
         _say_if_compiling(Module())
     assert caplog.text == ""
+
+
+def test_keep_largest_ties_go_to_the_lower_index():
+    """The beam's selection of its width segments, numpy and compiled: the k largest, ties
+    (within TIE_RTOL of the k-th) to the lower index; the compiled radix select finds the k-th
+    largest as a sort does."""
+    from imuloco.methods.mousas2017 import compiled
+    from imuloco.methods.mousas2017.beam import TIE_RTOL, keep_largest
+
+    w = np.array([0.1, 0.5, 0.3, 0.3 * (1 + TIE_RTOL / 10), 0.9, 0.3, 0.0, 0.3])
+    for k, want in [(1, [4]), (3, [1, 2, 4]), (4, [1, 2, 3, 4]), (5, [1, 2, 3, 4, 5]),
+                    (8, list(range(8)))]:
+        assert np.flatnonzero(keep_largest(w, k)).tolist() == want
+        assert np.flatnonzero(compiled.keep_largest(w, k, TIE_RTOL)).tolist() == want
+    rng = np.random.default_rng(0)
+    for v in (np.exp(-60 * rng.random(5000)), rng.random(3000), np.ones(100),
+              np.r_[np.zeros(400), rng.random(9)]):
+        for k in (1, 7, min(300, v.size), v.size):
+            assert compiled.kth_largest(v, k) == np.sort(v)[v.size - k]

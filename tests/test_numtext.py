@@ -128,9 +128,13 @@ def test_shared_clips_read_the_same_with_and_without_arrow(shared_dir: Path, mon
         motions_equal(m, read_bvh(f, skip_frames=skip))
 
 
-def test_still_joints_are_converted_once_to_the_same_rotations(tmp_path: Path):
+@pytest.mark.parametrize("once", [True, False])
+def test_still_joints_are_converted_once_to_the_same_rotations(tmp_path: Path, monkeypatch,
+                                                               once: bool):
     """A joint whose angles never change gets the rotation of its angles in every frame, as
-    the per-frame conversion gives it."""
+    the per-frame conversion gives it (converted once, or with the others when few)."""
+    from imuloco.io import bvh
+    monkeypatch.setattr(bvh, "_CALL_ANGLES", 0 if once else 10**6)
     head = TWO_JOINT.split("MOTION")[0]  # root: 6 channels; child: Zrotation Xrotation Yrotation
     text = head + ("MOTION\nFrames: 3\nFrame Time: 0.0333333\n"
                    "0 0 0 10 20 30 12.5 -33.25 171.75\n"

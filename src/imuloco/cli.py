@@ -287,7 +287,8 @@ def _folders(values: tuple[str, ...]) -> list[Path] | None:
               help="Instead: time loading these motion folders (repeat or comma-separate): "
                    "numpy parse, reader, cold and warm cache; writes load.json and load.md.")
 @click.option("--against", default=None, metavar="REV",
-              help="With --load: also time the BVH reader of this git commit; with --speed: "
+              help="With --load: also time the BVH reader of this git commit and report the "
+                   "largest difference of its Motions from today's; with --speed: "
                    "also each method's code at this commit, in the same run.")
 @_reading_options
 def bench(method_names: str | None, split_name: str, noise: str, placement: str,

@@ -40,7 +40,7 @@ class Motion:
                 f"motion {self.name!r}: expected rotations (T, {self.skeleton.num_joints}, 4) "
                 f"and root (T, 3), got {self.rotations.shape} and {self.root.shape}"
             )
-        if not (np.all(np.isfinite(self.rotations)) and np.all(np.isfinite(self.root))):
+        if not (np.isfinite(self.rotations).all() and np.isfinite(self.root).all()):
             raise ValueError(f"motion {self.name!r}: rotations or root contain NaN or inf")
 
     @property

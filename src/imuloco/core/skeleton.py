@@ -39,8 +39,8 @@ class Skeleton:
                 f"skeleton: expected parents (J,) and offsets (J, 3) for J={n} names, "
                 f"got {parents.shape} and {offsets.shape}"
             )
-        if n and (parents[0] != -1 or np.any(parents[1:] >= np.arange(1, n))
-                  or np.any(parents[1:] < 0)):
+        if n and (parents[0] != -1 or (parents[1:] >= np.arange(1, n)).any()
+                  or (parents[1:] < 0).any()):
             raise ValueError("skeleton: parents must be -1 for joint 0 and precede each child")
         object.__setattr__(self, "parents", parents)
         object.__setattr__(self, "offsets", offsets)

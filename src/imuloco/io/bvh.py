@@ -67,6 +67,9 @@ _MOTION = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE)
 _HEADERS = re.compile(r"(?:[ \t]*\r?\n)*[ \t]*Frames[ \t]*:[ \t]*(\S+)[ \t]*\r?\n"
                       r"(?:[ \t]*\r?\n)*[ \t]*Frame Time[ \t]*:[ \t]*(\S+)[ \t]*\r?\n")
 _MAX_ABS = 1e9  # larger numbers are corrupt data in any unit, and would overflow products
+# Euler angles whose conversion costs about as much as a conversion call's own overhead (sines
+# and cosines of 4,096 angles, 0.1-0.2 ms; measured in the issue 22 work)
+_CALL_ANGLES = 4096
 
 
 @dataclass
@@ -372,10 +375,22 @@ def _offset_is_added(motion: Motion, shift: np.ndarray) -> bool:
     return abs(lowest + shift[1]) < abs(lowest)
 
 
+_RATES: dict[str, float] = {}
+
+
 def frame_rate(path: Path, line: int, token: str) -> float:
     """Frames per second of a ``Frame Time`` token, rounded to a whole number when the token is
     that rate's frame time printed to its decimals, to at least 3 significant digits
-    (``0.016667`` is 60 fps, not 59.9988; ``0.03`` stays 33.33)."""
+    (``0.016667`` is 60 fps, not 59.9988; ``0.03`` stays 33.33). Memoised by token (a
+    folder's clips share one)."""
+    if token not in _RATES:
+        if len(_RATES) >= 256:
+            _RATES.clear()
+        _RATES[token] = _frame_rate(path, line, token)
+    return _RATES[token]
+
+
+def _frame_rate(path: Path, line: int, token: str) -> float:
     frame_time = _number(path, line, token, "Frame Time")
     if not 1.0 / MAX_FPS <= frame_time <= 1.0 / MIN_FPS:
         raise FormatError(path, line, f"expected a Frame Time from {1 / MAX_FPS:g} to "
@@ -565,8 +580,11 @@ def _build_motion(path: Path, joints: list[_Joint], data: np.ndarray, fps: float
         local_rot[:, lay.unrotated] = IDENTITY
     for order, ks, cols in lay.by_order:
         # from_euler's arithmetic on angles laid out (axis, ...) by one gather, its components
-        # written straight into place; joints whose angles never change are converted once.
-        still = np.all(high[cols] == low[cols], axis=0)  # (K,)
+        # written straight into place; joints whose angles never change are converted once,
+        # unless they are so few that converting them in every frame costs less than a call.
+        still = (high[cols] == low[cols]).all(axis=0)  # (K,)
+        if np.count_nonzero(still) * t < _CALL_ANGLES:
+            still[:] = False
         for pick, angles in ((~still, lambda c: data[:, c].swapaxes(0, 1)),  # (3, T, K')
                              (still, lambda c: data[0, c])):  # (3, K'')
             if pick.any():

@@ -3,10 +3,11 @@
 :func:`read_grid` uses pyarrow's compute kernels when pyarrow is installed (the ``dist`` extra)
 and the text is ASCII, else ``numpy.loadtxt``. Both parse with correct rounding (Arrow's
 ``cast`` uses fast_float, numpy Python's own ``float`` parsing), so they give the same numbers;
-Arrow's is the faster: on the shared BVH files it reads a MOTION block in about two thirds of
-``numpy.loadtxt``'s CPU time, where pyarrow's CSV reader (one column per channel) and pandas'
-are no faster than numpy, and splitting into Python strings costs as much as numpy's whole
-parse (measured in the issue 22 work, see ``docs/results/io/README.md``).
+Arrow's is the faster: on the shared BVH files it reads a MOTION block in about half of
+``numpy.loadtxt``'s CPU time (numpy finds the tokens, Arrow trims and casts them; Arrow's own
+split kernels cost as much again), where pyarrow's CSV reader (one column per channel) and
+pandas' are no faster than numpy, and splitting into Python strings costs as much as numpy's
+whole parse (measured in the issue 22 work, see ``docs/results/io/README.md``).
 
 Neither says what is wrong with text it refuses: callers read such text line by line.
 """
@@ -85,7 +86,8 @@ def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, start: int, rows: int
     # bounds[i] to bounds[i + 1] (in byte, then in raw) less its trailing whitespace
     edge = np.flatnonzero(space[:-1] > space[1:])
     first = 0 if len(byte) and not space[0] else 1
-    bounds = np.empty(len(edge) + 2 - first, dtype=np.int64)
+    small = len(raw) < 2**31  # 32-bit offsets (Arrow's string rather than large_string)
+    bounds = np.empty(len(edge) + 2 - first, dtype=np.int32 if small else np.int64)
     bounds[0] = 0
     np.add(edge, 1, out=bounds[1 - first:-1])
     end = len(byte)  # after the last token (bytes.rstrip would copy the text)
@@ -96,7 +98,7 @@ def _arrow_grid(pa: ModuleType, pc: ModuleType, text: str, start: int, rows: int
     if len(starts) != rows * width or not _one_row_a_line(byte, starts, rows, width, lf):
         return None
     bounds += start
-    tokens = pa.Array.from_buffers(pa.large_string(), len(starts), [
+    tokens = pa.Array.from_buffers(pa.string() if small else pa.large_string(), len(starts), [
         None, pa.py_buffer(bounds), pa.py_buffer(raw)])
     tokens = pc.call_function("ascii_rtrim_whitespace", [tokens])
     numbers = pc.call_function("cast", [tokens], pc.CastOptions.safe(pa.float64()))
@@ -109,7 +111,7 @@ def _one_row_a_line(byte: np.ndarray, starts: np.ndarray, rows: int, width: int,
     ``byte`` make ``rows`` lines of ``width`` tokens with no blank line between them (and only
     whitespace after them); ``lf``: the text's count of line feeds."""
     heads = starts[width::width]  # (rows - 1,) each later row's first token
-    if np.all(byte[heads - 1] == 10):  # right after a line break (no indent): the common case
+    if (byte[heads - 1] == 10).all():  # right after a line break (no indent): the common case
         # and the other gaps between the rows' tokens hold no line break
         return lf - np.count_nonzero(byte[starts[-1]:] == 10) == rows - 1
     # tokens before each line break: (k + 1) * width before the k-th of the first rows - 1,
@@ -120,9 +122,8 @@ def _one_row_a_line(byte: np.ndarray, starts: np.ndarray, rows: int, width: int,
 
 
 def _values(array) -> np.ndarray:
-    """A writable copy of the values of an Arrow numeric ``array`` without nulls
+    """A writable copy of the values of an Arrow float64 ``array`` without nulls
     (``to_numpy`` would import pandas)."""
-    assert array.null_count == 0
-    dtype = np.dtype(array.type.to_pandas_dtype())
-    return np.frombuffer(array.buffers()[1], dtype=dtype, count=len(array),
-                         offset=array.offset * dtype.itemsize).copy()
+    assert array.null_count == 0 and array.type.bit_width == 64
+    return np.frombuffer(array.buffers()[1], dtype=np.float64, count=len(array),
+                         offset=array.offset * 8).copy()

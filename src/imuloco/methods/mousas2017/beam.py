@@ -27,10 +27,13 @@ rows replaces a sparse (CSR) successor table and the de-duplication of successor
 per-state Python work, and no per-frame array of N states. Hand-written for the reason
 :mod:`.forward` gives (no library offers an online step for this structure).
 
+The segments kept are chosen by :func:`keep_largest` (ties to the lower index), so that the
+numpy step and the compiled one (:func:`.compiled.beam_step`, engine numba) keep the same.
 Measured on the shared data (docs/results/mousas2017/speed.md): a quarter of the mass sits on
-first frames every frame, so thousands of segments compete to enter the beam each step, and
-the upper level's emission needs every state's; no width was both faster than the exact step
-and as accurate, so the method's default is the exact step.
+first frames every frame, so thousands of segments pass the entry test each step (6,000 to
+15,000 of 21,536 at 100k database frames), each needing its emission, and every first frame
+is scanned each step; no width was both clearly faster than the exact step and as accurate,
+also compiled, so the method's default is the exact step.
 """
 
 from __future__ import annotations
@@ -39,6 +42,22 @@ import numpy as np
 
 from imuloco.methods.mousas2017.forward import Topology
 from imuloco.methods.mousas2017.model import FrameStates
+
+# Segment masses within this relative distance of the K-th largest are ties, decided by the
+# segment's index: the numpy and the compiled step then pick the same K segments although
+# their sums round differently (a flat forward variable, as after missing samples, has many
+# segments of the same mass up to float32 rounding). Used by the interpolation's K segments
+# (:func:`.stream.top_segments`) and the beam's ``width``.
+TIE_RTOL = 1e-5
+
+
+def keep_largest(v: np.ndarray, k: int) -> np.ndarray:
+    """Mask (n,) of the k largest entries of v (n,), 0 < k <= n: those above the k-th largest
+    by more than :data:`TIE_RTOL` (relative), then the lowest indices among the ties."""
+    thr = float(np.partition(v, v.size - k)[v.size - k])
+    keep = v > thr * (1.0 + TIE_RTOL)
+    tie = ~keep & (v >= thr * (1.0 - TIE_RTOL))
+    return keep | (tie & (np.cumsum(tie) <= k - int(keep.sum())))
 
 
 class SegmentBeam:
@@ -89,10 +108,11 @@ class SegmentBeam:
         self.counts = counts
         self.group_count = fs.group_count.astype(np.float64)
         self._phase = lower.phases[self.block]                       # (S,)
-        self._quad = np.empty(num_groups + 1, dtype=np.float32)
+        self._quad = np.empty(num_groups + 1, dtype=fs.lin.dtype)
         self._quad[-1] = np.inf
-        self._y = np.ones(fs.lin.shape[0] + 1, dtype=np.float32)
+        self._y = np.ones(fs.lin.shape[0] + 1, dtype=fs.lin.dtype)  # the sample and 1
         self.seg: np.ndarray | None = None
+        self._kernel_args: tuple | None = None  # of step_compiled, after the first step
         self.alpha = np.zeros((0, self.W))
         self.mass = np.zeros(0)
 
@@ -187,8 +207,7 @@ class SegmentBeam:
         and the entering (``new_a`` on their first frame), renormalised."""
         n = seg.size
         if n + new.size > self.width:
-            keep = np.argpartition(np.concatenate([mass, new_a]), n + new.size - self.width
-                                   )[n + new.size - self.width:]
+            keep = np.flatnonzero(keep_largest(np.concatenate([mass, new_a]), self.width))
             cont, ent = keep[keep < n], keep[keep >= n] - n
             seg, a, mass = seg[cont], a[cont], mass[cont]
             new, new_a = new[ent], new_a[ent]
@@ -207,6 +226,26 @@ class SegmentBeam:
         a += self.alpha_floor * self.valid[seg]
         self.seg, self.alpha, self.mass = seg, a, mass
 
+    # ---- the compiled step ------------------------------------------------------------------
+    def step_compiled(self, kernels, y: np.ndarray | None, bu: np.ndarray) -> None:
+        """:meth:`step` after the first, by :func:`.compiled.beam_step` (the same arithmetic,
+        to float rounding): sets ``bu`` (G,) to eq. 8's emission when ``y`` (dy,) is given."""
+        if self._kernel_args is None:
+            member = np.zeros(self.num_segments, dtype=bool)
+            member[self.seg] = True
+            self._kernel_args = (
+                np.ascontiguousarray(self.fs.prec, dtype=np.float64), self._quad, self.lin,
+                self.first_lin, self.group, np.ascontiguousarray(self.first_group), self.seg0,
+                self.block, self.lower.lengths[self.block].astype(np.int64),
+                self.lower.phases.astype(np.int64), self.counts.astype(np.int64),
+                np.ascontiguousarray(self.lower.phase_trans, dtype=np.float64),
+                np.array(self.lower.a_frame, dtype=np.float64), self.group_count, self.width,
+                self.emission_floor, self.alpha_floor, TIE_RTOL, member, bu)
+        if y is not None:
+            self._y[:-1] = y
+        self.seg, self.alpha, self.mass = kernels.beam_step(
+            self.seg, self.alpha, y is not None, self._y, *self._kernel_args[:-1], bu)
+
     # ---- views --------------------------------------------------------------------------------
     def dense(self) -> np.ndarray:
         """The forward variable over all N states (N,), zero outside the beam."""
@@ -218,4 +257,5 @@ class SegmentBeam:
         """The kept segments of block ``b`` (their ``s`` inside the block) and their frames'
         forward probabilities (m, L_b)."""
         rows = np.flatnonzero(self.block[self.seg] == b)
+        rows = rows[np.argsort(self.seg[rows])]  # by index, so that ties go to the lower one
         return self.seg[rows] - self.seg0[b], self.alpha[rows, :int(self.lower.lengths[b])]

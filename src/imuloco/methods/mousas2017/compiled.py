@@ -1,4 +1,4 @@
-"""Compiled kernels of the online stream's exact step (numba, the ``fast`` extra).
+"""Compiled kernels of the online stream's step (numba, the ``fast`` extra).
 
 The numpy step of :mod:`.stream` makes about 150 numpy calls a frame on arrays of a few dozen
 joints and 15 passes over the N frame states; each call costs microseconds on its own. These
@@ -12,7 +12,10 @@ kernels do the same arithmetic in a few compiled loops, called once a frame each
   normalisation and the forward floor: two passes over the states;
 - :func:`interpolate`: the upper level's dense step, the phase posterior and eq. 10-13;
 - :func:`pose`: velocity-based blending, Gram-Schmidt, root decoding, quaternions and the legs'
-  forward kinematics for the foot clean-up.
+  forward kinematics for the foot clean-up;
+- with a beam (:mod:`.beam`): :func:`beam_step`, the beam's whole step (transitions of the
+  kept segments, their emissions and every first frame's, the entrants, eq. 8, the selection
+  of the ``width`` segments by :func:`keep_largest`), and :func:`interpolate_beam`.
 
 Element operations are those of the numpy step in the forward variable's precision (float32
 in a fitted model); sums accumulate in float64, where numpy's float32 reductions (BLAS dot,
@@ -41,14 +44,12 @@ _jit_max = njit(cache=True, nogil=True, error_model="numpy",
 
 
 # ---- the lower level's forward step --------------------------------------------------------
-@_jit_max
-def emission(b, y, prec, quad, group_start, group_count, clamp):
-    """In place: ``b`` (N,) holds ``m_i . y + c_i`` (:meth:`.model.FrameStates.log_emission`
-    before its quadratic term); subtracts each group's ``y' P_g y / 2``, then the maximum, and
-    raises values below ``clamp`` to it. y : (dy,) float64; prec : (G, dy, dy); quad : (G,)
-    scratch of b's dtype."""
-    num_g, dy = prec.shape[0], prec.shape[1]
-    for g in range(num_g):
+@_jit
+def _quad(prec, y, quad):
+    """Each group's ``y' P_g y / 2`` into ``quad`` (G,); prec : (G, dy, dy); y : (dy,) or
+    longer (its first dy entries)."""
+    dy = prec.shape[1]
+    for g in range(prec.shape[0]):
         q = 0.0
         for d in range(dy):
             s = 0.0
@@ -56,6 +57,16 @@ def emission(b, y, prec, quad, group_start, group_count, clamp):
                 s += prec[g, d, e] * y[e]
             q += s * (0.5 * y[d])
         quad[g] = q
+
+
+@_jit_max
+def emission(b, y, prec, quad, group_start, group_count, clamp):
+    """In place: ``b`` (N,) holds ``m_i . y + c_i`` (:meth:`.model.FrameStates.log_emission`
+    before its quadratic term); subtracts each group's ``y' P_g y / 2``, then the maximum, and
+    raises values below ``clamp`` to it. y : (dy,) float64; prec : (G, dy, dy); quad : (G,)
+    scratch of b's dtype."""
+    num_g = prec.shape[0]
+    _quad(prec, y, quad)
     top = b[0] - quad[0]
     for g in range(num_g):
         q32 = quad[g]
@@ -158,19 +169,9 @@ def forward(alpha, pred, b, has_b, blocks, block_phase, phase_trans, weights, bu
 
 # ---- eq. 10-13 -------------------------------------------------------------------------------
 @_jit
-def interpolate(alpha, alpha_up, a_up, bu, has_y, step_up, group_phase, phase_block, blocks,
-                top_k, tie_rtol, mu_x, mu_y, reg, cond_var, y, pp, x, y_bar, variance):
-    """The upper level's step (dense, G states; when ``step_up``), then eq. 10-13 in the most
-    probable phase that holds lower-level mass, as the numpy step's ``_filter`` (upper part)
-    and ``_interpolate``. In place: ``alpha_up`` (G,), ``pp`` (P,) the phase posterior, ``x``
-    (dx,) the interpolated features, ``y_bar`` (dy,), ``variance`` (dx,). Returns the phase.
-
-    alpha : (N,) the lower level's forward variable; a_up : (G, G); bu : (G,) eq. 8;
-    has_y : a sample (y, bu) is given, else only transitions and means; phase_block : (P,)
-    block of each phase, -1 for none; blocks : as :func:`forward`; mu_x : (N, dx);
-    mu_y : (N, dy); reg : (G, dx, dy); cond_var : (G, dx); y : (dy,) the sample;
-    top_k, tie_rtol : K and the ties of :func:`.stream.top_segments`.
-    """
+def _upper(alpha_up, a_up, bu, has_y, step_up, group_phase, pp):
+    """The upper level's dense step (when ``step_up``) and the phase posterior ``pp`` (P,), in
+    place; returns the phases, most probable first."""
     if step_up:
         up = _vm(alpha_up, a_up)
         c = 0.0
@@ -188,38 +189,36 @@ def interpolate(alpha, alpha_up, a_up, bu, has_y, step_up, group_phase, phase_bl
     pp[:] = 0.0
     for g in range(alpha_up.size):
         pp[group_phase[g]] += alpha_up[g]
-    # the most probable phase whose block holds mass
-    order = np.argsort(-pp, kind="mergesort")
-    blk, w = -1, np.zeros(0)
-    phase = int(order[0])
-    for h in order:
-        k = phase_block[h]
-        if k < 0:
-            continue
-        st, big_h, length = blocks[k, 0], blocks[k, 1], blocks[k, 2]
-        w = np.zeros(big_h)
-        for j in range(length):
-            for s in range(big_h):
-                w[s] += alpha[st + j * big_h + s]
-        blk, phase = k, int(h)
-        if w.max() > 0:
-            break
-    st, big_h, length, g0 = blocks[blk, 0], blocks[blk, 1], blocks[blk, 2], blocks[blk, 3]
-    k = min(top_k, big_h)
-    top = _largest(w, k, tie_rtol)
+    return np.argsort(-pp, kind="mergesort")
+
+
+@_jit
+def _top(w, top_k, tie_rtol):
+    """The K = min(top_k, n) largest of the segment masses w (n,) (:func:`_largest`) and
+    their sum."""
+    top = _largest(w, min(top_k, w.size), tie_rtol)
     tot = 0.0
     for s in top:
         tot += w[s]
+    return top, tot
+
+
+@_jit
+def _blend(frames, rows, tot, g0, has_y, mu_x, mu_y, reg, cond_var, y, x, y_bar, variance):
+    """Eq. 10-13 over K segments of one block: ``frames`` (K, L) their frames' forward
+    probabilities, summing to ``tot``; ``rows`` (K, L) their frame states; g0 the block's
+    first group. Sets ``x`` (dx,), ``y_bar`` (dy,), ``variance`` (dx,)."""
+    k, length = frames.shape
     dx, dy = mu_x.shape[1], mu_y.shape[1]
     x[:] = 0.0
     y_bar[:] = 0.0
     variance[:] = 0.0
     wl = np.zeros(length)
     wy = np.zeros((length, dy))
-    for s in top:
+    for i in range(k):
         for j in range(length):
-            row = st + j * big_h + s
-            wt = alpha[row] / tot if tot > 0 else 1.0 / (k * length)
+            row = rows[i, j]
+            wt = frames[i, j] / tot if tot > 0 else 1.0 / (k * length)
             wl[j] += wt
             for d in range(dx):
                 x[d] += wt * mu_x[row, d]
@@ -235,6 +234,88 @@ def interpolate(alpha, alpha_up, a_up, bu, has_y, step_up, group_phase, phase_bl
                 r = wl[j] * y[d] - wy[j, d]
                 for e in range(dx):
                     x[e] += reg[g0 + j, e, d] * r
+
+
+@_jit
+def interpolate(alpha, alpha_up, a_up, bu, has_y, step_up, group_phase, phase_block, blocks,
+                top_k, tie_rtol, mu_x, mu_y, reg, cond_var, y, pp, x, y_bar, variance):
+    """The upper level's step (dense, G states; when ``step_up``), then eq. 10-13 in the most
+    probable phase that holds lower-level mass, as the numpy step's ``_filter`` (upper part)
+    and ``_interpolate``. In place: ``alpha_up`` (G,), ``pp`` (P,) the phase posterior, ``x``
+    (dx,) the interpolated features, ``y_bar`` (dy,), ``variance`` (dx,). Returns the phase.
+
+    alpha : (N,) the lower level's forward variable; a_up : (G, G); bu : (G,) eq. 8;
+    has_y : a sample (y, bu) is given, else only transitions and means; phase_block : (P,)
+    block of each phase, -1 for none; blocks : as :func:`forward`; mu_x : (N, dx);
+    mu_y : (N, dy); reg : (G, dx, dy); cond_var : (G, dx); y : (dy,) the sample;
+    top_k, tie_rtol : K and the ties of :func:`.stream.top_segments`.
+    """
+    order = _upper(alpha_up, a_up, bu, has_y, step_up, group_phase, pp)
+    # the most probable phase whose block holds mass
+    blk, w = -1, np.zeros(0)
+    phase = int(order[0])
+    for h in order:
+        k = phase_block[h]
+        if k < 0:
+            continue
+        st, big_h, length = blocks[k, 0], blocks[k, 1], blocks[k, 2]
+        w = np.zeros(big_h)
+        for j in range(length):
+            for s in range(big_h):
+                w[s] += alpha[st + j * big_h + s]
+        blk, phase = k, int(h)
+        if w.max() > 0:
+            break
+    st, big_h, length, g0 = blocks[blk, 0], blocks[blk, 1], blocks[blk, 2], blocks[blk, 3]
+    top, tot = _top(w, top_k, tie_rtol)
+    k = top.size
+    frames = np.empty((k, length))
+    rows = np.empty((k, length), dtype=np.int64)
+    for i in range(k):
+        for j in range(length):
+            rows[i, j] = st + j * big_h + top[i]
+            frames[i, j] = alpha[rows[i, j]]
+    _blend(frames, rows, tot, g0, has_y, mu_x, mu_y, reg, cond_var, y, x, y_bar, variance)
+    return phase
+
+
+@_jit
+def interpolate_beam(seg, seg_alpha, seg_block, alpha_up, a_up, bu, has_y, step_up,
+                     group_phase, phase_block, blocks, seg0, top_k, tie_rtol, mu_x, mu_y, reg,
+                     cond_var, y, pp, x, y_bar, variance):
+    """:func:`interpolate` with the lower level's forward variable in a beam
+    (:class:`.beam.SegmentBeam`: ``seg`` (n,) kept segments, ``seg_alpha`` (n, W) their
+    frames'; ``seg_block`` (S,) block of each segment, ``seg0`` (B,) first segment of each
+    block), as the numpy step's ``_interpolate`` with a beam: the top K of the block's kept
+    segments, in the order of their index."""
+    order = _upper(alpha_up, a_up, bu, has_y, step_up, group_phase, pp)
+    blk, w, mine = -1, np.zeros(0), np.zeros(0, dtype=np.int64)
+    phase = int(order[0])
+    for h in order:
+        k = phase_block[h]
+        if k < 0:
+            continue
+        length = blocks[k, 2]
+        mine = np.flatnonzero(seg_block[seg] == k)
+        mine = mine[np.argsort(seg[mine])]
+        w = np.zeros(mine.size)
+        for i in range(mine.size):
+            for j in range(length):
+                w[i] += seg_alpha[mine[i], j]
+        blk, phase = k, int(h)
+        if w.size and w.max() > 0:
+            break
+    st, big_h, length, g0 = blocks[blk, 0], blocks[blk, 1], blocks[blk, 2], blocks[blk, 3]
+    top, tot = _top(w, top_k, tie_rtol)
+    k = top.size
+    frames = np.empty((k, length))
+    rows = np.empty((k, length), dtype=np.int64)
+    for i in range(k):
+        r = mine[top[i]]
+        for j in range(length):
+            rows[i, j] = st + j * big_h + seg[r] - seg0[blk]
+            frames[i, j] = seg_alpha[r, j]
+    _blend(frames, rows, tot, g0, has_y, mu_x, mu_y, reg, cond_var, y, x, y_bar, variance)
     return phase
 
 
@@ -387,3 +468,229 @@ def pose(x, num_joints, blend, fps, t, state, r_prev, q_prev, shepperd, shepperd
                 feet[f, j] += e[j, 0] * off[0] + e[j, 1] * off[1] + e[j, 2] * off[2]
             _mm3(e, rm[chains[f, d]], p)
             e[:] = p
+
+
+# ---- the beam's step (:mod:`.beam`) ----------------------------------------------------------
+@_jit
+def kth_largest(v, k):
+    """The k-th largest of v (n,) float64 >= 0 (no NaN), 0 < k <= n: a radix select on the
+    floats' bits, which order as the values for non-negative floats (11 bits a pass, each pass
+    over the values left in the bucket of the k-th). Hand-written: numba's ``np.partition``
+    takes 4-7 times longer than this on the beam's 10^4 values."""
+    cand = v.view(np.int64)
+    hist = np.empty(2048, dtype=np.int64)
+    shift = 52
+    while cand.size > 32:
+        hist[:] = 0
+        for i in range(cand.size):
+            hist[(cand[i] >> shift) & 2047] += 1
+        e = 2047
+        while hist[e] < k:
+            k -= hist[e]
+            e -= 1
+        sub = np.empty(hist[e], dtype=np.int64)
+        m = 0
+        for i in range(cand.size):
+            if (cand[i] >> shift) & 2047 == e:
+                sub[m] = cand[i]
+                m += 1
+        cand = sub
+        if shift == 0:
+            break
+        shift = max(shift - 11, 0)
+    s = np.sort(cand)
+    return s.view(np.float64)[s.size - k]
+
+
+@_jit
+def keep_largest(v, k, tie_rtol):
+    """Mask of the k largest entries of v (n,) >= 0, 0 < k <= n, as
+    :func:`.beam.keep_largest`: those above the k-th largest by more than ``tie_rtol``
+    (relative), then the lowest indices among the ties. O(n)."""
+    thr = kth_largest(v, k)
+    lo, hi = thr * (1.0 - tie_rtol), thr * (1.0 + tie_rtol)
+    keep = v > hi
+    room = k - keep.sum()
+    for i in range(v.size):
+        if room == 0:
+            break
+        if not keep[i] and v[i] >= lo:
+            keep[i] = True
+            room -= 1
+    return keep
+
+
+@_jit_max
+def beam_step(seg, alpha, has_y, y_aug, prec, quad, lin, first_lin, group, first_group,
+              seg0, seg_block, seg_len, block_phase, counts, phase_trans, a_frame,
+              group_count, width, emission_floor, alpha_floor, tie_rtol, member, bu):
+    """One step of :class:`.beam.SegmentBeam` after its first, as its numpy ``step``: returns
+    the new kept segments (n',), their forward probabilities (n', W) and masses (n',).
+
+    seg : (n,) kept segments; alpha : (n, W) their frames' forward probabilities (float64);
+    has_y : a sample is given (``y_aug`` (dy + 1,) the sample and 1, in lin's dtype), else
+    transitions only; prec : (G, dy, dy); quad : (G + 1,) scratch of lin's dtype whose last
+    entry is inf; lin : (S, W, dy + 1) the beam's ``lin``; first_lin : (dy + 1, S);
+    group : (S, W), first_group : (S,) groups (G in the padding); seg0 : (B,) first segment of
+    each block; seg_block, seg_len : (S,) block and length of each segment; block_phase : (B,);
+    counts : (B,) segments per block; phase_trans : (P, P); a_frame : (3,) (self, next, skip);
+    group_count : (G,) float64; member : (S,) bool, True on the kept segments, updated;
+    bu : (G,) set to eq. 8's emission when ``has_y``.
+    """
+    n, w_ = alpha.shape
+    num_s, num_b, num_g = first_lin.shape[1], counts.size, group_count.size
+    fs_, fn, fk = a_frame[0], a_frame[1], a_frame[2]
+    # 1. the kept segments' mass moved one frame; what moves into the padding ends them
+    pred = np.empty((n, w_))
+    out_phase = np.zeros(phase_trans.shape[0])
+    for r in range(n):
+        s = seg[r]
+        length = seg_len[s]
+        ended = 0.0
+        for j in range(w_):
+            v = alpha[r, j] * fs_
+            if j >= 1:
+                v += fn * alpha[r, j - 1]
+            if j >= 2:
+                v += fk * alpha[r, j - 2]
+            if j < length:
+                pred[r, j] = v
+            else:
+                pred[r, j] = 0.0
+                ended += v
+        out_phase[block_phase[seg_block[s]]] += ended
+    up = _vm(out_phase, phase_trans)
+    entry = np.empty(num_b)
+    for b in range(num_b):
+        entry[b] = up[block_phase[b]] / counts[b]
+    for r in range(n):
+        pred[r, 0] += entry[seg_block[seg[r]]]
+    # 2. emissions of the kept frames and of every first frame, relative to their best
+    floor = emission_floor if has_y else 0.0
+    limit = np.zeros(num_b)
+    raw = np.zeros(num_s)
+    ll = np.full((n, w_), -np.inf)  # log b, then b (kept frames)
+    a = pred
+    if has_y:
+        dy = prec.shape[1]
+        _quad(prec, y_aug, quad)
+        top = -np.inf
+        for r in range(n):
+            s = seg[r]
+            for j in range(seg_len[s]):
+                t = 0.0
+                for d in range(dy + 1):
+                    t += lin[s, j, d] * y_aug[d]
+                v = t - quad[group[s, j]]
+                ll[r, j] = v
+                top = max(top, v)
+        for d in range(dy + 1):
+            yd = y_aug[d]
+            row = first_lin[d]
+            for s in range(num_s):
+                raw[s] += row[s] * yd
+        for b in range(num_b):
+            best = -np.inf
+            for s in range(seg0[b], seg0[b] + counts[b]):
+                best = max(best, raw[s])
+            top = max(top, best - quad[first_group[seg0[b]]])
+        for b in range(num_b):
+            limit[b] = quad[first_group[seg0[b]]] + top
+        a = np.zeros((n, w_))  # zero in the padding, where pred is
+        for r in range(n):
+            for j in range(seg_len[seg[r]]):
+                ll[r, j] = np.exp(ll[r, j] - top) + floor
+                a[r, j] = pred[r, j] * ll[r, j]
+    mass = np.empty(n)
+    for r in range(n):
+        t = 0.0
+        for j in range(w_):
+            t += a[r, j]
+        mass[r] = t
+    # 3. segments outside the beam whose entry mass times first frame's emission reaches the
+    # width-th largest kept mass
+    thr = (mass.min() if n == width else kth_largest(mass, width)) if n >= width else 0.0
+    lim = np.empty(num_b)
+    for b in range(num_b):
+        if entry[b] > 0:
+            need = thr / entry[b] - floor
+            lim[b] = (np.log(need) if need > 0 else -np.inf) + limit[b]
+        else:
+            lim[b] = np.inf
+    num_new = 0
+    new = np.empty(num_s, dtype=np.int64)
+    for b in range(num_b):
+        lo, hi = seg0[b], seg0[b] + counts[b]
+        if not has_y:  # every segment of the block or none
+            if lim[b] <= 0.0:
+                for s in range(lo, hi):
+                    if not member[s]:
+                        new[num_new] = s
+                        num_new += 1
+            continue
+        limb = lim[b]
+        for s in range(lo, hi):
+            if raw[s] >= limb and not member[s]:
+                new[num_new] = s
+                num_new += 1
+    new = new[:num_new]
+    new_b = np.ones(num_new)
+    if has_y:
+        for i in range(num_new):
+            s = new[i]
+            new_b[i] = np.exp(raw[s] - limit[seg_block[s]]) + floor
+        # eq. 8: the mean over each group's segments, the frames not computed at the floor
+        num = np.zeros(num_g)
+        cnt = np.zeros(num_g)
+        for r in range(n):
+            s = seg[r]
+            for j in range(seg_len[s]):
+                num[group[s, j]] += ll[r, j]
+                cnt[group[s, j]] += 1.0
+        for i in range(num_new):
+            g = first_group[new[i]]
+            num[g] += new_b[i]
+            cnt[g] += 1.0
+        for g in range(num_g):
+            bu[g] = (num[g] + (group_count[g] - cnt[g]) * emission_floor) / group_count[g]
+    # 4. keep the width segments of largest mass, renormalised
+    vals = np.empty(n + num_new)
+    vals[:n] = mass
+    for i in range(num_new):
+        vals[n + i] = entry[seg_block[new[i]]] * new_b[i]
+    keep = keep_largest(vals, min(width, vals.size), tie_rtol)
+    m = keep.sum()
+    out_seg = np.empty(m, dtype=np.int64)
+    out_a = np.zeros((m, w_))
+    out_mass = np.empty(m)
+    r2 = 0
+    for r in range(n + num_new):
+        if keep[r]:
+            if r < n:
+                out_seg[r2] = seg[r]
+                for j in range(w_):
+                    out_a[r2, j] = a[r, j]
+            else:
+                out_seg[r2] = new[r - n]
+                out_a[r2, 0] = vals[r]
+            out_mass[r2] = vals[r]
+            r2 += 1
+    c = 0.0
+    for r in range(m):
+        c += out_mass[r]
+    if not c > 0:  # every kept state impossible at float precision: spread evenly
+        c = 0.0
+        for r in range(m):
+            out_a[r, :] = 0.0
+            out_a[r, :seg_len[out_seg[r]]] = 1.0
+            out_mass[r] = seg_len[out_seg[r]]
+            c += out_mass[r]
+    for r in range(m):
+        out_mass[r] /= c
+        for j in range(seg_len[out_seg[r]]):
+            out_a[r, j] = out_a[r, j] / c + alpha_floor
+    for r in range(n):
+        member[seg[r]] = False
+    for r in range(m):
+        member[out_seg[r]] = True
+    return out_seg, out_a, out_mass

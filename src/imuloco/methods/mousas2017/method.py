@@ -77,7 +77,8 @@ class Mousas2017(Method):
     beam : the online forward variable is kept on this many segments, those of largest
         probability (:mod:`.beam`); 0: the exact forward step over every frame state. Model
         files written before the beam load with 0. On the shared data no width was both
-        faster than the exact step and as accurate (docs/results/mousas2017/speed.md).
+        faster than the exact step and as accurate, also compiled
+        (docs/results/mousas2017/speed.md).
     engine : how the online step runs: ``numba`` compiled kernels (the ``fast`` extra),
         ``numpy`` calls, or ``auto`` (numba when installed); the same step either way, to
         float rounding (:mod:`.compiled`). Model files written before it load with ``auto``.

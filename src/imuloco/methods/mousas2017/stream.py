@@ -46,7 +46,7 @@ import numpy as np
 
 from imuloco.errors import MissingExtraError
 from imuloco.methods.base import Stream
-from imuloco.methods.mousas2017.beam import SegmentBeam
+from imuloco.methods.mousas2017.beam import TIE_RTOL, SegmentBeam
 from imuloco.methods.postprocess import FootPinner
 
 log = logging.getLogger(__name__)
@@ -174,13 +174,6 @@ def _say_if_compiling(compiled) -> None:
                     "about 25 s of CPU; later runs load it from %s)", folder)
 
 
-# Segment masses within this relative distance of the K-th largest are ties, decided by the
-# segment's index: the numpy and the compiled step then pick the same K segments although
-# their sums round differently (a flat forward variable, as after missing samples, has many
-# segments of the same mass up to float32 rounding).
-TIE_RTOL = 1e-5
-
-
 def top_segments(w: np.ndarray, k: int) -> np.ndarray:
     """Indices of the k largest of w (m,), k < m: those above the k-th largest by more than
     :data:`TIE_RTOL`, then the lowest indices among the ties."""
@@ -202,7 +195,7 @@ class MousasStream(Stream):
     engine : ``numba``: the exact step's compiled kernels (:mod:`.compiled`, the ``fast``
         extra: MissingExtraError without it), ``numpy``: numpy calls, ``auto``: numba when
         installed (None: the model's ``engine``). Both compute the same step (to float
-        rounding); with a beam, the beam's step stays numpy's and the rest is compiled.
+        rounding), also with a beam (:func:`.compiled.beam_step`).
     """
 
     def __init__(self, model, pin: bool = True, beam: int | None = None,
@@ -518,8 +511,10 @@ class MousasStream(Stream):
         k, fs = self._k, self.fs
         has_y = y is not None
         first = self.alpha_up is None
-        if first or self._beam is not None:
-            self._filter(y)  # a stream's first step (pi), or the beam's step: numpy's
+        if first:
+            self._filter(y)  # a stream's first step (pi): numpy's
+        elif self._beam is not None:
+            self._beam.step_compiled(k, y, self._bu)
         else:
             if has_y:
                 b = self._b
@@ -530,8 +525,17 @@ class MousasStream(Stream):
             k.forward(self.alpha, self._pred, self._b, has_y, self._blocks_arr,
                       self._block_phase, self.lower.phase_trans, self._trans_w, self._bu,
                       self._floors[0], self._floors[1], self._scratch)
-        if self._beam is not None:
+        if first and self._beam is not None:
             x = self._interpolate(y)
+        elif self._beam is not None:
+            bm = self._beam
+            self.phase = k.interpolate_beam(
+                bm.seg, bm.alpha, bm.block, self.alpha_up, self._a_up, self._bu, has_y, True,
+                self._group_phase, self._phase_block_arr, self._blocks_arr, bm.seg0, self.m.K,
+                TIE_RTOL, fs.mu_x, fs.mu_y, self._reg, self._cond_var,
+                y if has_y else self.y_bar, self.phase_posterior, self._x, self.y_bar,
+                self.variance)
+            x = self._x
         else:
             self.phase = k.interpolate(
                 self.alpha, self.alpha_up, self._a_up, self._bu, has_y, not first,
