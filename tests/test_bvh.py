@@ -782,9 +782,15 @@ def test_joint_positions_match_fk(sample_db):
     m = sample_db.clips[0]
     sk = m.skeleton
     picks = [sk.part(p) for p in ("head", "left_ankle", "right_wrist")] + [0]
+    for frames in (slice(0, 4), slice(None)):  # a few rotations, and many (scipy's conversion)
+        np.testing.assert_allclose(
+            joint_positions(m.rotations[frames], m.root[frames], sk.offsets, sk.parents, picks),
+            m.positions()[frames, picks], atol=1e-12)
+    everyone = list(range(sk.num_joints))
+    assert m.num_frames * sk.num_joints > 1024
     np.testing.assert_allclose(
-        joint_positions(m.rotations, m.root, sk.offsets, sk.parents, picks),
-        m.positions()[:, picks], atol=1e-12)
+        joint_positions(m.rotations, m.root, sk.offsets, sk.parents, everyone), m.positions(),
+        atol=1e-12)
 
 
 # ---------------------------------------------------------------------------------------------

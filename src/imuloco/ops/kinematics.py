@@ -52,11 +52,17 @@ def joint_positions(rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray
     """
     order, levels, picks = _chains(np.asarray(parents, dtype=np.int64).tobytes(), tuple(joints))
     q = np.asarray(rotations, dtype=np.float64)[..., order, :]  # (..., N, 4)
-    # each joint's transform, local then world: the rotation matrix of a unit quaternion is
-    # linear in its products q_i q_j, one matrix product for all (scipy's to_matrix builds a
-    # Rotation object a call, several times this arithmetic for a clip's 16 frames)
-    pose = ((q[..., :, None] * q[..., None, :]).reshape(q.shape[:-1] + (16,)) @ _QQ_TO_POSE
-            + _IDENTITY_POSE).reshape(q.shape[:-1] + (4, 4))
+    # each joint's transform, local then world. A few rotations: the rotation matrix of a unit
+    # quaternion is linear in its products q_i q_j, one matrix product for all (scipy's
+    # to_matrix builds a Rotation object a call, several times this arithmetic for a clip's
+    # 16 frames); many: scipy's conversion, faster than the products' table then.
+    if q.size < 4 * _FEW_ROTATIONS:
+        pose = ((q[..., :, None] * q[..., None, :]).reshape(q.shape[:-1] + (16,)) @ _QQ_TO_POSE
+                + _IDENTITY_POSE).reshape(q.shape[:-1] + (4, 4))
+    else:
+        pose = np.zeros(q.shape[:-1] + (4, 4))
+        pose[..., :3, :3] = to_matrix(q)
+        pose[..., 3, 3] = 1.0
     pose[..., :3, 3] = np.asarray(offsets, dtype=np.float64)[order]
     pose[..., 0, :3, 3] = root
     for here, up in levels:
@@ -82,6 +88,7 @@ def _quaternion_to_pose() -> np.ndarray:
 
 _QQ_TO_POSE = _quaternion_to_pose()
 _IDENTITY_POSE = np.eye(4).ravel()
+_FEW_ROTATIONS = 1024  # below, the products' table beats scipy's conversion (measured)
 
 
 def _run(index: list[int]) -> np.ndarray | slice:
