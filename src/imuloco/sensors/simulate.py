@@ -13,6 +13,7 @@ aliasing that differencing coarse frames brings.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -30,7 +31,9 @@ from imuloco.sensors.noise import (
     sample_times,
 )
 from imuloco.sensors.placement import Placement, anatomical_frame, get_placement
-from imuloco.sensors.strap import Strap, strapped
+
+if TYPE_CHECKING:
+    from imuloco.sensors.strap import Strap
 
 GRAVITY = np.array([0.0, -G, 0.0])  # world is Y up
 
@@ -83,6 +86,7 @@ def strapped_signals(motion: Motion, placement: str | Placement, times: np.ndarr
     sensor's signals on a uniform grid, through the strap, then at ``times``."""
     from imuloco.ops.filters import resample_linear
     from imuloco.ops.rotations import from_rotvec, qmul, slerp
+    from imuloco.sensors.strap import strapped
 
     grid = np.arange(0.0, motion.duration + 1.0 / STRAP_RATE, 1.0 / STRAP_RATE)
     grid = grid[grid <= motion.times[-1]]

@@ -23,7 +23,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import bilinear, lfilter, lfilter_zi
 
 # Ranges of :func:`random_strap`: from a phone held tight (a stiff, damped mount ringing at
 # 15 Hz, no roll) to one loose on a soft strap (2 Hz, lightly damped, rolling up to 0.003 rad
@@ -53,6 +52,8 @@ def random_strap(rng: np.random.Generator) -> Strap:
 def _second_order(num: list[float], strap: Strap, rate: float, x: np.ndarray) -> np.ndarray:
     """``x`` (T, ...) on a uniform grid at ``rate`` Hz through ``num / (s^2 + 2 z w s + w^2)``
     (bilinear transform), started at rest at ``x[0]``."""
+    from scipy.signal import bilinear, lfilter, lfilter_zi  # 0.8 s to import: only when worn
+
     w = 2 * np.pi * strap.freq_hz
     b, a = bilinear(num, [1.0, 2 * strap.damping * w, w * w], fs=rate)
     zi = lfilter_zi(b, a).reshape(-1, *([1] * (x.ndim - 1))) * x[:1]
