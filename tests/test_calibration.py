@@ -177,3 +177,18 @@ def test_real_foot_sensors_turn_about_their_calibrated_medio_lateral_axis(shared
             share = np.mean(cal.gyro[:, 0] ** 2, axis=0)
             assert share[0] > 0.6 * share.sum(), (name, trial.name, share)
             assert mount.swings >= 4
+
+
+def test_calibrating_a_shoe_sensor_and_measuring_its_gait_track_it_once(foot_walks):
+    """``reconstruct`` calibrates a shoe sensor, then measures its gait from the same signals:
+    the ZUPT track is computed once."""
+    from imuloco.evaluate.sensorgait import sensor_gait
+    from imuloco.sensors.foottrack import _track
+
+    rec = Recording(foot_walks[0].times, foot_walks[0].acc + 1e-9, foot_walks[0].gyro,
+                    list(foot_walks[0].placements))  # signals no other test has tracked
+    before = _track.cache_info()
+    calibrate(rec)
+    gait = sensor_gait(rec, rec.placements[0])
+    after = _track.cache_info()
+    assert gait.measured and after.misses == before.misses + 1 and after.hits >= before.hits + 1

@@ -52,20 +52,30 @@ def test_proportioned_scales_limbs_and_keeps_rotations(sample_db):
     np.testing.assert_allclose(p.root, m.root * height * legs)
 
 
-def test_strap_draws_are_worn_on_a_strap_and_none_without(sample_db):
-    """``strap``: that share of augmented draws worn on a random soft-tissue strap; without
-    it the draws are the rigid ones, sample for sample."""
-    from imuloco.methods.learned.train import augment
+def test_strap_draws_are_worn_on_a_strap_and_none_without(sample_db, monkeypatch):
+    """``strap``: that share of augmented draws is simulated on a random soft-tissue strap;
+    without it the draws are the rigid ones, sample for sample."""
+    import imuloco.methods.learned.train as tr
     from imuloco.methods.training import synthesize
+    from imuloco.sensors.strap import Strap
 
     base = synthesize(sample_db.subset([0, 12]), ["right_ankle"], "phone", seed=0)
     args = (["right_ankle"], "phone", 0, 2, 0.15, 2.0, False)
-    rigid, again, worn = augment(base, *args), augment(base, *args, strap=0.0), augment(
-        base, *args, strap=1.0)
-    assert len(rigid) == len(worn) == 6
-    for a, b, c in zip(rigid[2:], again[2:], worn[2:]):
+    rigid, again = tr.augment(base, *args), tr.augment(base, *args, strap=0.0)
+    for a, b in zip(rigid[2:], again[2:]):
         np.testing.assert_array_equal(a.signals, b.signals)
-        assert a.signals.shape != c.signals.shape or not np.allclose(a.signals, c.signals)
+    worn = []
+    simulate = tr.simulate
+
+    def spy(*a, **kw):
+        worn.append(a[5] if len(a) > 5 else kw.get("strap"))
+        return simulate(*a, **kw)
+
+    monkeypatch.setattr(tr, "simulate", spy)
+    for share, expect in ((1.0, 4), (0.0, 0)):
+        worn.clear()
+        tr.augment(base, *args, strap=share)
+        assert sum(isinstance(w, Strap) for w in worn) == expect and len(worn) == 4
 
 
 def test_novelty_grows_with_the_distance_from_training_features(tiny):

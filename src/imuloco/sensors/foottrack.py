@@ -16,8 +16,13 @@ and the foot's sensor-to-segment calibration (:mod:`imuloco.sensors.calibration`
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 from imuloco.errors import MissingExtraError
 
@@ -140,7 +145,7 @@ class FootTrack:
 
     rate: float
     times: np.ndarray
-    level: object
+    level: pd.DataFrame
     rotation: np.ndarray
     starts: np.ndarray
     rest: np.ndarray
@@ -154,9 +159,22 @@ def foot_track(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray) -> FootTrac
 
     times : ndarray (T,), seconds; acc, gyro : ndarray (T, 3), m/s² (+9.81 up at rest) and
     rad/s, in any sensor axes.
+
+    The last few tracks are kept, keyed by the signals' bytes: ``reconstruct`` calibrates a
+    shoe sensor and then measures its gait from the same signals, and the ZUPT filter takes
+    about 5 s of CPU for 10 minutes of walking. Callers must not modify the track's arrays.
     """
+    t, a, g = (np.ascontiguousarray(v, dtype=np.float64) for v in (times, acc, gyro))
+    return _track(t.tobytes(), a.tobytes(), g.tobytes())
+
+
+@lru_cache(maxsize=4)
+def _track(times_b: bytes, acc_b: bytes, gyro_b: bytes) -> FootTrack:
+    """:func:`foot_track` of signals given as float64 bytes."""
     import pandas as pd
 
+    times = np.frombuffer(times_b)
+    acc, gyro = np.frombuffer(acc_b).reshape(-1, 3), np.frombuffer(gyro_b).reshape(-1, 3)
     _gaitmap()
     import warnings
 
@@ -164,7 +182,6 @@ def foot_track(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray) -> FootTrac
     from gaitmap.trajectory_reconstruction import RtsKalman
     from scipy.spatial.transform import Rotation
 
-    times = np.asarray(times, float)
     if len(times) < 2 or times[-1] - times[0] < 2.0:
         raise NoWalking("the recording is shorter than 2 s, less than one stride")
     rate, x = uniform(times, np.concatenate([acc, np.degrees(gyro)], axis=1))
