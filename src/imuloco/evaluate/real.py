@@ -14,6 +14,9 @@ reference's windows:
   one to the reference's (nearest within :data:`IC_TOLERANCE_S`), with the missed and extra.
 - ``stride_err_m`` / ``stride_err_pct``: mean stride length per bout against the reference's.
 - ``speed_err_pct``: walking speed per bout.
+- ``bouts_ref`` / ``bouts_measured``: the reference's bouts, and those in which the estimate
+  has a stride (the errors above average over these only: an estimator that misses a hard
+  bout is not scored on it, so its figures read together with this share).
 - pyshoe-vicon only: the foot's path against Vicon after aligning the start (the first
   stride's end position and direction): error at each stride end (``path_mean_m``) and the
   final error as % of the distance walked (``path_final_pct``); PyShoe's published path is
@@ -199,6 +202,8 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
         row[f"{key}_err_pct"] = _mean([_pct(b[f"{key}_est{unit}"], b[f"{key}_ref{unit}"])
                                       for b in bouts])
     row["stride_err_m"] = _mean([b["stride_est_m"] - b["stride_ref_m"] for b in bouts])
+    row["bouts_ref"] = len(bouts)
+    row["bouts_measured"] = sum(bool(np.isfinite(b["stride_est_m"])) for b in bouts)
     if trial.dataset == "pyshoe-vicon" and gait.path is not None:
         if ref.stride_points is not None and len(ref.stride_points) >= 2:
             xy = gait.path[:, :2] * ([1.0, -1.0] if ref.path_z_down else [1.0, 1.0])
@@ -315,7 +320,8 @@ SUMMARY_KEYS = ("steps_err_pct", "cadence_err_pct", "ic_median_ms", "stride_err_
 def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per data set, sensor and estimator: the mean absolute value of each error (the median
     of the recordings' IC medians), the share of reference contacts matched by an estimate
-    (``ic_matched_pct``), the recordings measured, and the shares within target."""
+    (``ic_matched_pct``), the share of the reference's bouts with an estimated stride
+    (``bouts_measured_pct``), the recordings measured, and the shares within target."""
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
         groups.setdefault((r["dataset"], r["sensor"], r["estimator"]), []).append(r)
@@ -336,6 +342,9 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         missed = sum(r.get("ic_missed", 0) for r in ok)
         if matched + missed:
             s["ic_matched_pct"] = 100.0 * matched / (matched + missed)
+        bouts = sum(r.get("bouts_ref", 0) for r in ok)
+        if bouts:
+            s["bouts_measured_pct"] = 100.0 * sum(r.get("bouts_measured", 0) for r in ok) / bouts
         kind = "foot" if sensor.endswith("_foot") else sensor
         for k, lim in TARGETS.get(kind, {}).items():
             vals = [abs(r[k]) for r in ok if k in r and np.isfinite(r[k])]
@@ -348,7 +357,7 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 COLUMNS = [("dataset", "data set"), ("sensor", "sensor"), ("estimator", "estimator"),
            ("measured", "n"), ("steps_err_pct", "steps %"), ("cadence_err_pct", "cadence %"),
            ("ic_median_ms", "IC ms"), ("ic_matched_pct", "IC matched %"),
-           ("stride_err_m", "stride m"),
+           ("bouts_measured_pct", "bouts %"), ("stride_err_m", "stride m"),
            ("stride_err_pct", "stride %"), ("speed_err_pct", "speed %"),
            ("stride_mae_m", "stride MAE m"), ("path_final_pct", "path end %")]
 
@@ -399,6 +408,8 @@ def write_results(rows: list[dict[str, Any]], out: str | Path) -> None:
                  "`imuloco bench --real DIR` (mean absolute errors over the recordings; IC: "
                  "median of the recordings' median absolute timing errors; IC matched: the "
                  f"share of the reference's contacts with an estimate within "
-                 f"{1e3 * IC_TOLERANCE_S:.0f} ms).\n\n"
+                 f"{1e3 * IC_TOLERANCE_S:.0f} ms; bouts: the share of the reference's walking "
+                 "bouts in which the estimate has a stride, the bouts that stride, cadence and "
+                 "speed errors average over).\n\n"
                  + table(summary) + "\n\nAnchors from the literature: "
                  + "; ".join(ANCHORS.values()) + ".\n")
