@@ -6,13 +6,14 @@ Three layouts (``../shared/data/real-imu``, see its README), detected from a fol
 - ``pyshoe-vicon``: ``*_LLIO.mat``, one shoe-top IMU (200 Hz) with the foot's Vicon path and
   the sample index of every stride's end (foot flat).
 - ``ipol-gait``: ``S-T.json`` with ``S-T_{lf,rf,lb}.txt``, Xsens IMUs on both feet and the lower
-  back (100 Hz), hand-checked foot-off / foot-strike events, two straight 10 m bouts.
+  back (100 Hz, each sample at its PacketCounter: the wireless sensors drop packets),
+  hand-checked foot-off / foot-strike events, two straight 10 m bouts.
 - ``mobilise-d-lab``: ``lab/{cohort}/{id}/data.mat``, a lower-back IMU (100 Hz) with the INDIP
   multi-sensor reference's walking bouts (initial contacts, stride lengths, speeds).
 
 Each trial becomes a :class:`RealTrial`: a :class:`~imuloco.core.recording.Recording` in m/s²
 and rad/s in the sensor's own axes (placements ``right_foot``, ``left_foot``, ``lower_back``)
-and a :class:`GaitReference` in seconds and metres from the recording's first sample.
+and a :class:`GaitReference` in seconds and metres on the recording's time line.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 
 from imuloco.core.recording import Recording
 from imuloco.errors import FormatError, UnknownNameError
+from imuloco.ops.filters import resample_linear
 
 G = 9.80665  # standard gravity, m/s^2 (mobilise-d-lab stores acceleration in g)
 LAYOUTS = ("pyshoe-vicon", "ipol-gait", "mobilise-d-lab")
@@ -191,8 +193,9 @@ def read_pyshoe(path: str | Path) -> Iterator[RealTrial]:
     yield RealTrial("pyshoe-vicon", path.name.removesuffix("_LLIO.mat"), rec, ref)
 
 
-def _read_ipol_txt(path: Path) -> tuple[float, np.ndarray]:
-    """Rate (Hz) and the (N, 6) acc m/s², gyro rad/s columns of an ipol-gait ``.txt``."""
+def _read_ipol_txt(path: Path) -> tuple[float, np.ndarray, np.ndarray]:
+    """Rate (Hz), the (N,) packet counters and the (N, 6) acc m/s², gyro rad/s columns of an
+    ipol-gait ``.txt``."""
     if not path.is_file():
         raise FormatError(path, None, "missing (ipol-gait has S-T_lf, _rf and _lb beside S-T.json)")
     with path.open() as fh:
@@ -209,7 +212,22 @@ def _read_ipol_txt(path: Path) -> tuple[float, np.ndarray]:
     if data.shape[1] < 7:
         raise FormatError(path, None, f"expected PacketCounter, Acc_X..Z, Gyr_X..Z columns, got "
                           f"{data.shape[1]}")
-    return rate, data[:, 1:7]
+    counter = _unwrap_counter(data[:, 0])
+    if np.any(np.diff(counter) < 0):
+        row = int(np.flatnonzero(np.diff(counter) < 0)[0]) + 4  # 1-based, two header lines
+        raise FormatError(path, row, "PacketCounter goes back")
+    # a packet sent twice (one in the data set) keeps its first copy
+    counter, first = np.unique(counter, return_index=True)
+    if len(counter) < 2:
+        raise FormatError(path, None, "fewer than two samples")
+    return rate, counter, data[first, 1:7]
+
+
+def _unwrap_counter(counter: np.ndarray) -> np.ndarray:
+    """Xsens's 16-bit PacketCounter made monotonic across its wrap at 65,536."""
+    step = np.diff(counter)
+    return counter[0] + np.concatenate([[0.0], np.cumsum(np.where(step < -32768, step + 65536,
+                                                                  step))])
 
 
 def read_ipol(path: str | Path) -> Iterator[RealTrial]:
@@ -224,17 +242,20 @@ def read_ipol(path: str | Path) -> Iterator[RealTrial]:
     if missing:
         raise FormatError(path, None, f"missing {missing}")
     stem = path.stem
-    signals, rates = [], []
-    for key in IPOL_SENSORS:
-        rate, data = _read_ipol_txt(path.with_name(f"{stem}_{key}.txt"))
-        signals.append(data)
-        rates.append(rate)
-    n = min(len(s) for s in signals)
-    rate = rates[0]
-    if any(r != rate for r in rates):
-        raise FormatError(path, None, f"the three sensors have different rates {rates}")
-    arr = np.stack([s[:n] for s in signals], axis=1)  # (N, 3, 6)
-    t = np.arange(n) / rate
+    read = [_read_ipol_txt(path.with_name(f"{stem}_{key}.txt")) for key in IPOL_SENSORS]
+    rate = read[0][0]
+    if any(r != rate for r, _, _ in read):
+        raise FormatError(path, None, f"the three sensors have different rates "
+                          f"{[r for r, _, _ in read]}")
+    # The wireless sensors drop packets (up to 12 % of a trial, runs of up to 10): a row is
+    # not a sample period. Each sample sits at its PacketCounter, the time base the reference
+    # events are counted in, and the three sensors are put on that common grid, the dropped
+    # packets linearly interpolated.
+    first = max(c[0] for _, c, _ in read)
+    last = min(c[-1] for _, c, _ in read)
+    grid = np.arange(first, last + 1)
+    arr = np.stack([resample_linear(c, d, grid) for _, c, d in read], axis=1)  # (N, 3, 6)
+    t = grid / rate
     rec = Recording(t, arr[..., :3], arr[..., 3:], list(IPOL_SENSORS.values()))
     start, end = (float(v) / rate for v in meta["TrialBoundaries"])
     u0, u1 = (float(v) / rate for v in meta["UTurnBoundaries"])
