@@ -16,20 +16,15 @@ from imuloco.io.realimu import Bout, GaitReference, RealTrial, read_trials
 pytest.importorskip("mobgap")
 from imuloco.evaluate.sensorgait import body_axes, lower_back_gait
 
-DEMO = "dataset-2_walk_normal_001"
-
 
 @pytest.fixture(scope="module")
-def demo_clip(sample_db):
-    return next(c for c in sample_db.clips if c.name == DEMO)
-
-
-@pytest.fixture(scope="module")
-def l5(demo_clip):
-    """The demo walk's simulated L5 IMU (sensor x left, y up, z forward)."""
+def walk(sample_db):
+    """The demo walk and its simulated L5 IMU (sensor x left, y up, z forward)."""
+    from imuloco.app.pipeline import DEMO_CLIP
     from imuloco.sensors.simulate import simulate
 
-    return simulate(demo_clip, ["lower_back"], rate=100.0, noise="clean", seed=0)
+    clip = next(c for c in sample_db.clips if c.name == DEMO_CLIP)
+    return clip, simulate(clip, ["lower_back"], rate=100.0, noise="clean", seed=0)
 
 
 def pendulum_walk(forward_against_rise: bool = True, rate: float = 100.0) -> np.ndarray:
@@ -59,11 +54,12 @@ def test_body_axes_find_up_forward_and_right(seed):
     assert np.allclose(back[1], -axes[1], atol=1e-6)
 
 
-def test_simulated_l5_axes_and_feet(l5, demo_clip):
+def test_simulated_l5_axes_and_feet(walk):
     """The simulated sensor's y is up and z forward; every stride's foot is the foot whose
     strike (from the clip's own motion) starts it."""
     from imuloco.phases import gait_phases
 
+    demo_clip, l5 = walk
     axes = body_axes(l5.acc[:, 0], 100.0)
     assert axes[0] @ [0, 1, 0] > 0.95 and axes[2] @ [0, 0, 1] > 0.95
     g = lower_back_gait(l5.times, l5.acc[:, 0], l5.gyro[:, 0], 0.53 * 1.7)
@@ -78,7 +74,8 @@ def test_simulated_l5_axes_and_feet(l5, demo_clip):
     assert all(ours == truth for ours, truth in matched)
 
 
-def test_lower_back_gait_does_not_depend_on_how_the_sensor_is_worn(l5):
+def test_lower_back_gait_does_not_depend_on_how_the_sensor_is_worn(walk):
+    l5 = walk[1]
     ref = lower_back_gait(l5.times, l5.acc[:, 0], l5.gyro[:, 0], 0.9)
     key = lambda g: [(r["foot"], r["start_s"], r["end_s"]) for r in g.strides]
     for seed in (4, 5):
@@ -109,16 +106,6 @@ def test_bouts_without_an_estimated_stride_are_counted():
 
 
 # ---- the real recordings ------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def real_dir():
-    from imuloco.data import shared_data_dir
-
-    d = shared_data_dir()
-    if d is None or not (d.parent / "real-imu").is_dir():
-        pytest.skip("../shared/data/real-imu is absent")
-    return d.parent / "real-imu"
-
-
 @pytest.mark.shared
 def test_forward_is_the_mobilise_d_sensor_s_z(real_dir):
     """mobilise-d-lab's sensors are worn in Mobilise-D's axes (x up, y, z forward): the axes

@@ -234,7 +234,7 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
     Against the hand-assembled chain it replaces (Iluz, Ionescu, Zijlstra's raw step lengths
     summed two by two), each walking bout's stride error is the same within 0.2 points
     (ipol-gait's 200 bouts, mobilise-d-lab's 17): the library takes over the stride assembly
-    and names each stride's foot (Ullrich), at about 3 times the CPU time.
+    and names each stride's foot (Ullrich), at 2.5 times the CPU time.
 
     Parameters
     ----------
