@@ -12,13 +12,13 @@ import pytest
 
 from imuloco.errors import FormatError
 from imuloco.evaluate.gait import gait_parameters
-from imuloco.evaluate.real import match_events, path_errors, run_real
+from imuloco.evaluate.real import match_events, path_errors, reference_stance, run_real
 from imuloco.io.realimu import detect_layout, read_trials
 
 pytest.importorskip("gaitmap")
 pytest.importorskip("mobgap")
 from imuloco.evaluate.sensorgait import foot_gait, lower_back_gait, sensor_gait
-from imuloco.sensors.foottrack import swings
+from imuloco.sensors.foottrack import foot_track, swings
 
 DEMO = "dataset-2_walk_normal_001"
 
@@ -69,6 +69,28 @@ def test_a_foot_never_under_the_zupt_threshold_still_gets_its_strides(demo_rec, 
     s = g.summary()
     assert s["stride_length_m"] == pytest.approx(truth["stride_length_m"], rel=0.05)
     assert s["cadence_spm"] == pytest.approx(truth["cadence_spm"], rel=0.05)
+
+
+def test_a_spike_at_toe_off_does_not_move_the_initial_contacts(demo_rec):
+    """Some shoes ring at toe off: a 460 deg/s spike on the sagittal gyroscope just after
+    the toe-off minimum, in the swing's direction, became Herzer's mid-swing peak and put the
+    contact 0.3-0.5 s early (ipol-gait). The IC search reads the gyroscope low-passed."""
+    t, acc, gyro = demo_rec.times, demo_rec.acc[:, 0], demo_rec.gyro[:, 0].copy()
+    clean = foot_gait(t, acc, gyro, "right").initial_contacts
+    sign = np.sign(np.median(gyro[np.linalg.norm(gyro, axis=1) > 3, 0]))  # the swing's way
+    for s in foot_track(t, acc, gyro).starts:
+        k = s + int(np.argmin(sign * gyro[s:s + 30, 0])) + 3
+        gyro[k:k + 2, 0] += sign * 8.0
+    spiked = foot_gait(t, acc, gyro, "right").initial_contacts
+    assert len(spiked) == len(clean) >= 6
+    assert np.abs(spiked - clean).max() < 0.1
+
+
+def test_reference_stance_reads_the_foot_off_between_two_contacts():
+    ic = np.array([0.0, 1.0, 2.0, 5.0])
+    fc = np.array([0.6, 1.7, 4.0])  # the last stride (2 to 5 s, a pause) lies outside
+    assert reference_stance(ic, fc, 0.0, 2.0) == pytest.approx(65.0)
+    assert np.isnan(reference_stance(ic, fc, 3.0, 4.0))
 
 
 def test_a_running_foot_s_brief_stances_still_separate_its_swings():

@@ -17,6 +17,9 @@ reference's windows:
 - ``bouts_ref`` / ``bouts_measured``: the reference's bouts, and those in which the estimate
   has a stride (the errors above average over these only: an estimator that misses a hard
   bout is not scored on it, so its figures read together with this share).
+- ``stance_err_pp``: a foot sensor's mean stance (share of the stride in contact, %) per
+  bout against the reference's strides (ipol-gait: from its hand-checked foot-off and
+  foot-strike events), in percentage points.
 - pyshoe-vicon only: the foot's path against Vicon after aligning the start (the first
   stride's end position and direction): error at each stride end (``path_mean_m``) and the
   final error as % of the distance walked (``path_final_pct``); PyShoe's published path is
@@ -32,6 +35,7 @@ import json
 import logging
 import math
 from collections.abc import Sequence
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -150,6 +154,28 @@ def _bout_rows(gait: SensorGait, trial: RealTrial, ref_ic: np.ndarray, per_conta
     return out
 
 
+def reference_stance(ic: np.ndarray, fc: np.ndarray, start: float, end: float) -> float:
+    """Mean stance (%) of the reference's strides within ``[start, end]`` s: from one initial
+    contact ``ic`` to the next, the share before the foot-off ``fc`` between them."""
+    shares = []
+    for a, b in pairwise(ic):
+        off = fc[(fc > a) & (fc < b)]
+        if start <= a and b <= end and len(off) == 1:
+            shares.append((off[0] - a) / (b - a))
+    return 100.0 * float(np.mean(shares)) if shares else math.nan
+
+
+def _stance(gait: SensorGait, trial: RealTrial, side: str) -> dict[str, float]:
+    """Mean stance (%) of the estimate and of the reference over the bouts, and the mean
+    per-bout difference in percentage points."""
+    ref = trial.reference
+    pairs = [(gait.window(b.start - IC_TOLERANCE_S, b.end + IC_TOLERANCE_S).summary()[
+        "stance_pct"], reference_stance(ref.initial_contacts[side], ref.final_contacts[side],
+                                        b.start, b.end)) for b in ref.bouts]
+    return {"stance_est": _mean([e for e, _ in pairs]), "stance_ref": _mean([r for _, r in pairs]),
+            "stance_err_pp": _mean([e - r for e, r in pairs])}
+
+
 def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[str, Any]:
     """One result row: the gait of one sensor of ``trial`` against its reference."""
     ref = trial.reference
@@ -204,6 +230,8 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
     row["stride_err_m"] = _mean([b["stride_est_m"] - b["stride_ref_m"] for b in bouts])
     row["bouts_ref"] = len(bouts)
     row["bouts_measured"] = sum(bool(np.isfinite(b["stride_est_m"])) for b in bouts)
+    if side and per_contact == 2 and side in ref.final_contacts:
+        row.update(_stance(gait, trial, side))
     if trial.dataset == "pyshoe-vicon" and gait.path is not None:
         if ref.stride_points is not None and len(ref.stride_points) >= 2:
             xy = gait.path[:, :2] * ([1.0, -1.0] if ref.path_z_down else [1.0, 1.0])
@@ -314,7 +342,8 @@ def run_real(folder: str | Path, out: str | Path | None = None, limit: int | Non
 
 
 SUMMARY_KEYS = ("steps_err_pct", "cadence_err_pct", "ic_median_ms", "stride_err_m",
-                "stride_err_pct", "speed_err_pct", "stride_mae_m", "path_final_pct")
+                "stride_err_pct", "speed_err_pct", "stance_err_pp", "stride_mae_m",
+                "path_final_pct")
 
 
 def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -359,6 +388,7 @@ COLUMNS = [("dataset", "data set"), ("sensor", "sensor"), ("estimator", "estimat
            ("ic_median_ms", "IC ms"), ("ic_matched_pct", "IC matched %"),
            ("bouts_measured_pct", "bouts %"), ("stride_err_m", "stride m"),
            ("stride_err_pct", "stride %"), ("speed_err_pct", "speed %"),
+           ("stance_err_pp", "stance pp"),
            ("stride_mae_m", "stride MAE m"), ("path_final_pct", "path end %")]
 
 
@@ -410,6 +440,7 @@ def write_results(rows: list[dict[str, Any]], out: str | Path) -> None:
                  f"share of the reference's contacts with an estimate within "
                  f"{1e3 * IC_TOLERANCE_S:.0f} ms; bouts: the share of the reference's walking "
                  "bouts in which the estimate has a stride, the bouts that stride, cadence and "
-                 "speed errors average over).\n\n"
+                 "speed errors average over; stance pp: a foot's stance against the "
+                 "reference's foot-off and foot-strike events, in percentage points).\n\n"
                  + table(summary) + "\n\nAnchors from the literature: "
                  + "; ".join(ANCHORS.values()) + ".\n")

@@ -61,6 +61,8 @@ class GaitReference:
 
     initial_contacts : per foot (``left``, ``right``, or ``any`` when the side is unknown),
         ndarray (K,) of initial-contact times.
+    final_contacts : per foot, ndarray (K,) of final-contact (foot-off) times, when the
+        reference has them (ipol-gait).
     bouts : straight walking bouts with their reference summaries.
     stride_ends : ndarray (K,), times of the foot-flat samples that end each stride of the
         sensor's foot (pyshoe-vicon), or None.
@@ -76,6 +78,7 @@ class GaitReference:
     """
 
     initial_contacts: dict[str, np.ndarray] = field(default_factory=dict)
+    final_contacts: dict[str, np.ndarray] = field(default_factory=dict)
     bouts: list[Bout] = field(default_factory=list)
     stride_ends: np.ndarray | None = None
     stride_points: np.ndarray | None = None
@@ -259,8 +262,9 @@ def read_ipol(path: str | Path) -> Iterator[RealTrial]:
     rec = Recording(t, arr[..., :3], arr[..., 3:], list(IPOL_SENSORS.values()))
     start, end = (float(v) / rate for v in meta["TrialBoundaries"])
     u0, u1 = (float(v) / rate for v in meta["UTurnBoundaries"])
-    ics = {side: np.asarray([e[1] for e in meta[f"{side.title()}FootEvents"]], float) / rate
-           for side in ("left", "right")}
+    events = {side: np.asarray(meta[f"{side.title()}FootEvents"], float).reshape(-1, 2) / rate
+              for side in ("left", "right")}  # [foot-off, foot-strike] per swing
+    ics = {side: e[:, 1] for side, e in events.items()}
     bouts = []
     for a, b in ((start, u0), (u1, end)):
         # strides of the bout: swings of both feet that end inside it, two steps a stride
@@ -269,7 +273,8 @@ def read_ipol(path: str | Path) -> Iterator[RealTrial]:
                           cadence_spm=60.0 * steps / (b - a),
                           stride_length_m=2.0 * IPOL_BOUT_M / steps if steps else float("nan"),
                           speed_mps=IPOL_BOUT_M / (b - a)))
-    ref = GaitReference(initial_contacts=ics, bouts=bouts, height_m=float(meta["Height"]) / 100,
+    ref = GaitReference(initial_contacts=ics, bouts=bouts,
+                        final_contacts={side: e[:, 0] for side, e in events.items()}, height_m=float(meta["Height"]) / 100,
                         source="hand-checked events, 10 m bouts")
     yield RealTrial("ipol-gait", stem, rec, ref)
 
