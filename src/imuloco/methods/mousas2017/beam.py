@@ -33,7 +33,10 @@ Measured on the shared data (docs/results/mousas2017/speed.md): a quarter of the
 first frames every frame, so thousands of segments pass the entry test each step (6,000 to
 15,000 of 21,536 at 100k database frames), each needing its emission, and every first frame
 is scanned each step; no width was both clearly faster than the exact step and as accurate,
-also compiled, so the method's default is the exact step.
+also compiled, so the method's default is the exact step. The scan is not replaced by an
+index: within a block the entry test is a ball in the first group's whitened space, but a
+k-d tree per block (scipy, scikit-learn) returns thousands of segments a step and its queries
+cost more than the whole exact step (``benchmarks/mousas_beam_index.py``).
 """
 
 from __future__ import annotations
