@@ -25,6 +25,15 @@ def _clip_cache(tmp_path_factory) -> None:
 
 
 @pytest.fixture(scope="session")
+def real_dir() -> Path:
+    """``../shared/data/real-imu`` (real IMUs with references); skipped when absent."""
+    d = shared_data_dir()
+    if d is None or not (d.parent / "real-imu").is_dir():
+        pytest.skip("../shared/data/real-imu is absent")
+    return d.parent / "real-imu"
+
+
+@pytest.fixture(scope="session")
 def shared_dir() -> Path:
     """``../shared/data/bandai-namco-2``; tests that use it are skipped when it is absent."""
     d = shared_data_dir()

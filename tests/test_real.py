@@ -239,16 +239,6 @@ def test_unknown_layout_is_named(tmp_path):
 
 
 # ---- the real recordings ------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def real_dir():
-    from imuloco.data import shared_data_dir
-
-    d = shared_data_dir()
-    if d is None or not (d.parent / "real-imu").is_dir():
-        pytest.skip("../shared/data/real-imu is absent")
-    return d.parent / "real-imu"
-
-
 @pytest.mark.shared
 def test_real_protocol_on_one_trial_each(real_dir, tmp_path):
     rows = run_real(real_dir, tmp_path, limit=1)

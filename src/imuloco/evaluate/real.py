@@ -14,6 +14,9 @@ reference's windows:
   one to the reference's (nearest within :data:`IC_TOLERANCE_S`), with the missed and extra.
 - ``stride_err_m`` / ``stride_err_pct``: mean stride length per bout against the reference's.
 - ``speed_err_pct``: walking speed per bout.
+- ``bouts_ref`` / ``bouts_measured``: the reference's bouts, and those in which the estimate
+  has a stride (the errors above average over these only: an estimator that misses a hard
+  bout is not scored on it, so its figures read together with this share).
 - ``stance_err_pp``: a foot sensor's mean stance (share of the stride in contact, %) per
   bout against the reference's strides (ipol-gait: from its hand-checked foot-off and
   foot-strike events), in percentage points.
@@ -225,6 +228,8 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
         row[f"{key}_err_pct"] = _mean([_pct(b[f"{key}_est{unit}"], b[f"{key}_ref{unit}"])
                                       for b in bouts])
     row["stride_err_m"] = _mean([b["stride_est_m"] - b["stride_ref_m"] for b in bouts])
+    row["bouts_ref"] = len(bouts)
+    row["bouts_measured"] = sum(bool(np.isfinite(b["stride_est_m"])) for b in bouts)
     if side and per_contact == 2 and side in ref.final_contacts:
         row.update(_stance(gait, trial, side))
     if trial.dataset == "pyshoe-vicon" and gait.path is not None:
@@ -344,7 +349,8 @@ SUMMARY_KEYS = ("steps_err_pct", "cadence_err_pct", "ic_median_ms", "stride_err_
 def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per data set, sensor and estimator: the mean absolute value of each error (the median
     of the recordings' IC medians), the share of reference contacts matched by an estimate
-    (``ic_matched_pct``), the recordings measured, and the shares within target."""
+    (``ic_matched_pct``), the share of the reference's bouts with an estimated stride
+    (``bouts_measured_pct``), the recordings measured, and the shares within target."""
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
         groups.setdefault((r["dataset"], r["sensor"], r["estimator"]), []).append(r)
@@ -365,6 +371,9 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         missed = sum(r.get("ic_missed", 0) for r in ok)
         if matched + missed:
             s["ic_matched_pct"] = 100.0 * matched / (matched + missed)
+        bouts = sum(r.get("bouts_ref", 0) for r in ok)
+        if bouts:
+            s["bouts_measured_pct"] = 100.0 * sum(r.get("bouts_measured", 0) for r in ok) / bouts
         kind = "foot" if sensor.endswith("_foot") else sensor
         for k, lim in TARGETS.get(kind, {}).items():
             vals = [abs(r[k]) for r in ok if k in r and np.isfinite(r[k])]
@@ -377,7 +386,7 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 COLUMNS = [("dataset", "data set"), ("sensor", "sensor"), ("estimator", "estimator"),
            ("measured", "n"), ("steps_err_pct", "steps %"), ("cadence_err_pct", "cadence %"),
            ("ic_median_ms", "IC ms"), ("ic_matched_pct", "IC matched %"),
-           ("stride_err_m", "stride m"),
+           ("bouts_measured_pct", "bouts %"), ("stride_err_m", "stride m"),
            ("stride_err_pct", "stride %"), ("speed_err_pct", "speed %"),
            ("stance_err_pp", "stance pp"),
            ("stride_mae_m", "stride MAE m"), ("path_final_pct", "path end %")]
@@ -429,7 +438,9 @@ def write_results(rows: list[dict[str, Any]], out: str | Path) -> None:
                  "`imuloco bench --real DIR` (mean absolute errors over the recordings; IC: "
                  "median of the recordings' median absolute timing errors; IC matched: the "
                  f"share of the reference's contacts with an estimate within "
-                 f"{1e3 * IC_TOLERANCE_S:.0f} ms; stance pp: a foot's stance against the "
+                 f"{1e3 * IC_TOLERANCE_S:.0f} ms; bouts: the share of the reference's walking "
+                 "bouts in which the estimate has a stride, the bouts that stride, cadence and "
+                 "speed errors average over; stance pp: a foot's stance against the "
                  "reference's foot-off and foot-strike events, in percentage points).\n\n"
                  + table(summary) + "\n\nAnchors from the literature: "
                  + "; ".join(ANCHORS.values()) + ".\n")

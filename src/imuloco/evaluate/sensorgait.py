@@ -9,9 +9,10 @@
   the swings' starts. gaitmap's Barth DTW segmentation and Rampp event detection live in
   ``gaitmap_mad`` (AGPL-3.0), which this MIT package does not depend on; the swings need no
   template.
-- Lower back (``lower_back``, L5): Mobilise-D's algorithms from ``mobgap`` (Iluz gait sequence
-  detection, Ionescu initial contacts, Zijlstra's inverted-pendulum step length with Mobilise-D's
-  published scaling factor). They need only the vertical acceleration, found from gravity.
+- Lower back (``lower_back``, L5): Mobilise-D's published pipeline from ``mobgap`` (Iluz gait
+  sequence detection, Ionescu initial contacts, Ullrich left/right, Zijlstra's inverted-pendulum
+  step length with Mobilise-D's published scaling factor, stride selection and walking-bout
+  assembly), on body axes found from gravity and the fore-aft sway.
 
 Every figure is derived from the same strides, so they agree by construction:
 ``speed = stride length x cadence / 120`` and ``steps = 2 x strides`` for a foot sensor.
@@ -200,12 +201,58 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
                       steps_per_contact=2, times=t, path=pos)
 
 
-BACK_METHOD = "mobgap GsdIluz, IcdIonescu, SlZijlstra (Mobilise-D)"
+BACK_METHOD = ("mobgap MobilisedPipelineHealthy (Mobilise-D P1: GsdIluz, IcdIonescu, LrcUllrich, "
+               "CadFromIc, SlZijlstra with the all-participants factor, stride selection, "
+               "walking-bout assembly)")
+
+
+def body_axes(acc: np.ndarray, rate: float) -> np.ndarray:
+    """Rows: Mobilise-D's body axes (up, medio-lateral, forward) in sensor axes, found from the
+    signal alone so that the sensor may be worn in any axes.
+
+    acc : ndarray, shape (T, 3), m/s² (+9.81 up at rest), sampled at ``rate`` Hz.
+
+    Up is the mean acceleration's direction (gravity). The fore-aft line is the principal
+    direction of the horizontal acceleration: walking shakes the trunk more fore-aft than
+    sideways. Forward is the direction along it whose acceleration runs against the vertical
+    velocity: over each stance the body vaults over its leg as an inverted pendulum, slowing
+    while it rises and speeding up while it falls (Cavagna et al. 1977, J Physiol 268:467),
+    compared in walking's step band (cadence 60-180 steps/min: 1-3 Hz; band 0.5-3 Hz). The
+    medio-lateral axis completes the right-handed frame of Mobilise-D's sensor (x up,
+    z forward: y = z x x, to the right).
+    """
+    from scipy.signal import butter, sosfiltfilt
+
+    up = acc.mean(axis=0)
+    up = up / np.linalg.norm(up)
+    h = acc - np.outer(acc @ up, up)
+    _, _, vt = np.linalg.svd(h - h.mean(axis=0), full_matrices=False)
+    pa = vt[0] - up * (vt[0] @ up)
+    pa /= np.linalg.norm(pa)
+    band = butter(4, [0.5, min(3.0, 0.45 * rate)], "bandpass", fs=rate, output="sos")
+    vertical = sosfiltfilt(band, acc @ up)
+    speed_up = sosfiltfilt(band, np.cumsum(vertical) / rate)
+    if np.dot(sosfiltfilt(band, acc @ pa), speed_up) > 0:
+        pa = -pa
+    return np.stack([up, np.cross(pa, up), pa])
 
 
 def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
                     sensor_height_m: float) -> SensorGait:
-    """Gait from a lower-back (L5) IMU with Mobilise-D's algorithms (see the module docstring).
+    """Gait from a lower-back (L5) IMU by Mobilise-D's published pipeline (mobgap's
+    ``MobilisedPipelineHealthy``, its published defaults), on the body axes of
+    :func:`body_axes`.
+
+    Two choices are ours: Zijlstra's step length takes Mobilise-D's scaling factor fitted on
+    all participants (``step_length_scaling_factor_ms_all``), not the pipeline's default one
+    fitted on people with multiple sclerosis only, as imuloco's users are anyone; and the
+    steps are every initial contact found in the gait sequences, while the strides (their
+    lengths) are those the stride selection and walking-bout assembly keep.
+
+    Against the hand-assembled chain it replaces (Iluz, Ionescu, Zijlstra's raw step lengths
+    summed two by two), each walking bout's stride error is the same within 0.2 points
+    (ipol-gait's 200 bouts, mobilise-d-lab's 17): the library takes over the stride assembly
+    and names each stride's foot (Ullrich), at 2.5 times the CPU time.
 
     Parameters
     ----------
@@ -217,9 +264,16 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
     import pandas as pd
 
     try:
-        from mobgap.gait_sequences import GsdIluz
-        from mobgap.initial_contacts import IcdIonescu
-        from mobgap.stride_length import SlZijlstra
+        from sklearn.exceptions import InconsistentVersionWarning
+
+        with warnings.catch_warnings():
+            # mobgap ships Ullrich's left/right classifier as a scikit-learn 1.6 pickle (of
+            # the package, not the user's), which a newer scikit-learn loads with a warning;
+            # its feet agree with ipol-gait's hand-checked ones (test_lower_back.py)
+            warnings.simplefilter("ignore", InconsistentVersionWarning)
+            from mobgap.data import GaitDatasetFromData
+            from mobgap.pipeline import MobilisedPipelineHealthy
+            from mobgap.stride_length import SlZijlstra
     except ImportError as e:
         raise MissingExtraError("lower-back gait", f"mobgap ({e})", "gait") from None
     times = np.asarray(times, float)
@@ -227,50 +281,36 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
         return not_measured(LOWER_BACK, BACK_METHOD, "the recording is shorter than 3 s, "
                             "too short for a walking bout")
     rate, x = uniform(times, np.concatenate([acc, np.degrees(gyro)], axis=1))
-    a, w = x[:, :3], x[:, 3:]
-    up = a.mean(axis=0)
-    up /= np.linalg.norm(up)
-    # horizontal axes: the principal direction of the horizontal acceleration is taken as
-    # anterior-posterior (walking shakes the trunk more fore-aft than sideways); only the
-    # gait sequence detector reads it, and it uses its variability, not its sign
-    h = a - np.outer(a @ up, up)
-    _, _, vt = np.linalg.svd(h - h.mean(axis=0), full_matrices=False)
-    pa = vt[0] - up * (vt[0] @ up)
-    pa /= np.linalg.norm(pa)
-    ml = np.cross(up, pa)
-    axes = np.stack([up, ml, pa])
-    frame = pd.DataFrame(np.concatenate([a @ axes.T, w @ axes.T], axis=1),
-                         columns=["acc_is", "acc_ml", "acc_pa", "gyr_is", "gyr_ml", "gyr_pa"])
+    axes = body_axes(x[:, :3], rate)
+    # mobgap's sensor frame of a Mobilise-D lower-back sensor: x up, y medio-lateral,
+    # z forward; acceleration in m/s² with gravity, rotation in deg/s
+    frame = pd.DataFrame(np.concatenate([x[:, :3] @ axes.T, x[:, 3:] @ axes.T], axis=1),
+                         columns=["acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z"])
+    data = GaitDatasetFromData({"r": {"LowerBack": frame}}, rate,
+                               {"r": {"sensor_height_m": float(sensor_height_m)}}, {"r": {}})
+    pipe = MobilisedPipelineHealthy(
+        stride_length_calculation=SlZijlstra(
+            **SlZijlstra.PredefinedParameters.step_length_scaling_factor_ms_all),
+        # turns, the per-bout plausibility thresholds (which need a cohort) and the week's
+        # aggregates are read by none of the steps whose strides are reported
+        turn_detection=None, dmo_thresholds=None, dmo_aggregation=None,
+        recommended_cohorts=None)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        gsd = GsdIluz().detect(frame, sampling_rate_hz=rate).gs_list_
-    if gsd.empty:
+        pipe.run(data[0])
+    if pipe.gs_list_.empty:
         return not_measured(LOWER_BACK, BACK_METHOD, "no walking bout found (Iluz gait "
                             "sequence detection)")
     t = times[0] + np.arange(len(frame)) / rate
-    ics_all, rows = [], []
-    for _, gs in gsd.iterrows():
-        part = frame.iloc[int(gs["start"]):int(gs["end"])].reset_index(drop=True)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            icd = IcdIonescu().detect(part, sampling_rate_hz=rate).ic_list_
-            if len(icd) < 3:
-                continue
-            sl = SlZijlstra(**SlZijlstra.PredefinedParameters.step_length_scaling_factor_ms_all
-                            ).calculate(part, initial_contacts=icd, sampling_rate_hz=rate,
-                                        sensor_height_m=sensor_height_m)
-        ic = icd["ic"].to_numpy(int)
-        steps = sl.raw_step_length_per_step_["step_length_m"].to_numpy(float)
-        ics_all.append(t[int(gs["start"]) + ic])
-        for k in range(len(ic) - 2):  # a stride spans two steps
-            length = float(steps[k] + steps[k + 1])
-            a0, b0 = int(gs["start"]) + ic[k], int(gs["start"]) + ic[k + 2]
-            rows.append(stride_row("either", float(t[a0]), float(t[b0]), length, math.nan))
+    strides = pipe.per_stride_parameters_
+    rows = [stride_row(str(s.lr_label), float(t[int(s.start)]), float(t[int(s.end)]),
+                       float(s.stride_length_m), math.nan) for s in strides.itertuples()]
     if len(rows) < MIN_STRIDES:
-        return not_measured(LOWER_BACK, BACK_METHOD, "fewer than 2 strides found in the "
-                            "walking bouts")
+        return not_measured(LOWER_BACK, BACK_METHOD, f"{len(rows)} stride(s) in Mobilise-D's "
+                            "walking bouts: no walking")
     return SensorGait(LOWER_BACK, BACK_METHOD, strides=rows,
-                      initial_contacts=np.concatenate(ics_all), steps_per_contact=1)
+                      initial_contacts=t[np.sort(pipe.raw_ic_list_["ic"].to_numpy(int))],
+                      steps_per_contact=1)
 
 
 def sensor_gait(rec, placement: str, height_m: float | None = None,
