@@ -86,6 +86,20 @@ def test_a_spike_at_toe_off_does_not_move_the_initial_contacts(demo_rec):
     assert np.abs(spiked - clean).max() < 0.1
 
 
+def test_contacts_fall_back_to_the_unfiltered_gyroscope(demo_rec, monkeypatch):
+    """Where the low-passed gyroscope shows no swing peak (a jogging stride's can blur into its
+    toe off), the contact is searched on the unfiltered one: with a cutoff so low that no
+    stride keeps its peak, every contact is still found."""
+    from imuloco.evaluate import sensorgait
+
+    t, acc, gyro = demo_rec.times, demo_rec.acc[:, 0], demo_rec.gyro[:, 0]
+    walk = foot_gait(t, acc, gyro, "right").initial_contacts
+    monkeypatch.setattr(sensorgait, "GYRO_CUTOFF_HZ", 0.3)
+    g = foot_gait(t, acc, gyro, "right")
+    assert g.measured and len(g.initial_contacts) == len(walk) >= 6
+    assert np.abs(g.initial_contacts - walk).max() < 0.1
+
+
 def test_reference_stance_reads_the_foot_off_between_two_contacts():
     ic = np.array([0.0, 1.0, 2.0, 5.0])
     fc = np.array([0.6, 1.7, 4.0])  # the last stride (2 to 5 s, a pause) lies outside

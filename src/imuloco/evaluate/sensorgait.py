@@ -163,23 +163,24 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
     # which an impact spike at toe off can be on some shoes (IC then 0.3-0.5 s early, in 7 % of
     # ipol-gait's strides): the IC is searched on the gyroscope low-passed at 6 Hz, the cutoff
     # Winter found for walking's kinematics (Biomechanics and Motor Control of Human Movement,
-    # 2009); the contact itself is still found on the acceleration, and the toe off on the
-    # unfiltered gyroscope. Both runs keep every stride's row (NaN where none was found).
+    # 2009), and on the unfiltered one where that finds none (a jogging stride's swing peak can
+    # blur into its toe off); the contact itself is found on the acceleration, and the toe off
+    # on the unfiltered gyroscope. Every stride keeps its row (NaN where nothing was found).
     smooth = fbf.copy()
     gyr = ["gyr_pa", "gyr_ml", "gyr_si"]
     smooth[gyr] = ButterworthFilter(order=2, cutoff_freq_hz=GYRO_CUTOFF_HZ).filter(
         fbf[gyr], sampling_rate_hz=track.rate).filtered_data_
-    ev = {}
-    for event, data in (("ic", smooth), ("tc", fbf)):
+    found = []
+    for data, events in ((smooth, ("ic",)), (fbf, ("ic", "tc"))):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            ev[event] = HerzerEventDetection(enforce_consistency=False, detect_only=(event,)
-                                             ).detect(data, stride_list=seg,
-                                                      sampling_rate_hz=track.rate
-                                                      ).annotated_original_event_list_[event]
-    both = pd.concat(ev, axis=1).reindex(seg.index)
-    ic = both["ic"].to_numpy(float)
-    tc = both["tc"].to_numpy(float)
+            found.append(HerzerEventDetection(enforce_consistency=False, detect_only=events
+                                              ).detect(data, stride_list=seg,
+                                                       sampling_rate_hz=track.rate
+                                                       ).annotated_original_event_list_
+                         .reindex(seg.index))
+    ic = found[0]["ic"].fillna(found[1]["ic"]).to_numpy(float)
+    tc = found[1]["tc"].to_numpy(float)
     rows = []
     # stride k: from its initial contact to the next one; its length is the distance between
     # the foot's rest positions of the stances that follow those contacts
