@@ -175,6 +175,8 @@ ATTACK_NUMBERS = ("1e308", "-1e308", "1e309", "nan", "inf", "-inf", "0", "-0", "
 def _mutate_bytes(data: bytes, rng: random.Random) -> tuple[str, bytes]:
     b = bytearray(data)
     op = rng.choice(("flip", "insert", "delete", "duplicate", "truncate", "zero"))
+    if not b:  # truncated to nothing by an earlier step: only inserting changes it
+        op = "insert"
     i = rng.randrange(len(b)) if b else 0
     n = rng.choice((1, 1, 2, 8, 64, 512))
     if op == "flip":
