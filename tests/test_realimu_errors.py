@@ -62,7 +62,7 @@ CASES = {
     "times-back": (0, {fr.PYSHOE: _pyshoe(timestamps_all=np.arange(200)[None, ::-1] / 200)},
                    "a_LLIO.mat", "increasing"),
     # TypeError ("in" on an int), ValueError (float of "x", a reshape), RecursionError
-    "json-number": (1, {"1-1.json": b"3"}, "1-1.json", "JSON object"),
+    "json-number": (1, {"1-1.json": b"3"}, "1-1.json", "top level: expected a struct"),
     "json-text-field": (1, {"1-1.json": _ipol_json(TrialBoundaries="x")}, "1-1.json",
                         "TrialBoundaries"),
     "json-odd-events": (1, {"1-1.json": _ipol_json(RightFootEvents=[1, 2, 3])}, "1-1.json",

@@ -215,6 +215,19 @@ def _numbers(value, path: Path, name: str, expected: str, shape: tuple[int | Non
     return a.astype(np.float64)
 
 
+def _struct(v, path: Path, where: str, keys: tuple[str, ...] = ()) -> dict:
+    """``v`` if it is a MATLAB struct or a JSON object (a dict) with ``keys``, else a
+    FormatError naming ``where``."""
+    if not isinstance(v, dict):
+        fields = f" of fields {', '.join(keys)}" if keys else ""
+        raise FormatError(path, None, f"{where}: expected a struct{fields}, got "
+                          f"{type(v).__name__} {str(v)[:40]!r}")
+    missing = [k for k in keys if k not in v]
+    if missing:
+        raise FormatError(path, None, f"{where}: missing field {missing[0]!r}")
+    return v
+
+
 def _field(d: dict, key: str, path: Path, shape: tuple[int | None, ...] = (None, None),
            finite: bool = True) -> np.ndarray:
     if key not in d:
@@ -313,14 +326,8 @@ def _unwrap_counter(counter: np.ndarray) -> np.ndarray:
 def read_ipol(path: str | Path) -> Iterator[RealTrial]:
     """One ipol-gait trial from its ``S-T.json`` and the three ``.txt`` beside it."""
     path = Path(path)
-    meta = _read_json(path)
     keys = ("TrialBoundaries", "UTurnBoundaries", "LeftFootEvents", "RightFootEvents", "Height")
-    if not isinstance(meta, dict):
-        raise FormatError(path, None, f"expected a JSON object with {list(keys)}, got "
-                          f"{type(meta).__name__}")
-    missing = [k for k in keys if k not in meta]
-    if missing:
-        raise FormatError(path, None, f"missing {missing}")
+    meta = _struct(_read_json(path), path, "top level", keys)
     # sample numbers: [start, end] of the trial and of its U-turn, [foot-off, foot-strike] per
     # swing; the height in cm
     bounds = [_numbers(meta[k], path, k, "[first, last] sample numbers", (2,))
@@ -380,17 +387,6 @@ def _as_list(v) -> list:
     if isinstance(v, list):
         return v
     return [v] if isinstance(v, dict) else []
-
-
-def _struct(v, path: Path, where: str, keys: tuple[str, ...] = ()) -> dict:
-    """``v`` if it is a MATLAB struct (a dict) with ``keys``, else a FormatError."""
-    if not isinstance(v, dict):
-        raise FormatError(path, None, f"{where}: expected a struct, got {type(v).__name__} "
-                          f"{str(v)[:40]!r}")
-    missing = [k for k in keys if k not in v]
-    if missing:
-        raise FormatError(path, None, f"{where}: missing field {missing[0]!r}")
-    return v
 
 
 def _wb_bout(wb: dict, path: Path, where: str) -> Bout:
