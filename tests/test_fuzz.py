@@ -30,3 +30,13 @@ def test_bench_fuzz_writes_the_table(tmp_path):
     for reader in ("sensorlog", "model"):
         assert sum(data[reader][o] for o in OUTCOMES) == data[reader]["inputs"] == 6
     assert "| sensor-log tables | 6 |" in (tmp_path / "fuzz.md").read_text()
+
+
+def test_fuzzed_real_data_folders_end_in_clean_errors():
+    """The real-data layouts (pyshoe-vicon, ipol-gait, mobilise-d-lab): generated malformed
+    folders are read or refused with the library's own error, none hangs or is implausible."""
+    from imuloco.evaluate.fuzz import run_fuzz
+
+    r = run_fuzz(150, ("real",))["real"]
+    assert r["wrong exception type"] == r["hang"] == r["garbage accepted"] == 0, r["examples"]
+    assert r["clean"] > 50 and r["accepted"] > 5  # both outcomes are exercised

@@ -1,9 +1,10 @@
 """Fuzzing the readers: generated malformed inputs, each read with a time limit.
 
 ``imuloco bench --fuzz N`` runs :func:`run_fuzz`: for each reader (BVH, ASF/AMC, sensor-log
-tables, :func:`~imuloco.sensors.reallog.read_log`, model files) it builds small valid files from
-the bundled sample (:func:`seed_files`), derives N inputs from them by random mutation (bytes,
-lines, cells) and by the structured attacks of issue 18 (a timestamp jumping by days, rows a
+tables, :func:`~imuloco.sensors.reallog.read_log`, model files, the real-data folders of
+:func:`~imuloco.io.realimu.read_trials`: :mod:`imuloco.evaluate.fuzz_real`) it builds small
+valid files from the bundled sample (:func:`seed_files`), derives N inputs from them by random
+mutation (bytes, lines, cells) and by the structured attacks of issue 18 (a timestamp jumping by days, rows a
 nanosecond apart, cells of 1e308, ``Frame Time`` of 1000 s, 20,000 nested joints, ASF units of
 5e-324, forged array shapes, decompression bombs, deep JSON headers, ...), and reads each in a
 worker process. Every outcome is one of :data:`OUTCOMES`:
@@ -37,6 +38,7 @@ import multiprocessing as mp
 import os
 import random
 import resource
+import shutil
 import tempfile
 import time
 import zipfile
@@ -47,9 +49,12 @@ from pathlib import Path
 
 import numpy as np
 
-READERS = ("bvh", "asf", "sensorlog", "read_log", "model")
+from imuloco.evaluate.fuzz_real import read_real, real_attack, real_garbage, real_seeds
+
+READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "real")
 READER_TITLES = {"bvh": "BVH", "asf": "ASF/AMC", "sensorlog": "sensor-log tables",
-                 "read_log": "`read_log`", "model": "model files"}
+                 "read_log": "`read_log`", "model": "model files",
+                 "real": "real-data folders (`read_trials`)"}
 OUTCOMES = ("clean", "accepted", "wrong exception type", "hang", "garbage accepted")
 MEMORY_LIMIT = 4 << 30  # bytes of address space per worker
 
@@ -102,6 +107,7 @@ def seed_files(work: Path) -> dict[str, list[Files]]:
                       {"TotalAcceleration.csv": total}],
         "read_log": [{"log.csv": generic}, {"phyphox.csv": phyphox}, {"export.zip": sl_zip}],
         "model": models,
+        "real": real_seeds(),
     }
 
 
@@ -169,6 +175,8 @@ ATTACK_NUMBERS = ("1e308", "-1e308", "1e309", "nan", "inf", "-inf", "0", "-0", "
 def _mutate_bytes(data: bytes, rng: random.Random) -> tuple[str, bytes]:
     b = bytearray(data)
     op = rng.choice(("flip", "insert", "delete", "duplicate", "truncate", "zero"))
+    if not b:  # truncated to nothing by an earlier step: only inserting changes it
+        op = "insert"
     i = rng.randrange(len(b)) if b else 0
     n = rng.choice((1, 1, 2, 8, 64, 512))
     if op == "flip":
@@ -410,7 +418,7 @@ def _npy(arr: np.ndarray) -> bytes:
 
 
 ATTACKS = {"bvh": _bvh_attack, "asf": _asf_attack, "sensorlog": _table_attack,
-           "read_log": _table_attack, "model": _model_attack}
+           "read_log": _table_attack, "model": _model_attack, "real": real_attack}
 
 
 def cases(reader: str, seeds: list[Files], n: int, seed: int = 0) -> Iterator[Case]:
@@ -457,6 +465,8 @@ def read_case(reader: str, paths: list[Path]) -> object:
         from imuloco.sensors.reallog import read_log
 
         return read_log(paths[0])
+    if reader == "real":
+        return read_real(paths)
     from imuloco.methods import load_model
 
     return load_model(paths[0])
@@ -492,6 +502,8 @@ def garbage(reader: str, result: object) -> str | None:
         if abs(rec.times[-1] - report.duration) > 0.05 or report.duration > 48 * 3600:
             return f"duration {report.duration} against {rec.times[-1]}"
         return None
+    if reader == "real":
+        return real_garbage(result)
     from imuloco.methods.modelfile import check_header
 
     model = result
@@ -607,6 +619,7 @@ def run_fuzz(n: int, readers: tuple[str, ...] = READERS, timeout: float = 5.0, s
         # every reader imported before the workers fork: they all run the same code
         import imuloco.io.asf_amc
         import imuloco.io.bvh
+        import imuloco.io.realimu
         import imuloco.methods.modelfile
         import imuloco.sensors.reallog  # noqa: F401
         pool = _Pool(timeout)
@@ -620,7 +633,8 @@ def run_fuzz(n: int, readers: tuple[str, ...] = READERS, timeout: float = 5.0, s
                     folder = work / f"{reader}-{i}"
                     folder.mkdir()
                     paths = []
-                    for name, data in case.files:
+                    for name, data in case.files:  # a name may hold "/" (real-data trees)
+                        (folder / name).parent.mkdir(parents=True, exist_ok=True)
                         (folder / name).write_bytes(data)
                         paths.append(folder / name)
                     outcome, detail, seconds = pool.run(reader, paths)
@@ -628,9 +642,7 @@ def run_fuzz(n: int, readers: tuple[str, ...] = READERS, timeout: float = 5.0, s
                     counts[outcome] += 1
                     if outcome != "accepted" and len(found.setdefault(outcome, [])) < examples:
                         found[outcome].append(f"{case.mutation}: {detail}")
-                    for p in folder.iterdir():
-                        p.unlink()
-                    folder.rmdir()
+                    shutil.rmtree(folder)
                 results[reader] = {"inputs": n, **{o: counts[o] for o in OUTCOMES},
                                    "slowest_s": round(slowest, 2), "examples": found}
         finally:

@@ -18,7 +18,11 @@ and a :class:`GaitReference` in seconds and metres on the recording's time line.
 
 from __future__ import annotations
 
+import contextlib
+import faulthandler
 import json
+import os
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +37,7 @@ G = 9.80665  # standard gravity, m/s^2 (mobilise-d-lab stores acceleration in g)
 LAYOUTS = ("pyshoe-vicon", "ipol-gait", "mobilise-d-lab")
 IPOL_BOUT_M = 10.0  # ipol-gait protocol: each straight bout is 10 m (Voisard et al. 2023)
 IPOL_SENSORS = {"rf": "right_foot", "lf": "left_foot", "lb": "lower_back"}
+IPOL_MAX_GAP = 1000  # packets: the longest run of dropped packets in ipol-gait is 65
 
 
 @dataclass
@@ -147,23 +152,89 @@ def read_trials(folder: str | Path, layout: str | None = None, limit: int | None
         raise UnknownNameError(f"unknown real-data layout {layout!r}; expected one of {LAYOUTS}")
     reader, pattern = readers[layout]
     paths = sorted(Path(folder).glob(pattern))[:limit]
+    if not paths:
+        raise FormatError(folder, None, f"no {pattern} in it ({layout} has one per trial)")
     for path in paths:
         yield from reader(path)
 
 
 def _loadmat(path: Path, **kw) -> dict:
+    """``scipy.io.loadmat``, or a FormatError for a file it cannot read.
+
+    scipy's MAT reader is not hardened against damaged files (its docstring says so): some
+    crash the process (a segmentation fault on an out-of-range element type, scipy PR
+    25349). A forked child reads the file first and only its exit status is looked at (no
+    data comes back from it), which costs one more read (30 ms for a mobilise-d-lab file)."""
     from scipy.io import loadmat
 
+    if hasattr(os, "fork"):
+        with warnings.catch_warnings():  # Python 3.12+ warns of fork in a threaded process:
+            warnings.simplefilter("ignore", DeprecationWarning)  # the child takes no lock
+            pid = os.fork()
+        if pid == 0:
+            try:
+                faulthandler.disable()  # a crash is the expected outcome, not to be reported
+                with contextlib.suppress(Exception):  # only a crash (a signal) is looked for
+                    loadmat(path, **kw)
+            finally:
+                os._exit(0)
+        _, status = os.waitpid(pid, 0)
+        if os.WIFSIGNALED(status):
+            raise FormatError(path, None, f"not a readable MATLAB v5 file (scipy's reader "
+                              f"crashed on it with signal {os.WTERMSIG(status)})")
     try:
         return loadmat(path, **kw)
-    except (ValueError, OSError, NotImplementedError) as e:
-        raise FormatError(path, None, f"not a readable MATLAB v5 file ({e})") from None
+    except Exception as e:  # noqa: BLE001 - scipy's MAT reader raises anything on damaged
+        # bytes (TypeError "Expecting miMATRIX", KeyError, UnboundLocalError, MemoryError, ...)
+        raise FormatError(path, None, f"not a readable MATLAB v5 file "
+                          f"({type(e).__name__}: {e})") from None
 
 
-def _field(d: dict, key: str, path: Path) -> np.ndarray:
+def _read_json(path: Path) -> object:
+    try:
+        return json.loads(path.read_bytes().decode("utf-8"))
+    except (ValueError, RecursionError) as e:  # JSONDecodeError, UnicodeDecodeError
+        raise FormatError(path, None, f"not JSON ({type(e).__name__}: {e})") from None
+
+
+def _numbers(value, path: Path, name: str, expected: str, shape: tuple[int | None, ...] = (),
+             finite: bool = True) -> np.ndarray:
+    """``value`` (a MATLAB variable, a struct field or a JSON value) as a float array of
+    ``shape`` (None: any length), or a FormatError naming ``name`` and ``expected``."""
+    try:
+        a = np.asarray(value)
+    except ValueError:  # a ragged JSON list
+        a = np.empty(0, dtype=object)
+    ok = (a.dtype.kind in "iuf" and a.ndim == len(shape)
+          and all(n is None or n == m for n, m in zip(shape, a.shape)))
+    if ok and finite:
+        ok = bool(np.isfinite(a).all())
+    if not ok:
+        raise FormatError(path, None, f"{name}: expected {expected}, got {a.dtype.name} "
+                          f"{a.shape}: {' '.join(str(value).split())[:60]!r}")
+    return a.astype(np.float64)
+
+
+def _struct(v, path: Path, where: str, keys: tuple[str, ...] = ()) -> dict:
+    """``v`` if it is a MATLAB struct or a JSON object (a dict) with ``keys``, else a
+    FormatError naming ``where``."""
+    if not isinstance(v, dict):
+        fields = f" of fields {', '.join(keys)}" if keys else ""
+        raise FormatError(path, None, f"{where}: expected a struct{fields}, got "
+                          f"{type(v).__name__} {str(v)[:40]!r}")
+    missing = [k for k in keys if k not in v]
+    if missing:
+        raise FormatError(path, None, f"{where}: missing field {missing[0]!r}")
+    return v
+
+
+def _field(d: dict, key: str, path: Path, shape: tuple[int | None, ...] = (None, None),
+           finite: bool = True) -> np.ndarray:
     if key not in d:
         raise FormatError(path, None, f"missing field {key!r}")
-    return np.asarray(d[key], dtype=np.float64)
+    return _numbers(d[key], path, f"field {key!r}", f"a {len(shape)}-D array of finite numbers "
+                    f"of shape ({', '.join('N' if n is None else str(n) for n in shape)})", shape,
+                    finite)
 
 
 def read_pyshoe(path: str | Path) -> Iterator[RealTrial]:
@@ -173,21 +244,27 @@ def read_pyshoe(path: str | Path) -> Iterator[RealTrial]:
     the LLIO code does), ``GCP`` (K, 2) Vicon positions there, ``pyshoeTrajectory`` (N, 2)."""
     path = Path(path)
     d = _loadmat(path)
-    imu = _field(d, "imu_data", path)
+    imu = _field(d, "imu_data", path, (None, 6))
     # the SensorConnectData files name it ``timestamps`` and have no full Vicon path ``gt``
     t = _field(d, "timestamps_all" if "timestamps_all" in d else "timestamps", path).ravel()
-    if imu.ndim != 2 or imu.shape[1] != 6 or len(t) != len(imu):
-        raise FormatError(path, None, f"imu_data must be (N, 6) with N timestamps, got "
-                          f"{imu.shape} and {t.shape}")
+    if len(t) != len(imu) or len(t) < 2:
+        raise FormatError(path, None, f"expected as many timestamps as imu_data's {len(imu)} "
+                          f"samples (two or more), got {len(t)}")
+    if not np.all(np.diff(t) > 0):
+        raise FormatError(path, None, f"timestamps: expected increasing times, got "
+                          f"{t[1:][np.diff(t) <= 0][0]} after {t[:-1][np.diff(t) <= 0][0]}")
     t = t - t[0]
-    idx = _field(d, "strideIndex", path).ravel().astype(np.int64)
-    idx = np.clip(idx, 0, len(t) - 1)
-    gcp = _field(d, "GCP", path).reshape(-1, 2)
+    idx = _field(d, "strideIndex", path).ravel()
+    if len(idx) < 2 or idx.min() < 0 or idx.max() > len(t) or np.any(np.diff(idx) <= 0):
+        raise FormatError(path, None, f"strideIndex: expected at least two increasing sample "
+                          f"indices in 0-{len(t)}, got {idx[:6].tolist()}")
+    idx = np.clip(idx.astype(np.int64), 0, len(t) - 1)
+    gcp = _field(d, "GCP", path, (None, 2))
     rec = Recording(t, imu[:, None, :3], imu[:, None, 3:], ["right_foot"])
     ref = GaitReference(
         stride_ends=t[idx], stride_points=gcp, path_times=t,
-        path=_field(d, "gt", path).reshape(-1, 2) if "gt" in d else None,
-        published_path=(_field(d, "pyshoeTrajectory", path).reshape(-1, 2)
+        path=_field(d, "gt", path, (None, 2), finite=False) if "gt" in d else None,
+        published_path=(_field(d, "pyshoeTrajectory", path, (None, 2), finite=False)
                         if "pyshoeTrajectory" in d else None),
         bouts=[Bout(float(t[idx[0]]), float(t[idx[-1]]),
                     float(np.linalg.norm(np.diff(gcp, axis=0), axis=-1).sum()),
@@ -201,24 +278,37 @@ def _read_ipol_txt(path: Path) -> tuple[float, np.ndarray, np.ndarray]:
     ipol-gait ``.txt``."""
     if not path.is_file():
         raise FormatError(path, None, "missing (ipol-gait has S-T_lf, _rf and _lb beside S-T.json)")
-    with path.open() as fh:
-        first = fh.readline()
+    with path.open("rb") as fh:
+        first = fh.readline().decode("utf-8", "replace")
+        body = fh.readline() and fh.readline()  # the first sample's line, if any
     try:
         rate = float(first.split(":")[1].split()[0])
     except (IndexError, ValueError):
-        raise FormatError(path, 1, f"expected 'Acquisition frequency: 100 Hz', got "
-                          f"{first.strip()!r}") from None
+        rate = float("nan")
+    if not 1.0 <= rate <= 1000.0:
+        raise FormatError(path, 1, f"expected 'Acquisition frequency: 100 Hz' (1-1000 Hz), got "
+                          f"{first.strip()[:60]!r}")
+    if not body.strip():
+        raise FormatError(path, 3, "no samples after the two header lines")
     try:
-        data = np.loadtxt(path, skiprows=2, delimiter="\t", ndmin=2)
-    except ValueError as e:
+        data = np.loadtxt(path, skiprows=2, delimiter="\t", ndmin=2, encoding="utf-8")
+    except ValueError as e:  # UnicodeDecodeError included
         raise FormatError(path, None, f"not tab-separated numbers after the header ({e})") from None
     if data.shape[1] < 7:
         raise FormatError(path, None, f"expected PacketCounter, Acc_X..Z, Gyr_X..Z columns, got "
                           f"{data.shape[1]}")
+    bad = ~np.isfinite(data[:, :7]).all(axis=1) | (data[:, 0] < 0) | (data[:, 0] > 65535)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        raise FormatError(path, row + 3, f"expected a PacketCounter in 0-65535 (Xsens's 16-bit "
+                          f"counter) and finite Acc, Gyr, got {data[row, :7].tolist()}")
     counter = _unwrap_counter(data[:, 0])
-    if np.any(np.diff(counter) < 0):
-        row = int(np.flatnonzero(np.diff(counter) < 0)[0]) + 4  # 1-based, two header lines
-        raise FormatError(path, row, "PacketCounter goes back")
+    step = np.diff(counter)
+    if np.any(step < 0) or np.any(step > IPOL_MAX_GAP):
+        row = int(np.flatnonzero((step < 0) | (step > IPOL_MAX_GAP))[0]) + 4  # 1-based
+        raise FormatError(path, row, "PacketCounter goes back" if step[row - 4] < 0 else
+                          f"PacketCounter jumps by {step[row - 4]:.0f} packets (dropped runs "
+                          f"up to {IPOL_MAX_GAP} expected)")
     # a packet sent twice (one in the data set) keeps its first copy
     counter, first = np.unique(counter, return_index=True)
     if len(counter) < 2:
@@ -236,14 +326,24 @@ def _unwrap_counter(counter: np.ndarray) -> np.ndarray:
 def read_ipol(path: str | Path) -> Iterator[RealTrial]:
     """One ipol-gait trial from its ``S-T.json`` and the three ``.txt`` beside it."""
     path = Path(path)
-    try:
-        meta = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise FormatError(path, None, f"not JSON ({e})") from None
     keys = ("TrialBoundaries", "UTurnBoundaries", "LeftFootEvents", "RightFootEvents", "Height")
-    missing = [k for k in keys if k not in meta]
-    if missing:
-        raise FormatError(path, None, f"missing {missing}")
+    meta = _struct(_read_json(path), path, "top level", keys)
+    # sample numbers: [start, end] of the trial and of its U-turn, [foot-off, foot-strike] per
+    # swing; the height in cm
+    bounds = [_numbers(meta[k], path, k, "[first, last] sample numbers", (2,))
+              for k in keys[:2]]
+    events = {}
+    for side in ("left", "right"):
+        key = f"{side.title()}FootEvents"
+        events[side] = _numbers(np.zeros((0, 2)) if meta[key] == [] else meta[key], path, key,
+                                "[[foot-off, foot-strike], ...] sample numbers", (None, 2))
+    height = _numbers(np.nan if meta["Height"] is None else meta["Height"], path, "Height",
+                      "a height in cm (NaN or null when unknown)", finite=False)
+    (start, end), (u0, u1) = bounds
+    if not start < u0 <= u1 < end or not (np.isnan(height) or 0 < height < 300):
+        raise FormatError(path, None, f"expected TrialBoundaries [start, end] around "
+                          f"UTurnBoundaries and a Height in cm, got {meta['TrialBoundaries']}, "
+                          f"{meta['UTurnBoundaries']} and {meta['Height']}")
     stem = path.stem
     read = [_read_ipol_txt(path.with_name(f"{stem}_{key}.txt")) for key in IPOL_SENSORS]
     rate = read[0][0]
@@ -256,14 +356,16 @@ def read_ipol(path: str | Path) -> Iterator[RealTrial]:
     # packets linearly interpolated.
     first = max(c[0] for _, c, _ in read)
     last = min(c[-1] for _, c, _ in read)
+    if last - first < 1:
+        raise FormatError(path, None, f"the PacketCounters of {stem}_{{lf,rf,lb}}.txt do not "
+                          f"overlap (first {[float(c[0]) for _, c, _ in read]}, "
+                          f"last {[float(c[-1]) for _, c, _ in read]})")
     grid = np.arange(first, last + 1)
     arr = np.stack([resample_linear(c, d, grid) for _, c, d in read], axis=1)  # (N, 3, 6)
     t = grid / rate
     rec = Recording(t, arr[..., :3], arr[..., 3:], list(IPOL_SENSORS.values()))
-    start, end = (float(v) / rate for v in meta["TrialBoundaries"])
-    u0, u1 = (float(v) / rate for v in meta["UTurnBoundaries"])
-    events = {side: np.asarray(meta[f"{side.title()}FootEvents"], float).reshape(-1, 2) / rate
-              for side in ("left", "right")}  # [foot-off, foot-strike] per swing
+    start, end, u0, u1 = (v / rate for v in (start, end, u0, u1))
+    events = {side: e / rate for side, e in events.items()}  # [foot-off, foot-strike] per swing
     ics = {side: e[:, 1] for side, e in events.items()}
     bouts = []
     for a, b in ((start, u0), (u1, end)):
@@ -274,7 +376,8 @@ def read_ipol(path: str | Path) -> Iterator[RealTrial]:
                           stride_length_m=2.0 * IPOL_BOUT_M / steps if steps else float("nan"),
                           speed_mps=IPOL_BOUT_M / (b - a)))
     ref = GaitReference(initial_contacts=ics, bouts=bouts,
-                        final_contacts={side: e[:, 0] for side, e in events.items()}, height_m=float(meta["Height"]) / 100,
+                        final_contacts={side: e[:, 0] for side, e in events.items()},
+                        height_m=float(height) / 100,
                         source="hand-checked events, 10 m bouts")
     yield RealTrial("ipol-gait", stem, rec, ref)
 
@@ -286,12 +389,19 @@ def _as_list(v) -> list:
     return [v] if isinstance(v, dict) else []
 
 
-def _wb_bout(wb: dict) -> Bout:
-    return Bout(float(wb["Start"]), float(wb["End"]), strides=float(wb["NumberStrides"]),
-                cadence_spm=float(wb["Cadence"]),
-                stride_length_m=float(wb["AverageStrideLength"]),
-                speed_mps=float(wb["WalkingSpeed"]),
-                distance_m=float(wb.get("Length", np.nan)))
+def _wb_bout(wb: dict, path: Path, where: str) -> Bout:
+    keys = ("Start", "End", "NumberStrides", "Cadence", "AverageStrideLength", "WalkingSpeed")
+    wb = _struct(wb, path, where, keys + ("InitialContact_Event",))
+    v = {k: float(_numbers(wb[k], path, f"{where}.{k}", "a number", finite=k in keys[:2]))
+         for k in keys}
+    length = np.ravel(_numbers(np.ravel(wb.get("Length", np.nan)), path, f"{where}.Length",
+                               "a number", (None,), finite=False))
+    if not v["End"] > v["Start"]:
+        raise FormatError(path, None, f"{where}: expected End > Start, got {v['Start']} and "
+                          f"{v['End']}")
+    return Bout(v["Start"], v["End"], strides=v["NumberStrides"], cadence_spm=v["Cadence"],
+                stride_length_m=v["AverageStrideLength"], speed_mps=v["WalkingSpeed"],
+                distance_m=float(length[0]) if len(length) == 1 else float("nan"))
 
 
 def read_mobilise(path: str | Path, standard: str = "INDIP") -> Iterator[RealTrial]:
@@ -305,28 +415,45 @@ def read_mobilise(path: str | Path, standard: str = "INDIP") -> Iterator[RealTri
     meta_path = path.parent.parent.parent.parent / "participant_metadata.json"
     meta = {}
     if meta_path.is_file():
-        meta = json.loads(meta_path.read_text()).get(cohort, {}).get(pid, {})
-    for tm in data["data"].values():
-        for test_name, test in tm.items():
-            for trial_name, trial in test.items():
-                try:
-                    lb = trial["SU"]["LowerBack"]
-                    std = trial["Standards"][standard]
-                except (KeyError, TypeError):
-                    continue
-                acc = np.asarray(lb["Acc"], float) * G
-                gyro = np.radians(np.asarray(lb["Gyr"], float))
-                fs = float(_as_list(lb["Fs"])[0] if not isinstance(lb["Fs"], dict)
-                           else lb["Fs"]["Acc"])
+        meta = _read_json(meta_path)
+        for key in (cohort, pid):
+            meta = _struct(meta, meta_path, f"{cohort}.{pid}").get(key, {})
+        _struct(meta, meta_path, f"{cohort}.{pid}")
+    heights = [float(_numbers(np.nan if meta.get(k) is None else meta[k], meta_path,
+                              f"{cohort}.{pid}.{k}", "metres", finite=False))
+               for k in ("height_m", "sensor_height_m")]
+    for tm_name, tm in _struct(data["data"], path, "data").items():
+        for test_name, test in _struct(tm, path, f"data.{tm_name}").items():
+            where = f"data.{tm_name}.{test_name}"
+            for trial_name, trial in _struct(test, path, where).items():
+                trial = _struct(trial, path, f"{where}.{trial_name}")
+                su = _struct(trial.get("SU", {}), path, f"{where}.{trial_name}.SU")
+                stds = _struct(trial.get("Standards", {}), path,
+                               f"{where}.{trial_name}.Standards")
+                if "LowerBack" not in su or standard not in stds:
+                    continue  # no lower-back recording or no such reference
+                at = f"{where}.{trial_name}.SU.LowerBack"
+                lb = _struct(su["LowerBack"], path, at, ("Acc", "Gyr", "Fs"))
+                std = _struct(stds[standard], path, f"{where}.{trial_name}.Standards.{standard}")
+                acc = _numbers(lb["Acc"], path, f"{at}.Acc", "(N, 3) finite g", (None, 3)) * G
+                gyro = np.radians(_numbers(lb["Gyr"], path, f"{at}.Gyr",
+                                           f"({len(acc)}, 3) finite deg/s", (len(acc), 3)))
+                fs = lb["Fs"]["Acc"] if isinstance(lb["Fs"], dict) and "Acc" in lb["Fs"] else (
+                    _as_list(lb["Fs"]) or [lb["Fs"]])[0]
+                fs = float(_numbers(fs, path, f"{at}.Fs", "a rate in Hz"))
+                if not 1.0 <= fs <= 1000.0 or len(acc) < 2:
+                    raise FormatError(path, None, f"{at}: expected a rate of 1-1000 Hz and two "
+                                      f"samples or more, got {fs} Hz and {len(acc)}")
                 t = np.arange(len(acc)) / fs
-                wbs = [_wb_bout(w) for w in _as_list(std.get("MicroWB"))]
+                at = f"{where}.{trial_name}.Standards.{standard}.MicroWB"
+                wbs = [_wb_bout(w, path, at) for w in _as_list(std.get("MicroWB"))]
                 if not wbs:
                     continue  # no walking bout in the reference
-                ics = np.concatenate([np.atleast_1d(np.asarray(w["InitialContact_Event"], float))
-                                      for w in _as_list(std["MicroWB"])])
+                ics = np.concatenate([_numbers(np.atleast_1d(w["InitialContact_Event"]), path,
+                                               f"{at}.InitialContact_Event", "seconds", (None,),
+                                               finite=False) for w in _as_list(std["MicroWB"])])
                 ref = GaitReference(initial_contacts={"any": ics[np.isfinite(ics)]},
-                                    bouts=wbs, height_m=float(meta.get("height_m", np.nan)),
-                                    sensor_height_m=float(meta.get("sensor_height_m", np.nan)),
+                                    bouts=wbs, height_m=heights[0], sensor_height_m=heights[1],
                                     source=standard)
                 rec = Recording(t, acc[:, None], gyro[:, None], ["lower_back"])
                 yield RealTrial("mobilise-d-lab", f"{cohort}-{pid}-{test_name}-{trial_name}",
