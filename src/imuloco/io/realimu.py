@@ -350,7 +350,7 @@ def read_ipol(path: str | Path) -> Iterator[RealTrial]:
     if any(r != rate for r, _, _ in read):
         raise FormatError(path, None, f"the three sensors have different rates "
                           f"{[r for r, _, _ in read]}")
-    # The wireless sensors drop packets (up to 12 % of a trial, runs of up to 10): a row is
+    # The wireless sensors drop packets (up to 12 % of a trial, runs of up to 65): a row is
     # not a sample period. Each sample sits at its PacketCounter, the time base the reference
     # events are counted in, and the three sensors are put on that common grid, the dropped
     # packets linearly interpolated.
