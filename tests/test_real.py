@@ -267,6 +267,10 @@ def test_real_protocol_on_one_trial_each(real_dir, tmp_path):
     assert shoe["cadence_err_pct"] == pytest.approx(shoe["steps_err_pct"], abs=1e-9)
     assert shoe["stride_mae_m"] < 0.10 and shoe["path_final_pct"] < 1.0
     assert abs(ours[("ipol-gait", "lower_back")]["cadence_err_pct"]) < 3
+    # a foot's stance against ipol-gait's foot-off events: both near 60 % of the stride
+    foot = ours[("ipol-gait", "right_foot")]
+    assert 50 < foot["stance_ref"] < 70 and 50 < foot["stance_est"] < 70
+    assert foot["stance_err_pp"] == pytest.approx(foot["stance_est"] - foot["stance_ref"])
 
 
 # ---- heights, consistency and the report's gait --------------------------------------------

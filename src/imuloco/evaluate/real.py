@@ -127,11 +127,13 @@ def path_errors(est_times: np.ndarray, est_xy: np.ndarray, ref_times: np.ndarray
             "distance_m": walked}
 
 
-def _bout_rows(gait: SensorGait, trial: RealTrial, ref_ic: np.ndarray, per_contact: int
-               ) -> list[dict[str, float]]:
-    """Cadence, stride length and speed against each reference bout."""
+def _bout_rows(gait: SensorGait, trial: RealTrial, ref_ic: np.ndarray, per_contact: int,
+               side: str | None = None) -> list[dict[str, float]]:
+    """Cadence, stride length and speed against each reference bout, and a foot's stance
+    when the reference has that foot's foot-off events (``side``)."""
+    ref = trial.reference
     out = []
-    for b in trial.reference.bouts:
+    for b in ref.bouts:
         w = gait.window(b.start - IC_TOLERANCE_S, b.end + IC_TOLERANCE_S).summary()
         inside = ref_ic[(ref_ic >= b.start - 1e-9) & (ref_ic <= b.end + 1e-9)]
         ref_cad = (b.cadence_spm if trial.dataset == "mobilise-d-lab"
@@ -148,9 +150,13 @@ def _bout_rows(gait: SensorGait, trial: RealTrial, ref_ic: np.ndarray, per_conta
                                           (gait.initial_contacts <= b.end)]
             w["cadence_spm"] = 60.0 * per_contact * len(inner) / (b.end - b.start)
             w["speed_mps"] = w["stride_length_m"] * w["cadence_spm"] / 120.0
-        out.append({"cadence_ref": ref_cad, "cadence_est": w["cadence_spm"],
-                    "stride_ref_m": ref_len, "stride_est_m": w["stride_length_m"],
-                    "speed_ref_mps": ref_speed, "speed_est_mps": w["speed_mps"]})
+        row = {"cadence_ref": ref_cad, "cadence_est": w["cadence_spm"],
+               "stride_ref_m": ref_len, "stride_est_m": w["stride_length_m"],
+               "speed_ref_mps": ref_speed, "speed_est_mps": w["speed_mps"]}
+        if side in ref.final_contacts:
+            row.update(stance_est=w["stance_pct"], stance_ref=reference_stance(
+                ref.initial_contacts[side], ref.final_contacts[side], b.start, b.end))
+        out.append(row)
     return out
 
 
@@ -163,17 +169,6 @@ def reference_stance(ic: np.ndarray, fc: np.ndarray, start: float, end: float) -
         if start <= a and b <= end and len(off) == 1:
             shares.append((off[0] - a) / (b - a))
     return 100.0 * float(np.mean(shares)) if shares else math.nan
-
-
-def _stance(gait: SensorGait, trial: RealTrial, side: str) -> dict[str, float]:
-    """Mean stance (%) of the estimate and of the reference over the bouts, and the mean
-    per-bout difference in percentage points."""
-    ref = trial.reference
-    pairs = [(gait.window(b.start - IC_TOLERANCE_S, b.end + IC_TOLERANCE_S).summary()[
-        "stance_pct"], reference_stance(ref.initial_contacts[side], ref.final_contacts[side],
-                                        b.start, b.end)) for b in ref.bouts]
-    return {"stance_est": _mean([e for e, _ in pairs]), "stance_ref": _mean([r for _, r in pairs]),
-            "stance_err_pp": _mean([e - r for e, r in pairs])}
 
 
 def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[str, Any]:
@@ -219,7 +214,7 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
                    ic_bias_ms=1e3 * float(np.mean(errs)) if len(errs) else math.nan)
     row["steps_err_pct"] = _pct(row["steps_est"], row["steps_ref"])
     bouts = _bout_rows(gait, trial, ref_ic if trial.dataset != "pyshoe-vicon" else
-                       np.zeros(0), per_contact)
+                       np.zeros(0), per_contact, side if per_contact == 2 else None)
     for key in ("cadence", "stride", "speed"):
         unit = {"cadence": "", "stride": "_m", "speed": "_mps"}[key]
         r = _mean([b[f"{key}_ref{unit}"] for b in bouts])
@@ -230,8 +225,10 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
     row["stride_err_m"] = _mean([b["stride_est_m"] - b["stride_ref_m"] for b in bouts])
     row["bouts_ref"] = len(bouts)
     row["bouts_measured"] = sum(bool(np.isfinite(b["stride_est_m"])) for b in bouts)
-    if side and per_contact == 2 and side in ref.final_contacts:
-        row.update(_stance(gait, trial, side))
+    if bouts and "stance_est" in bouts[0]:  # a foot against its foot-off events
+        row["stance_est"] = _mean([b["stance_est"] for b in bouts])
+        row["stance_ref"] = _mean([b["stance_ref"] for b in bouts])
+        row["stance_err_pp"] = _mean([b["stance_est"] - b["stance_ref"] for b in bouts])
     if trial.dataset == "pyshoe-vicon" and gait.path is not None:
         if ref.stride_points is not None and len(ref.stride_points) >= 2:
             xy = gait.path[:, :2] * ([1.0, -1.0] if ref.path_z_down else [1.0, 1.0])
