@@ -600,7 +600,7 @@ class LearnedStream(Stream):
 
     def step(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         m = self.model
-        with torch.no_grad():
+        with torch.inference_mode():
             x = m._inputs(np.asarray(sample)[None])
             feats, self.h = m.net_.encode(x[None], self.h)
             p, logit, logvar = m.net_.heads(feats)
