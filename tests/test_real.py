@@ -100,46 +100,6 @@ def test_contacts_fall_back_to_the_unfiltered_gyroscope(demo_rec, monkeypatch):
     assert np.abs(g.initial_contacts - walk).max() < 0.1
 
 
-def _pivot(acc_rest: np.ndarray, rate: float, yaw_deg: float = 60.0, lift_deg: float = 15.0,
-           shift_m: float = 0.05, dur: float = 0.6, still: float = 0.3):
-    """A resting foot's signals (acc, gyro (T, 3), m/s² and rad/s) while it lifts its heel by
-    ``lift_deg``, turns ``yaw_deg`` about the vertical and lands ``shift_m`` away (minimum-jerk
-    profiles over ``dur`` s), with ``still`` s at rest before and after."""
-    from scipy.spatial.transform import Rotation
-
-    g = float(np.linalg.norm(acc_rest))
-    r0, _ = Rotation.align_vectors([[0.0, 0.0, 1.0]], [acc_rest / g])  # sensor -> level
-    s = np.linspace(0.0, 1.0, round(dur * rate) + 1)
-    mj = 10 * s**3 - 15 * s**4 + 6 * s**5
-    rot = (Rotation.from_euler("z", np.radians(yaw_deg) * mj[:, None])
-           * Rotation.from_euler("y", np.radians(lift_deg) * np.sin(np.pi * s)[:, None]) * r0)
-    a = np.zeros((len(s), 3))
-    a[:, 0] = np.gradient(np.gradient(shift_m * mj, 1 / rate), 1 / rate)
-    acc = rot.inv().apply(a + [0.0, 0.0, g])
-    w = (rot[:-1].inv() * rot[1:]).as_rotvec() * rate
-    k = round(still * rate)
-    return (np.vstack([np.tile(acc_rest, (k, 1)), acc, np.tile(acc_rest, (k, 1))]),
-            np.vstack([np.zeros((k, 3)), w, w[-1:], np.zeros((k, 3))]))
-
-
-def test_a_pivot_in_a_stance_is_no_step(demo_rec):
-    """A foot that turns 60 degrees in place in the middle of a walk (heel lifted, landing
-    5 cm away) swings without walking a stride (Mobilise-D: a stride is more than 0.15 m):
-    no contact, no stride of its own; the stride around it runs to the next contact."""
-    t, acc, gyro = demo_rec.times, demo_rec.acc[:, 0], demo_rec.gyro[:, 0]
-    walk = foot_gait(t, acc, gyro, "right")
-    r = foot_track(t, acc, gyro).rest[3]
-    pa, pg = _pivot(acc[r], 100.0)
-    acc2, gyro2 = np.vstack([acc[:r], pa, acc[r:]]), np.vstack([gyro[:r], pg, gyro[r:]])
-    t2 = t[0] + np.arange(len(acc2)) / 100.0
-    assert len(foot_track(t2, acc2, gyro2).starts) == len(foot_track(t, acc, gyro).starts) + 1
-    g = foot_gait(t2, acc2, gyro2, "right")
-    assert len(g.initial_contacts) == len(walk.initial_contacts) >= 6
-    assert g.summary()["steps"] == walk.summary()["steps"]
-    assert len(g.strides) == len(walk.strides)
-    assert min(s["length_m"] for s in g.strides) > 1.0  # the walk's strides are 1.3-1.4 m
-
-
 def test_reference_stance_reads_the_foot_off_between_two_contacts():
     ic = np.array([0.0, 1.0, 2.0, 5.0])
     fc = np.array([0.6, 1.7, 4.0])  # the last stride (2 to 5 s, a pause) lies outside

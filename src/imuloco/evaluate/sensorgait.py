@@ -8,9 +8,7 @@
   acceleration; its IC search on the gyroscope low-passed at 6 Hz) on strides segmented at
   the swings' starts. gaitmap's Barth DTW segmentation and Rampp event detection live in
   ``gaitmap_mad`` (AGPL-3.0), which this MIT package does not depend on; the swings need no
-  template. A stride is Mobilise-D's (Kluge et al. 2021; mobgap's ``StrideSelection``):
-  0.2-3.0 s long and more than 0.15 m; a swing moving the foot less (a pivot in a turn)
-  is no step, and its stance runs on to the next one (:func:`walking_strides`).
+  template.
 - Lower back (``lower_back``, L5): Mobilise-D's published pipeline from ``mobgap`` (Iluz gait
   sequence detection, Ionescu initial contacts, Ullrich left/right, Zijlstra's inverted-pendulum
   step length with Mobilise-D's published scaling factor, stride selection and walking-bout
@@ -27,7 +25,6 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field
-from itertools import pairwise
 
 import numpy as np
 
@@ -184,68 +181,25 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
                          .reindex(seg.index))
     ic = found[0]["ic"].fillna(found[1]["ic"]).to_numpy(float)
     tc = found[1]["tc"].to_numpy(float)
-    rest_xy = pos[rest, :2]
-    steps, pairs = walking_strides(ic, rest_xy, track.rate)
     rows = []
-    # stride (a, b): from contact a to contact b, the swings between them that are not steps
-    # part of its stance; its length is the distance between the foot's rest positions after
-    # those contacts, its toe off the one of the swing that ends it
-    for a, b in pairs:
-        ia, ib = int(ic[a]), int(ic[b])
-        stance = (tc[b] - ia) / (ib - ia) if np.isfinite(tc[b]) else math.nan
+    # stride k: from its initial contact to the next one; its length is the distance between
+    # the foot's rest positions of the stances that follow those contacts
+    for k in range(len(ic) - 1):
+        if not (np.isfinite(ic[k]) and np.isfinite(ic[k + 1])):
+            continue
+        a, b = int(ic[k]), int(ic[k + 1])
+        length = float(np.linalg.norm(pos[rest[k + 2], :2] - pos[rest[k + 1], :2])) if (
+            k + 2 < len(rest)) else math.nan
+        stance = (tc[k + 1] - a) / (b - a) if np.isfinite(tc[k + 1]) else math.nan
         if not (0 < stance < 1):
             stance = math.nan
-        rows.append(stride_row(foot, float(t[ia]), float(t[ib]),
-                               float(np.linalg.norm(rest_xy[b + 1] - rest_xy[a + 1])), stance))
-    ics = t[ic[steps].astype(int)]
+        rows.append(stride_row(foot, float(t[a]), float(t[b]), length, stance))
+    ics = t[ic[np.isfinite(ic)].astype(int)]
     if len(rows) < MIN_STRIDES:
-        return not_measured(placement, FOOT_METHOD, f"{len(rows)} walking stride(s) with both "
+        return not_measured(placement, FOOT_METHOD, f"{len(rows)} stride(s) with both "
                             "contacts found: no walking")
     return SensorGait(placement, FOOT_METHOD, strides=rows, initial_contacts=ics,
                       steps_per_contact=2, times=t, path=pos)
-
-
-def walking_strides(ic: np.ndarray, rest_xy: np.ndarray, rate: float
-                    ) -> tuple[np.ndarray, list[tuple[int, int]]]:
-    """The contacts that are steps and the strides between them, by Mobilise-D's definition
-    of a stride (Kluge et al. 2021; mobgap's ``StrideSelection`` with its ``mobilised``
-    parameters: 0.2-3.0 s long, more than 0.15 m).
-
-    ic : ndarray (K,), the sample of the contact after each swing (NaN where none was found).
-    rest_xy : ndarray (K + 1, 2), metres, the foot's floor position at rest before the first
-        swing and after each swing.
-
-    Returns the mask (K,) of the contacts that are steps and the strides ``(a, b)`` between
-    two of them (indices into ``ic``) that Mobilise-D calls strides. A swing that moves the
-    foot less than the shortest stride (a pivot in a turn, a shuffle) is no step: its contact
-    is dropped and the stride runs on to the next contact, until every stride is long enough
-    (the first contact, after a swing no stride measures, is kept). A stride too short or too
-    long in time (a pause) is not a stride, but its contacts are steps.
-    """
-    import pandas as pd
-
-    try:
-        from mobgap.wba import StrideSelection
-    except ImportError as e:
-        raise MissingExtraError("foot-sensor gait", f"mobgap ({e})", "gait") from None
-    valid = np.isfinite(ic)
-    steps = valid.copy()
-    while True:
-        idx = np.flatnonzero(steps)
-        # consecutive steps with no contact between them left unfound
-        pairs = [(a, b) for a, b in pairwise(idx) if valid[a:b + 1].all()]
-        if not pairs:
-            return steps, []
-        a, b = np.array(pairs).T
-        strides = pd.DataFrame({"start": ic[a], "end": ic[b], "stride_length_m": np.linalg.norm(
-            rest_xy[b + 1] - rest_xy[a + 1], axis=1)})
-        checks = StrideSelection(**StrideSelection.PredefinedParameters.mobilised).filter(
-            strides, sampling_rate_hz=rate).check_results_
-        short = ~checks["stride_length_thres"].to_numpy(bool)
-        if not short.any():
-            keep = checks["stride_duration_thres"].to_numpy(bool)
-            return steps, [(int(i), int(j)) for i, j, k in zip(a, b, keep) if k]
-        steps[b[short]] = False
 
 
 BACK_METHOD = ("mobgap MobilisedPipelineHealthy (Mobilise-D P1: GsdIluz, IcdIonescu, LrcUllrich, "
