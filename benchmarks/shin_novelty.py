@@ -1,7 +1,7 @@
 """Why the shipped shin model flags every frame of the real shin phone: a measurement.
 
     python benchmarks/shin_novelty.py [--data ../shared/data] [-o TABLE.md] [--plot CYCLES.png]
-    python benchmarks/shin_novelty.py --models A.npz,B.npz [-o TABLE.md]
+    python benchmarks/shin_novelty.py --models A.npz,B.npz [--min-still S] [-o TABLE.md]
 
 The shipped ``learned_right_ankle.npz`` reads the real ``realworld-shin`` walk (its first two
 minutes after the first 10 s, calibrated as ``reconstruct`` does) and virtual right-ankle
@@ -35,15 +35,15 @@ CHANNELS = ("acc x (left)", "acc y (up the shin)", "acc z (forward)", "gyro x (s
 CMU_WALKS = ("002_01", "002_02", "005_01", "006_01", "007_01", "007_02", "007_03")
 
 
-def real_walk(data: Path, seconds: float | None = 120.0):
+def real_walk(data: Path, seconds: float | None = 120.0, min_still_s: float = 1.0):
     """The calibrated real shin phone's walk from 10 s in (``seconds`` long; None: to 10 s
-    before its end)."""
+    before its end); ``min_still_s`` as for :func:`imuloco.sensors.calibration.calibrate`."""
     from imuloco.core.recording import Recording
     from imuloco.sensors.calibration import calibrate
     from imuloco.sensors.reallog import read_log
 
     rec, _ = read_log(data / "realworld-shin" / "acc_walking_shin.csv", placement="right_ankle")
-    rec, _ = calibrate(rec)
+    rec, _ = calibrate(rec, min_still_s)
     end = rec.times[-1] - 10 if seconds is None else rec.times[0] + 10 + seconds
     k = (rec.times > rec.times[0] + 10) & (rec.times < end)
     return Recording(rec.times[k], rec.acc[k], rec.gyro[k], list(rec.placements))
@@ -135,7 +135,7 @@ def novelty_rows(data: Path) -> list[str]:
     return lines
 
 
-def model_rows(data: Path, files: list[str]) -> list[str]:
+def model_rows(data: Path, files: list[str], min_still_s: float = 1.0) -> list[str]:
     """The ``--models`` table (module docstring)."""
     from imuloco.app.pipeline import shipped_model
     from imuloco.evaluate.gait import gait_parameters, plausibility, signal_cadence
@@ -145,14 +145,16 @@ def model_rows(data: Path, files: list[str]) -> list[str]:
     from imuloco.sensors.simulate import simulate
     from imuloco.sensors.strap import random_strap
 
-    real = real_walk(data, None)
+    real = real_walk(data, None, min_still_s)
+    force = real.acc[:, 0].mean(0)
     rng = np.random.default_rng(42)
     walks = [read_motion(f) for f in
              sorted((data / "bandai-namco-1").glob("*_walk_normal_*.bvh"))[:4]]
     rigid = [simulate(w, ["right_ankle"], 100.0, "phone", 7) for w in walks]
     worn = [simulate(w, ["right_ankle"], 100.0, "phone", 7, random_strap(rng)) for w in walks]
     head = (f"Real walk: {real.times[-1] - real.times[0]:.0f} s, the signal's own cadence "
-            f"{signal_cadence(real):.1f} steps/min.")
+            f"{signal_cadence(real):.1f} steps/min; calibrated mean inclination "
+            f"{np.degrees(np.arctan2(force[2], force[1])):.1f} deg.")
     cols = ("| model | real: flagged % | novelty / threshold | cadence | stance % L / R | "
             "double support % | stride m | foot skate cm/s | virtual rigid: flagged % | "
             "virtual strapped: flagged % |")
@@ -239,13 +241,16 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=Path("../shared/data"))
     ap.add_argument("-o", "--output", type=Path, help="also write the table to this file")
     ap.add_argument("--plot", type=Path, help="write the gait-cycle figure to this PNG")
+    ap.add_argument("--min-still", type=float, default=1.0,
+                    help="the calibration's seconds of stillness needed to use gravity at rest "
+                    "(inf: always the walking-inclination prior; --models only)")
     ap.add_argument("--models", help="compare these right-ankle model files (comma-separated; "
                     "'shipped': the shipped one)")
     args = ap.parse_args()
     logging.disable(logging.WARNING)  # the real log's sampling gaps are reported, not errors
     if args.plot:
         plot_cycles(args.data, args.plot)
-    table = "\n".join(model_rows(args.data, args.models.split(",")) if args.models else
+    table = "\n".join(model_rows(args.data, args.models.split(","), args.min_still) if args.models else
                       novelty_rows(args.data))
     print(table)
     if args.output:
