@@ -358,6 +358,10 @@ def test_an_ensemble_refuses_members_that_differ(tiny_model, sample_db):
                                                                       "phone", seed=0)
     with pytest.raises(InputError, match=r"member 1 differs from member 0 in lag \(2 vs 8\)"):
         ensemble([tiny_model, lagged])
+    two = get_method("learned", **dict(TINY, epochs=1)).fit(db, ["right_ankle", "right_wrist"],
+                                                           "phone", seed=0)
+    with pytest.raises(InputError, match=r"member 1 differs .*placements_.*input_map_"):
+        ensemble([tiny_model, two])
     with pytest.raises(InputError, match="at least 2"):
         ensemble([tiny_model])
     mean = get_method("mean").fit(db, ["right_ankle"], "phone", seed=0)

@@ -498,11 +498,11 @@ def ensemble(models: Sequence[Learned]) -> Learned:
                              + (" (an ensemble)" if isinstance(m, Learned) else ""))
         m.check_fitted()
         diff = [k for k in _SHARED if getattr(m, k) != getattr(first, k)]
-        if m.skeleton_.names != first.skeleton_.names or not np.allclose(
-                m.skeleton_.offsets, first.skeleton_.offsets):
+        if m.skeleton_.names != first.skeleton_.names or not _same(m.skeleton_.offsets,
+                                                                   first.skeleton_.offsets):
             diff.append("skeleton_")
         diff += [k for k in ("input_map_", "frames_")
-                 if not np.allclose(getattr(m, k), getattr(first, k))]
+                 if not _same(getattr(m, k), getattr(first, k))]
         if diff:
             raise InputError(f"ensemble member {i} differs from member 0 in "
                              + ", ".join(f"{k} ({getattr(m, k)!r} vs {getattr(first, k)!r})"
@@ -527,6 +527,10 @@ def ensemble(models: Sequence[Learned]) -> Learned:
                      "train_seconds": round(sum(p.get("train_seconds", 0.0)
                                                 for p in protocols), 1)}
     return new
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return np.shape(a) == np.shape(b) and bool(np.allclose(a, b))
 
 
 def _mean_novelty(model: Learned, members: Sequence[Learned]) -> None:
