@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,9 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from imuloco.core.mirror import _reflection, mirror, mirror_frames, mirror_pairs
+from imuloco.errors import InputError
 from imuloco.methods import get_method, load_model
+from imuloco.methods.learned.method import ensemble
 from imuloco.methods.learned.model import Reconstructor, TorchFK, rotation_from_6d
 from imuloco.methods.training import synthesize
 from imuloco.ops.heading import heading_from_hips
@@ -209,22 +212,23 @@ def test_mirrored_model_twice_is_the_model(tiny_model, sample_db, test_signals):
     np.testing.assert_allclose(left._mirror_vectors(left._mirror_vectors(v)), v, atol=1e-6)
 
 
-def test_onnx_export(tiny_model, sample_db, test_signals, tmp_path):
+def test_onnx_export(tiny_model, tiny_ensemble, sample_db, test_signals, tmp_path):
     onnx = pytest.importorskip("onnx")
     from scipy.signal import lfilter
 
     from imuloco.methods.learned.export import export_onnx
 
     left = tiny_model.mirrored(sample_db.clips[:4])
-    for model in (tiny_model, left):
-        path = export_onnx(model, tmp_path / f"{model.placements_[0]}.onnx")
+    for k, model in enumerate((tiny_model, left, tiny_ensemble[0])):
+        path = export_onnx(model, tmp_path / f"{k}.onnx")
         proto = onnx.load(str(path))
         onnx.checker.check_model(proto)
         meta = {p.key: p.value for p in proto.metadata_props}
         assert meta["method"] == "learned" and model.placements_[0] in meta["placements"]
         ort = pytest.importorskip("onnxruntime")
         sess = ort.InferenceSession(str(path))
-        h = np.zeros((model.layers, 1, model.hidden), np.float32)
+        h = np.zeros(json.loads(meta["h_shape"]), np.float32)
+        assert h.shape == (model.members * model.layers, 1, model.hidden)
         lag = int(meta["lag"])
         assert lag == model.lag == 8
         fed = np.concatenate([test_signals, np.repeat(test_signals[-1:], lag, axis=0)])
@@ -292,3 +296,97 @@ def test_files_with_retired_features_load_or_are_refused(tiny_model, test_signal
     path = rewrite_params(tiny_model, tmp_path / "centered.npz", features="centered", tau=2.0)
     with pytest.raises(ModelFileError, match=r"centered\.npz.*features='centered'.*retrain"):
         load_model(path)
+
+
+@pytest.fixture(scope="module")
+def tiny_ensemble(tiny_model, sample_db):
+    """tiny_model and a second fit from another seed, as an ensemble."""
+    db = sample_db.subset([0, 4, 12])
+    other = get_method("learned", **dict(TINY, seed=1)).fit(db, ["right_ankle"], "phone", seed=0)
+    return ensemble([tiny_model, other]), other
+
+
+def test_an_ensemble_averages_its_members(tiny_ensemble, tiny_model, test_signals):
+    model, other = tiny_ensemble
+    # each member standardizes its own augmented draws: the ensemble maps between them
+    assert not np.allclose(tiny_model.x_mean_, other.x_mean_)
+    a, b, e = (m.predict(test_signals) for m in (tiny_model, other, model))
+    assert not np.allclose(a.vectors, b.vectors, atol=1e-2)
+    np.testing.assert_allclose(e.vectors, (a.vectors + b.vectors) / 2, atol=1e-5)
+    np.testing.assert_allclose(e.contacts, (a.contacts + b.contacts) / 2, atol=1e-6)
+    np.testing.assert_allclose(e.sigma ** 2, (a.sigma ** 2 + b.sigma ** 2) / 2, rtol=1e-5)
+    # novelty: the members' mean, each against its own reference
+    np.testing.assert_allclose(e.novelty, (a.novelty + b.novelty) / 2, rtol=1e-4)
+    assert model.novelty_threshold_ == pytest.approx(
+        (tiny_model.novelty_threshold_ + other.novelty_threshold_) / 2)
+    assert_stream_equals_offline(model, test_signals)
+
+
+def test_an_ensemble_file_round_trip_and_mirror(tiny_ensemble, sample_db, test_signals,
+                                                tmp_path):
+    model, _other = tiny_ensemble
+    model.save(tmp_path / "e.npz")
+    back = load_model(tmp_path / "e.npz")
+    assert back.members == 2 and [p["model_seed"] for p in back.protocol_["members"]] == [0, 1]
+    np.testing.assert_array_equal(back.predict(test_signals).vectors,
+                                  model.predict(test_signals).vectors)
+    assert back.novelty_threshold_ == model.novelty_threshold_
+    left = model.mirrored(sample_db.clips[:4])
+    assert left.members == 2 and left.placements_ == ["left_ankle"]
+    again = left.mirrored(sample_db.clips[:4])
+    np.testing.assert_allclose(again.predict(test_signals).vectors,
+                               model.predict(test_signals).vectors, atol=1e-6)
+
+
+def test_members_train_as_separate_fits_would(sample_db, test_signals):
+    db = sample_db.subset([12])
+    one = dict(TINY, epochs=1)
+    both = get_method("learned", **one, members=2).fit(db, ["right_ankle"], "phone", seed=0)
+    apart = ensemble([get_method("learned", **dict(one, seed=s)).fit(db, ["right_ankle"],
+                                                                     "phone", seed=0)
+                      for s in (0, 1)])
+    np.testing.assert_array_equal(both.predict(test_signals).vectors,
+                                  apart.predict(test_signals).vectors)
+    assert {h["member"] for h in both.history_} == {0, 1}
+    np.testing.assert_array_equal(both.predict(test_signals).novelty,
+                                  apart.predict(test_signals).novelty)
+
+
+def test_an_ensemble_refuses_members_that_differ(tiny_model, sample_db):
+    db = sample_db.subset([12])
+    lagged = get_method("learned", **dict(TINY, epochs=1, lag=2)).fit(db, ["right_ankle"],
+                                                                      "phone", seed=0)
+    with pytest.raises(InputError, match=r"member 1 differs from member 0 in lag \(2 vs 8\)"):
+        ensemble([tiny_model, lagged])
+    with pytest.raises(InputError, match="at least 2"):
+        ensemble([tiny_model])
+    mean = get_method("mean").fit(db, ["right_ankle"], "phone", seed=0)
+    with pytest.raises(InputError, match="member 1: expected a learned model"):
+        ensemble([tiny_model, mean])
+
+
+def test_cli_ensemble(tmp_path):
+    from click.testing import CliRunner
+
+    from imuloco.cli import cli
+
+    tiny = ["--param", "epochs=1", "--param", "hidden=8", "--param", "layers=1", "--param",
+            "draws=1", "--limit", "3"]
+    for s in (0, 1):
+        res = CliRunner().invoke(cli, ["train", "--method", "learned", *tiny, "--param",
+                                       f"seed={s}", "-o", str(tmp_path / f"m{s}.npz")])
+        assert res.exit_code == 0, res.output
+    out, left = tmp_path / "e.npz", tmp_path / "left.npz"
+    args = ["ensemble", str(tmp_path / "m0.npz"), str(tmp_path / "m1.npz"), "--limit", "3"]
+    res = CliRunner().invoke(cli, [*args, "-o", str(out), "--mirrored", str(left)])
+    assert res.exit_code == 0, res.output
+    model = load_model(out)
+    assert model.members == 2 and model.novelty_mean_ is not None
+    assert load_model(left).placements_ == ["left_ankle"]
+    assert (tmp_path / "e.npz.curves.png").exists()
+    before = out.read_bytes()
+    res = CliRunner().invoke(cli, [*args, "-o", str(out)])  # nothing the user has is replaced
+    assert res.exit_code != 0 and "exists" in res.output and out.read_bytes() == before
+    res = CliRunner().invoke(cli, ["ensemble", str(tmp_path / "m0.npz"), str(out), "-o",
+                                   str(tmp_path / "x.npz")])
+    assert res.exit_code == 2 and "member 1: expected a learned model of one network" in res.output

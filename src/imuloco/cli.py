@@ -441,6 +441,49 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
         click.echo(f"wrote {mirrored_path} (for {', '.join(other.placements_)})")
 
 
+@cli.command()
+@click.argument("members", nargs=-1, required=True, type=_existing_file())
+@click.option("-o", "--output", type=_file(), required=True, help="Model file to write (.npz).")
+@click.option("--mirrored", "mirrored_path", type=_file(), default=None,
+              help="Also write the ensemble of the other side's placements (right <-> left).")
+@data_options
+@force_option
+@_reading_options
+def ensemble(members: tuple[Path, ...], output: Path, mirrored_path: Path | None,
+             data_items: tuple[str, ...], limit: int | None, seed: int, force: bool, up: str,
+             skip_frames: int) -> None:
+    """Average learned models of one recipe trained from other seeds (``train --param
+    seed=K``) into one model (a deep ensemble) and write it. Its novelty is the members' mean
+    (each against its own reference); --data gives the motion --mirrored fits its mirror on.
+
+    Members train independently, so they can run at once on several cores or machines.
+    """
+    from imuloco.errors import ImulocoError
+    from imuloco.evaluate.bench import load_data
+    from imuloco.io.atomic import check_outputs
+    from imuloco.methods import load_model
+    from imuloco.methods.learned.method import ensemble as combine
+
+    check_outputs([output, mirrored_path], force)
+    try:
+        model = combine([load_model(p) for p in members])
+    except ImulocoError as e:
+        raise click.UsageError(f"{e} ({', '.join(map(str, members))})") from None
+    model.save(output, overwrite=True)  # checked above
+    click.echo(f"wrote {output}: {len(members)} members")
+    for path in model.write_training_report(output):
+        click.echo(f"wrote {path}")
+    if mirrored_path is not None:
+        db = load_data(_folders(data_items), limit, progress=True, up=up,
+                       skip_frames=skip_frames)
+        try:
+            other = model.mirrored(db.clips[:: max(len(db) // MIRROR_CLIPS, 1)])
+        except ValueError as e:
+            raise click.UsageError(f"--mirrored: {e}") from None
+        other.save(mirrored_path, overwrite=True)  # checked above
+        click.echo(f"wrote {mirrored_path} (for {', '.join(other.placements_)})")
+
+
 @cli.command("export-onnx")
 @click.option("--model", "model_path", type=_existing_file(), default=None,
               help="A model file written by `imuloco train` (method learned) [default: the "

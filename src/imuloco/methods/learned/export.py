@@ -4,7 +4,8 @@ The exported graph is the whole per-frame network with its input standardization
 de-standardization (and, for a mirrored model, the mirroring) baked in:
 
 - inputs ``signals`` (1, T, 6 S) raw channels at the model rate (m/s^2, rad/s; sensor order
-  and fps in the metadata) and ``h`` (layers, 1, hidden), zeros at the start;
+  and fps in the metadata) and ``h`` (the metadata's ``h_shape``: layers, 1, hidden; members
+  x layers for an ensemble), zeros at the start;
 - outputs ``pose`` (1, T, 6 J + 4) pose vectors (:mod:`imuloco.methods.pose`), ``contacts``
   (1, T, 4) probabilities, ``sigma`` (1, T) metres, ``h_out`` to feed back, and
   ``novelty_frame`` (1, T): each frame's novelty before its causal smoothing (NaN for a model
@@ -74,8 +75,9 @@ class _Exported(nn.Module):
         p, logit, logvar = self.net.heads(feats)
         sigma = torch.exp(0.5 * logvar[..., 0])
         if self.novelty:
-            d = feats - self.n_mean
-            novelty = ((d @ self.n_precision) * d).sum(-1)
+            prec = self.n_precision if self.n_precision.dim() == 3 else self.n_precision[None]
+            d = (feats - self.n_mean).reshape(*feats.shape[:2], prec.shape[0], 1, prec.shape[1])
+            novelty = ((d @ prec) * d).sum((-1, -2, -3))  # one block per ensemble member
         else:
             novelty = torch.full_like(sigma, float("nan"))
         pose = p * self.y_std + self.y_mean
@@ -125,6 +127,7 @@ def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Pa
                 "parents": json.dumps([int(p) for p in sk.parents]),
                 "offsets_m": json.dumps(np.asarray(sk.offsets).round(6).tolist()),
                 "contacts": json.dumps(list(CONTACT_PARTS)), "lag": str(model.lookahead),
+                "h_shape": json.dumps(list(h.shape)),
                 "channels": "per sensor acc x,y,z (m/s^2) then gyro x,y,z (rad/s), sensor "
                             "frame"}
         if model.novelty_mean_ is not None:

@@ -9,12 +9,16 @@ the offline result frame for frame.
 
 A model for the other leg (:meth:`Learned.mirrored`) reuses the weights: the other leg's
 signals are mapped onto this leg's sensor axes and the predicted pose is mirrored back.
+
+Several models of one recipe trained from other seeds read as one (:func:`ensemble`, or
+``members`` > 1): their outputs are averaged (:class:`.model.Ensemble`).
 """
 
 from __future__ import annotations
 
 import json
 import zlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -29,7 +33,7 @@ from imuloco.methods import pose
 from imuloco.methods.base import Method, Reconstruction, Stream, calibrated_error
 from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
-from imuloco.methods.learned.model import CONTACT_PARTS, Reconstructor, TorchFK
+from imuloco.methods.learned.model import CONTACT_PARTS, Ensemble, Reconstructor, TorchFK
 from imuloco.methods.postprocess import FootPinner, pin_feet
 from imuloco.methods.training import Example, TrainingSet
 from imuloco.ops.kinematics import fk
@@ -101,6 +105,11 @@ class Learned(Method):
         round).
     bidirectional : a GRU that reads the recording both ways (offline only: no :meth:`stream`;
         ``lag`` is then not needed and ignored).
+    members : networks trained from seeds ``seed``, ``seed + 1``, ... (each with its own
+        augmented draws, as separate ``train`` runs would be) and averaged (:func:`ensemble`).
+        On the real shin walk four 5-epoch strap models' average walked normally where one of
+        them did not (docs/results/learned/experiments.md, ninth round). Costs ``members``
+        times the training and the reconstruction.
     threads : torch CPU threads while fitting (None: torch's default). Use 1 on a machine
         shared with other jobs: torch's thread pool stalls when its cores are taken (a batch
         took 10x longer with 2 threads than with 1 on a loaded 2-core machine).
@@ -112,7 +121,7 @@ class Learned(Method):
     # files from before the look-ahead and the heavier acceleration term
     legacy_params: ClassVar[dict[str, Any]] = {"lag": 0, "accel_weight": 30.0,
                                                "proportions": 0.0, "bidirectional": False,
-                                               "reverse": 0.0, "strap": 0.0}
+                                               "reverse": 0.0, "strap": 0.0, "members": 1}
     # inputs centred by a causal running mean (``features="centered"``, time constant ``tau``)
     # measured worse (4.06 vs 3.94 cm, docs/results/learned/experiments.md) and were removed
     retired_params: ClassVar[dict[str, Any]] = {"features": "raw", "tau": None}
@@ -123,8 +132,8 @@ class Learned(Method):
                  validation: float = 0.05, dropout: float = 0.0, weight_decay: float = 1e-4,
                  position_weight: float = 10.0, accel_weight: float = 150.0, lag: int = 8,
                  proportions: float = 0.1, reverse: float = 0.3, strap: float = 0.0,
-                 bidirectional: bool = False, threads: int | None = None, seed: int = 0
-                 ) -> None:
+                 bidirectional: bool = False, members: int = 1, threads: int | None = None,
+                 seed: int = 0) -> None:
         self.hidden = hidden
         self.layers = layers
         self.epochs = epochs
@@ -145,6 +154,7 @@ class Learned(Method):
         self.reverse = reverse
         self.strap = strap
         self.bidirectional = bidirectional
+        self.members = members
         self.threads = threads
         self.seed = seed
 
@@ -152,6 +162,12 @@ class Learned(Method):
     def learn(self, data: TrainingSet, progress: bool = False) -> None:
         if self.threads:
             torch.set_num_threads(int(self.threads))
+        if self.members > 1:
+            one = {**self.get_params(), "members": 1}
+            combined = ensemble([Learned(**{**one, "seed": self.seed + k}).fit_set(data, progress)
+                                 for k in range(int(self.members))])
+            self.set_state(*combined.get_state())
+            return
         train_ex, val_ex = self._validation_split(data.examples)
         sk = data.skeleton
         try:
@@ -267,8 +283,12 @@ class Learned(Method):
 
         if self.novelty_mean_ is None:
             return np.full(len(feats), np.nan)
-        d = feats - self.novelty_mean_
-        d2 = np.einsum("ti,ij,tj->t", d, self.novelty_precision_, d) / d.shape[1]
+        p = self.novelty_precision_
+        p = p if p.ndim == 3 else p[None]  # an ensemble's: one block per member
+        d = (feats - self.novelty_mean_).reshape(len(feats), len(p), -1)
+        # einsum, not a BLAS product: numpy's BLAS threads made a stream's step 6 ms slower
+        # on a busy 2-core machine
+        d2 = np.einsum("tki,kij,tkj->t", d, p, d) / (d.shape[1] * d.shape[2])
         a = self.novelty_alpha_
         prev = d2[0] if state is None else state * self.novelty_scale_
         if len(d2) == 1:  # a stream's step: the recursion below, without lfilter's overhead
@@ -443,11 +463,88 @@ class Learned(Method):
             self.novelty_alpha_ = float(values["novelty_alpha"])
             self.novelty_scale_ = float(values["novelty_scale"])
             self.novelty_threshold_ = float(values["novelty_threshold"])
-        self.net_ = Reconstructor(int(values["channels"]), int(values["pose_dim"]), self.hidden,
-                                  self.layers, self.dropout, self.bidirectional)
+        shape = {"channels": int(values["channels"]), "pose_dim": int(values["pose_dim"]),
+                 "hidden": self.hidden, "layers": self.layers, "dropout": self.dropout,
+                 "bidirectional": self.bidirectional}
+        self.net_ = (Ensemble.of_size(int(self.members), **shape) if self.members > 1
+                     else Reconstructor(**shape))
         self.net_.load_state_dict({k[4:]: torch.as_tensor(arrays[k]) for k in arrays
                                    if k.startswith("net.")})
         self.net_.eval()
+
+
+# what members of one ensemble must share: they read the same signals and write the same poses
+_SHARED = ("placements_", "noise_", "fps_", "channels_", "lag", "bidirectional", "hidden",
+           "layers", "output_mirror_")
+
+
+def ensemble(models: Sequence[Learned]) -> Learned:
+    """One model that averages ``models`` (:class:`.model.Ensemble`): the same placements,
+    noise, rate, skeleton, look-ahead, network shape and leg, trained from other seeds.
+
+    The result keeps the first model's standardization and hyperparameters (``members`` set,
+    ``seed`` the first's), each member's protocol and history, the members' mean novelty
+    (:func:`_mean_novelty`) and no calibration (``imuloco calibrate``). Raises InputError
+    naming the member and what differs.
+    """
+    models = list(models)
+    if len(models) < 2:
+        raise InputError(f"an ensemble needs at least 2 learned models, got {len(models)}")
+    first = models[0]
+    for i, m in enumerate(models):
+        if not isinstance(m, Learned) or isinstance(getattr(m, "net_", None), Ensemble):
+            raise InputError(f"ensemble member {i}: expected a learned model of one network, "
+                             f"got {type(m).__name__}"
+                             + (" (an ensemble)" if isinstance(m, Learned) else ""))
+        m.check_fitted()
+        diff = [k for k in _SHARED if getattr(m, k) != getattr(first, k)]
+        if m.skeleton_.names != first.skeleton_.names or not np.allclose(
+                m.skeleton_.offsets, first.skeleton_.offsets):
+            diff.append("skeleton_")
+        diff += [k for k in ("input_map_", "frames_")
+                 if not np.allclose(getattr(m, k), getattr(first, k))]
+        if diff:
+            raise InputError(f"ensemble member {i} differs from member 0 in "
+                             + ", ".join(f"{k} ({getattr(m, k)!r} vs {getattr(first, k)!r})"
+                                         if k not in ("skeleton_", "input_map_", "frames_")
+                                         else k for k in diff))
+    new = Learned(**{**first.get_params(), "members": len(models)})
+    new.set_setup(first.skeleton_, first.fps_, first.placements_, first.noise_)
+    new.x_mean_, new.x_std_, new.y_mean_, new.y_std_ = (first.x_mean_, first.x_std_,
+                                                        first.y_mean_, first.y_std_)
+    new.input_map_, new.frames_ = first.input_map_, first.frames_
+    new.output_mirror_ = first.output_mirror_
+    # member k standardized its own augmented draws: maps to and from the first's folded in
+    new.net_ = Ensemble([Ensemble.restandardized(
+        m.net_, first.x_std_ / m.x_std_, (first.x_mean_ - m.x_mean_) / m.x_std_,
+        m.y_std_ / first.y_std_, (m.y_mean_ - first.y_mean_) / first.y_std_) for m in models]
+    ).eval()
+    new.history_ = [{"member": k, **row} for k, m in enumerate(models) for row in m.history_]
+    new.calibration_ = None
+    _mean_novelty(new, models)
+    protocols = [{**getattr(m, "protocol_", {}), "model_seed": int(m.seed)} for m in models]
+    new.protocol_ = {**protocols[0], "members": protocols,
+                     "train_seconds": round(sum(p.get("train_seconds", 0.0)
+                                                for p in protocols), 1)}
+    return new
+
+
+def _mean_novelty(model: Learned, members: Sequence[Learned]) -> None:
+    """An ensemble's novelty: its members' mean novelty, each against its own reference
+    (fitted in training on its augmented draws), as one distance on the features side by side
+    (the precision one (W, W) block per member); flagged above the members' mean threshold,
+    which flags no more than each member's 1 % of held-out training frames on average. None
+    when a member has no reference."""
+    if any(m.novelty_mean_ is None for m in members):
+        model.novelty_mean_ = None
+        return
+    model.novelty_mean_ = np.concatenate([m.novelty_mean_ for m in members])
+    # Learned._novelty divides the distance by the feature count: K W here, W per member
+    model.novelty_precision_ = np.stack([m.novelty_precision_ / m.novelty_scale_
+                                         for m in members])
+    model.novelty_scale_ = 1.0
+    model.novelty_alpha_ = float(members[0].novelty_alpha_)
+    model.novelty_threshold_ = float(np.mean([m.novelty_threshold_ for m in members]))
 
 
 def _partner(placement: str) -> str:
@@ -503,7 +600,7 @@ class LearnedStream(Stream):
 
     def step(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         m = self.model
-        with torch.no_grad():
+        with torch.inference_mode():
             x = m._inputs(np.asarray(sample)[None])
             feats, self.h = m.net_.encode(x[None], self.h)
             p, logit, logvar = m.net_.heads(feats)

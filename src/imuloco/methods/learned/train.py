@@ -333,20 +333,25 @@ def plot_history(history: list[dict], path: str | Path) -> Path | None:
         import matplotlib.pyplot as plt
     except ImportError:
         return None
-    epochs = [h["epoch"] for h in history]
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for key in ("total", "pose", "contact"):
-        axes[0].plot(epochs, [h[key] for h in history], label=key)
+    members = sorted({h.get("member", 0) for h in history})  # an ensemble's, one by one
+    for m in members:
+        rows = [h for h in history if h.get("member", 0) == m]
+        epochs = [h["epoch"] for h in rows]
+        tag = f" ({m})" if len(members) > 1 else ""
+        for key in ("total", "pose", "contact"):
+            axes[0].plot(epochs, [h[key] for h in rows], label=key + tag)
+        axes[1].plot(epochs, [100 * h["position"] for h in rows], label="training" + tag)
+        if "val_position" in rows[0]:
+            axes[1].plot(epochs, [100 * h["val_position"] for h in rows],
+                         label="validation" + tag)
     axes[0].set_xlabel("epoch")
     axes[0].set_title("training losses")
-    axes[0].legend()
-    axes[1].plot(epochs, [100 * h["position"] for h in history], label="training")
-    if "val_position" in history[0]:
-        axes[1].plot(epochs, [100 * h["val_position"] for h in history], label="validation")
+    axes[0].legend(fontsize="small")
     axes[1].set_xlabel("epoch")
     axes[1].set_ylabel("cm")
     axes[1].set_title("mean joint position error (root-relative, heading frame)")
-    axes[1].legend()
+    axes[1].legend(fontsize="small")
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=100)
