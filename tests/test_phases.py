@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from imuloco.core.motion import Motion
+from imuloco.ops.rotations import about_y, from_rotvec, qmul, qrot
 from imuloco.phases import (
     EOM2014,
     GAIT8,
@@ -18,7 +19,13 @@ from imuloco.phases import (
     right_ahead,
     segment,
 )
-from imuloco.phases.contacts import clean_mask, foot_contacts
+from imuloco.phases.contacts import (
+    FEET,
+    MIN_FLOOR_STEPS,
+    clean_mask,
+    foot_contacts,
+    runs,
+)
 from imuloco.phases.gait import enforce_cycle, gait8_states
 
 WALKS = ["walk", "walk-turn-left", "walk-turn-right"]
@@ -145,13 +152,16 @@ def test_eom2014_steps_alternate(sample_phases):
         assert set(names) <= set(EOM2014)
 
 
-def _yawed(m: Motion, yaw: float, shift: np.ndarray) -> Motion:
-    from imuloco.ops.rotations import about_y, qmul, qrot
-
-    q = about_y(np.full(m.num_frames, yaw))
+def _turned(m: Motion, q: np.ndarray, shift: np.ndarray | float = 0.0) -> Motion:
+    """The whole motion ``m`` turned by the world rotation ``q`` (4,), then moved by ``shift``."""
+    q = np.broadcast_to(q, (m.num_frames, 4))
     rot = m.rotations.copy()
     rot[:, 0] = qmul(q, rot[:, 0])
     return Motion(m.skeleton, rot, qrot(q, m.root) + shift, m.fps, m.name)
+
+
+def _yawed(m: Motion, yaw: float, shift: np.ndarray) -> Motion:
+    return _turned(m, about_y(np.array(yaw)), shift)
 
 
 def test_contacts_and_phases_invariant_to_yaw_and_translation(sample_db):
@@ -176,6 +186,54 @@ def test_thresholds_adapt_to_skeleton_size(sample_db):
         assert any(not np.array_equal(c0[k], v) for k, v in
                    foot_contacts(small, heel_height_tol=0.04, toe_height_tol=0.1,
                                  speed_tol=1.6).items())
+
+
+def _tilted(m: Motion, rise: float) -> Motion:
+    """``m`` on a floor that rises ``rise`` metres from its first root position to the one
+    farthest from it: the whole motion turned about the horizontal axis across that line."""
+    ways = (m.root - m.root[0]) * [1.0, 0.0, 1.0]
+    span = np.linalg.norm(ways, axis=-1).max()
+    way = ways[np.argmax(np.linalg.norm(ways, axis=-1))]
+    axis = np.cross(way / span, [0.0, 1.0, 0.0])
+    return _turned(m, from_rotvec(axis * np.arctan2(rise, span)))
+
+
+def _spells(mask: np.ndarray) -> np.ndarray:
+    """(start, stop) of the True runs of a 1-D mask, shape (N, 2)."""
+    starts, stops, vals = runs(mask)
+    return np.stack([starts[vals], stops[vals]], axis=1)
+
+
+def test_contacts_follow_a_sloping_floor(sample_db):
+    """A floor rising 8 cm over the walk (as cmu-iclone's do) keeps the level clip's contacts
+    within 2 frames; one floor level per clip loses the later steps' contacts."""
+    for m in (sample_db.where(content="walk").clips[3],
+              sample_db.where(content="walk-turn-left").clips[0]):
+        flat, ramp = foot_contacts(m), _tilted(m, 0.08)
+        c, level = foot_contacts(ramp), foot_contacts(ramp, sloped_floor=False)
+        for k in flat:
+            a, b = _spells(flat[k]), _spells(c[k])
+            assert a.shape == b.shape and np.abs(a - b).max() <= 2, (m.name, k)
+        for side in FEET:
+            assert level[f"{side}_foot"].mean() < flat[f"{side}_foot"].mean() - 0.1, m.name
+
+
+def test_floor_stays_level_where_little_ground_is_covered(sample_db):
+    """Standing, or pacing to and fro over a leg length and a half: no slope is fitted (the
+    floor is one level, as before), even on a tilted clip."""
+    walk = sample_db.where(content="walk").clips[3]
+    feet = walk.part_positions([f"{s}_ankle" for s in FEET])
+    far = np.linalg.norm(feet[:, 0, [0, 2]] - feet[0, 0, [0, 2]], axis=-1)
+    short = int(np.argmax(far > 1.5 * walk.skeleton.leg_length()))
+    pace = np.tile(np.r_[np.arange(short), np.arange(short)[::-1]], 3)
+    for frames in (pace, np.zeros(60, dtype=int)):
+        m = Motion(walk.skeleton, walk.rotations[frames], walk.root[frames], walk.fps)
+        for clip in (m, _tilted(m, 0.03) if frames.any() else m):
+            c, level = foot_contacts(clip), foot_contacts(clip, sloped_floor=False)
+            for k in c:
+                assert np.array_equal(c[k], level[k]), k
+        if frames.any():  # enough steps to fit a slope, were the ground covered wide enough
+            assert sum(len(_spells(c[f"{s}_heel"])) for s in FEET) >= MIN_FLOOR_STEPS
 
 
 def test_segment_api(sample_db):

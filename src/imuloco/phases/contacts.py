@@ -4,18 +4,25 @@ A foot part (heel = ankle joint, toe = toe joint) is in contact when it is near 
 floor and nearly still, the rule of Eom et al. 2014 sec. 6.2 ("sufficiently close to the ground
 and its velocity is below a threshold", after Kim et al. 2009). Neither paper gives numbers, so
 the tolerances here are fractions of the leg length: a skeleton scaled by ``s`` (root included)
-gets the same contacts. The floor is a low percentile of each part's heights over the clip, so
-the height of the ankle joint above the sole and the floor's own level need no calibration.
+gets the same contacts. The floor is the clip's own: a low percentile of each part's heights
+over the clip, so the height of the ankle joint above the sole and the floor's own level need
+no calibration, measured from a plane that may slope where the clip covers enough ground
+(:func:`floor_under`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from imuloco.core.motion import Motion
 
 FEET = ("left", "right")
 SPEED_TOL = 0.8  # leg lengths per second (~0.65 m/s for a 0.8 m leg)
+MIN_FLOOR_SPAN = 2.0  # leg lengths of ground covered along a direction to fit a slope along it
+MIN_FLOOR_STEPS = 4  # lowest points of still spells needed to fit a slope at all
+FLOOR_ROUGHNESS = 0.01  # leg lengths (~8 mm): a step's lowest point farther off the plane than
+# this weighs in linearly, not squared (Huber loss), so a step onto something barely tilts it
 
 
 def floor_height(heights: np.ndarray, percentile: float = 5.0) -> float:
@@ -28,6 +35,60 @@ def floor_height(heights: np.ndarray, percentile: float = 5.0) -> float:
     if heights.size == 0:
         raise ValueError("floor_height: no frames")
     return float(np.percentile(heights, percentile))
+
+
+def floor_under(
+    positions: np.ndarray, still: np.ndarray, leg_length: float, percentile: float = 5.0,
+) -> np.ndarray:
+    """The floor's height under each foot part at each frame: a plane that may slope.
+
+    Some recorded floors slope: in 13 of the 16 ``cmu-iclone`` walks the ankle's lowest point
+    per step rises 5-11 cm over the 4-5 m walked, so with one floor height per clip the later
+    steps sat above the heel tolerance (~1.7 cm) and the walks were labelled 44 / 40 % stance
+    per foot, 58 / 58 % with this floor (``docs/results/learned/experiments.md``, "A second,
+    smaller defect: cmu-iclone's floor slopes"; ``benchmarks/floor_slope.py``: Bandai-Namco's
+    flat floors move under 1 point). So the floor's slope is fitted to the lowest point
+    of each still spell of each part (one per step), by least squares with a Huber loss (robust
+    to a step onto something or a foot paused in the air), as a linear function of the horizontal position
+    along each principal direction of those points that spans at least ``MIN_FLOOR_SPAN`` leg
+    lengths: none for standing or stepping in place (the floor is then level, as before), the
+    walking direction for a straight walk, both for a path that turns. The floor's level is
+    then :func:`floor_height` of the heights with the slope taken out.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (T, F, 3), world positions of a part on F feet, metres, Y up.
+    still : ndarray, shape (T, F), bool: the part is slow enough to stand.
+    leg_length : metres; the span needed to fit a slope scales with it.
+    percentile : see :func:`floor_height`.
+
+    Returns
+    -------
+    ndarray, shape (T, F), metres.
+    """
+    heights = positions[..., 1]
+    lows = []  # the lowest frame of each still spell, per foot
+    for k in range(still.shape[1]):  # a few feet, a few dozen spells: no per-frame loop
+        starts, stops, vals = runs(still[:, k])
+        lows += [positions[a + np.argmin(heights[a:b, k]), k]
+                 for a, b in zip(starts[vals], stops[vals], strict=True)]
+    slope = np.zeros_like(heights)
+    if len(lows) >= MIN_FLOOR_STEPS:
+        lows = np.array(lows)
+        centre = lows[:, [0, 2]].mean(axis=0)
+        axes = np.linalg.svd(lows[:, [0, 2]] - centre, full_matrices=False)[2].T  # (2, 2)
+        along = (lows[:, [0, 2]] - centre) @ axes
+        wide = np.ptp(along, axis=0) >= MIN_FLOOR_SPAN * leg_length
+        if wide.any():
+            # scipy's robust least squares, not sklearn's HuberRegressor: its L-BFGS takes
+            # 9-120 ms a fit here (OpenBLAS threads on tiny arrays), this 1.5 ms
+            design = np.c_[np.ones(len(lows)), along[:, wide]]
+            fit = least_squares(lambda w: design @ w - lows[:, 1],
+                                np.r_[np.median(lows[:, 1]), np.zeros(wide.sum())],
+                                jac=lambda w: design, loss="huber",
+                                f_scale=FLOOR_ROUGHNESS * leg_length)
+            slope = ((positions[..., [0, 2]] - centre) @ axes)[..., wide] @ fit.x[1:]
+    return slope + floor_height(heights - slope, percentile)
 
 
 def runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -74,6 +135,7 @@ def part_contacts(
     floor_percentile: float = 5.0,
     max_gap_s: float = 0.07,
     min_length_s: float = 0.05,
+    sloped_floor: bool = True,
 ) -> np.ndarray:
     """Contact of one kind of foot part (all heels, or all toes) from its positions.
 
@@ -87,6 +149,8 @@ def part_contacts(
         of the backward and forward differences).
     floor_percentile : percentile of the pooled heights taken as the floor.
     max_gap_s, min_length_s : cleanup, see :func:`clean_mask`.
+    sloped_floor : heights from a floor that may slope (:func:`floor_under`); False: from one
+        level over the clip (:func:`floor_height`).
 
     Returns
     -------
@@ -100,11 +164,13 @@ def part_contacts(
                          f"{leg_length} and {fps}")
     if positions.shape[0] < 2:
         raise ValueError("part_contacts: need at least 2 frames")
-    height = positions[..., 1] - floor_height(positions[..., 1], floor_percentile)
     step = np.linalg.norm(np.diff(positions, axis=0), axis=-1) * fps  # (T-1, F)
     # still on at least one side: a strike frame is still afterwards, a lift-off frame before
     speed = np.minimum(np.concatenate([step[:1], step]), np.concatenate([step, step[-1:]]))
-    raw = (height < height_tol * leg_length) & (speed < speed_tol * leg_length)
+    still = speed < speed_tol * leg_length
+    floor = (floor_under(positions, still, leg_length, floor_percentile) if sloped_floor
+             else floor_height(positions[..., 1], floor_percentile))
+    raw = (positions[..., 1] - floor < height_tol * leg_length) & still
     return clean_mask(raw, round(max_gap_s * fps), round(min_length_s * fps))
 
 
@@ -122,7 +188,7 @@ def foot_contacts(
         terminal stance) is found when the heel starts to rise, which is slow (the ankle moves
         at under 0.5 m/s then); the toe joint's is loose because it lifts a few cm while the
         foot rolls over the toe tips before toe-off.
-    **tolerances : passed to :func:`part_contacts` (``speed_tol``, ...).
+    **tolerances : passed to :func:`part_contacts` (``speed_tol``, ``sloped_floor``, ...).
 
     Returns
     -------
