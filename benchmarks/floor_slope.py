@@ -68,7 +68,10 @@ def main() -> None:
                          f"{np.nanmean(r[:, 6]):.2f} |")
             print(lines[-1], flush=True)
     if args.output:
-        Path(args.output).write_text("\n".join(lines) + "\n")
+        from imuloco.io.atomic import atomic_write
+
+        with atomic_write(args.output, "w") as f:
+            f.write("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

@@ -1,61 +1,40 @@
 """How shipped-style model files do in and out of the lab they were trained on (issue 16).
 
+    python benchmarks/model_generalization.py --models shipped,A.npz,... [--data ../shared/data]
+
 For each model file (``--models``, comma separated; ``shipped``: the shipped right-ankle
-model), one phone at the right ankle, ``phone`` noise, test seeds (1000 + the clip's):
+model), one phone at the right ankle, ``phone`` noise, test seed 1000, measured as ``imuloco
+bench`` measures a test clip (:func:`imuloco.evaluate.bench.measure`):
 
 - ``lab``: the ``bandai-namco-2`` clips every such model holds out for its validation curve
-  (5 % by CRC32 of the name, :meth:`imuloco.methods.learned.method.Learned._validation_split`);
+  (:func:`imuloco.methods.learned.method.held_out`, the method's default share);
 - ``bandai-namco-1``: ``--limit`` clips of its styles (none in ``bandai-namco-2``) and contents
-  (adds dash, walking backwards, side steps), MPJPE and foot skate (ground truth's beside it);
+  (adds dash, walking backwards, side steps), MPJPE per content and foot skate on walking
+  backwards (the ground truth's beside it);
 - ``cmu-iclone``: other people on another rig, compared on canonical body parts as
   ``bench --split cross-dataset`` does (retargeting alone scores 5.24 cm there).
 
-MPJPE in cm, frame-weighted, heading-aligned at the first frame as in ``imuloco bench``.
-Models trained on a data set are not tested on it: read their row as in-sample there.
+MPJPE in cm, frame-weighted. Models trained on a data set are not tested on it: read their row
+as in-sample there.
 """
 
 from __future__ import annotations
 
 import argparse
-import zlib
 from pathlib import Path
 
-import numpy as np
-
 SEED = 1000
-
-
-def _rows(model, examples, parts: bool) -> dict[str, tuple[float, float, float, float]]:
-    """Per content: (frames, MPJPE cm, foot skate cm/s, ground truth's skate) summed by frames."""
-    from imuloco.evaluate import metrics
-
-    out: dict[str, list[float]] = {}
-    for ex in examples:
-        gt, full = ex.motion, model.reconstruct_signals(ex.signals)
-        n = gt.num_frames
-        if parts:
-            v, skate, gskate = metrics.evaluate_parts(gt, full)["mpjpe_cm"], np.nan, np.nan
-        else:
-            rec = metrics.align_heading(full, gt, 0)
-            v, skate, gskate = (metrics.mpjpe(gt, rec), metrics.foot_skate(gt, rec),
-                                metrics.foot_skate(gt, gt))
-        acc = out.setdefault(ex.labels.get("content") or "-", [0.0, 0.0, 0.0, 0.0])
-        for i, x in enumerate((n, n * v, n * skate, n * gskate)):
-            acc[i] += x
-    return {c: (a[0], a[1] / a[0], a[2] / a[0], a[3] / a[0]) for c, a in out.items()}
-
-
-def _all(rows: dict) -> float:
-    n = sum(r[0] for r in rows.values())
-    return sum(r[0] * r[1] for r in rows.values()) / n
 
 
 def main() -> None:
     from imuloco.app.pipeline import shipped_model
     from imuloco.core.motion import MotionDatabase
     from imuloco.core.retarget import resampled
+    from imuloco.evaluate.bench import aggregate, measure
+    from imuloco.io.atomic import atomic_write, check_output
     from imuloco.io.database import load_database
-    from imuloco.methods import load_model
+    from imuloco.methods import get_method, load_model
+    from imuloco.methods.learned.method import held_out
     from imuloco.methods.training import synthesize
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -64,38 +43,37 @@ def main() -> None:
     ap.add_argument("--limit", type=int, default=80)
     ap.add_argument("-o", "--output", type=Path, default=None)
     args = ap.parse_args()
+    if args.output is not None:
+        check_output(args.output)
+    share = get_method("learned").validation
     lab = load_database(args.data / "bandai-namco-2", progress=False)
-    lab = lab.subset([i for i, lab_ in enumerate(lab.labels)
-                      if zlib.crc32(lab_["name"].encode()) < 0.05 * 2**32])
+    lab = lab.subset([i for i, c in enumerate(lab.labels) if held_out(c["name"], share)])
     other = load_database(args.data / "bandai-namco-1", limit=args.limit, progress=False)
     cmu = load_database(args.data / "cmu-iclone", progress=False)
     cmu = MotionDatabase([resampled(c, float(lab.clips[0].fps)) for c in cmu.clips], cmu.labels)
     sets = {name: synthesize(db, ["right_ankle"], "phone", SEED)
             for name, db in (("lab", lab), ("bn1", other), ("cmu", cmu))}
+    contents = sorted({c["content"] for c in other.labels})
     lines = [(f"Test clips: lab {len(lab)} (bandai-namco-2 validation), bandai-namco-1 "
-             f"{len(other)}, cmu-iclone {len(cmu)}; right ankle, phone noise, seed {SEED}."), ""]
-    bn1_contents: list[str] = []
-    table = []
+              f"{len(other)}, cmu-iclone {len(cmu)}; right ankle, phone noise, seed {SEED}."),
+             "", "| model | lab | bandai-namco-1 | " + " | ".join(contents) +
+             " | skate: walk-back (truth) | cmu-iclone |",
+             "|---|" + "---:|" * (len(contents) + 4)]
     for name in args.models.split(","):
         model = load_model(shipped_model("learned", "right_ankle") if name == "shipped" else name)
-        r = {k: _rows(model, ex, k == "cmu") for k, ex in sets.items()}
-        bn1_contents = sorted(r["bn1"])
-        table.append((Path(name).name, r))
-    head = ("| model | lab | bandai-namco-1 | " + " | ".join(bn1_contents) +
-            " | skate: walk-back (truth) | cmu-iclone |")
-    lines += [head, "|---|" + "---:|" * (len(bn1_contents) + 4)]
-    for name, r in table:
-        wb = r["bn1"].get("walk-back", (0, np.nan, np.nan, np.nan))
-        lines.append(f"| {name} | {_all(r['lab']):.2f} | {_all(r['bn1']):.2f} | " +
-                     " | ".join(f"{r['bn1'][c][1]:.2f}" for c in bn1_contents) +
-                     f" | {wb[2]:.1f} ({wb[3]:.1f}) | {_all(r['cmu']):.2f} |")
-    text = "\n".join(lines) + "\n"
-    print(text)
-    if args.output:
-        from imuloco.io.atomic import atomic_write
-
+        clips = {k: measure(model, ex)["clips"] for k, ex in sets.items()}
+        by = {c: aggregate([r for r in clips["bn1"] if r["motion_type"] == c]) for c in contents}
+        back = by.get("walk-back", {"foot_skate_cm_s": float("nan"),
+                                    "foot_skate_gt_cm_s": float("nan")})
+        lines.append(f"| {Path(name).name} | {aggregate(clips['lab'])['mpjpe_cm']:.2f} | "
+                     f"{aggregate(clips['bn1'])['mpjpe_cm']:.2f} | " +
+                     " | ".join(f"{by[c]['mpjpe_cm']:.2f}" for c in contents) +
+                     f" | {back['foot_skate_cm_s']:.1f} ({back['foot_skate_gt_cm_s']:.1f}) | "
+                     f"{aggregate(clips['cmu'])['mpjpe_cm']:.2f} |")
+        print(lines[-1], flush=True)
+    if args.output is not None:
         with atomic_write(args.output, "w") as f:
-            f.write(text)
+            f.write("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

@@ -446,11 +446,12 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
 @click.option("-o", "--output", type=_file(), required=True, help="Model file to write (.npz).")
 @click.option("--mirrored", "mirrored_path", type=_file(), default=None,
               help="Also write the ensemble of the other side's placements (right <-> left).")
-@data_options
+@click.option("--data", "data_items", multiple=True, help=DATA_HELP)
+@click.option("--limit", type=int, default=None, help="Read at most N clips per folder.")
 @force_option
 @_reading_options
 def ensemble(members: tuple[Path, ...], output: Path, mirrored_path: Path | None,
-             data_items: tuple[str, ...], limit: int | None, seed: int, force: bool, up: str,
+             data_items: tuple[str, ...], limit: int | None, force: bool, up: str,
              skip_frames: int) -> None:
     """Average learned models of one recipe trained from other seeds (``train --param
     seed=K``) into one model (a deep ensemble) and write it. Its novelty is the members' mean

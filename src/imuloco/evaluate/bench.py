@@ -103,7 +103,7 @@ def data_label(data: DataArg) -> str:
     return "+".join(f.name for f in data_folders(data)) or "sample"
 
 
-def _aggregate(clips: list[dict[str, Any]]) -> dict[str, Any]:
+def aggregate(clips: list[dict[str, Any]]) -> dict[str, Any]:
     """Frame-weighted means of per-clip metrics (nan values ignored)."""
     out: dict[str, Any] = {"n_clips": len(clips), "n_frames": int(sum(c["n_frames"]
                                                                       for c in clips))}
@@ -164,10 +164,27 @@ def evaluate_method(
     t0, saved = time.perf_counter(), saved_seconds()
     method.fit(train, placements, noise, seed, progress=progress)
     train_s = time.perf_counter() - t0 + (saved_seconds() - saved)  # as if nothing cached
+    out = measure(method, test, progress, name)
+    p50, p99, delay = _latency(method, test[0].signals)
+    frames = sum(c["n_frames"] for c in out["clips"])
+    rec_s = out.pop("reconstruct_s")
+    out["cost"] = {"train_s": train_s, "offline_fps": frames / rec_s if rec_s > 0 else None,
+                   "online_latency_ms_p50": p50, "online_latency_ms_p99": p99,
+                   "online_delay_ms": delay, "model_bytes": _model_bytes(method)}
+    return out
+
+
+def measure(method, test: list[Example], progress: bool = False, name: str = ""
+            ) -> dict[str, Any]:
+    """Reconstruct every test example with a fitted method and measure it (the module
+    docstring's protocol): ``clips``, ``per_joint``, ``curves`` and ``confidence`` as
+    :func:`evaluate_method` returns them, and ``reconstruct_s``, the wall time of the
+    reconstructions."""
     clips, rec_s, joint_sum, frames, curves = [], 0.0, 0.0, 0, {}
     cross = False
     confidence: list[dict[str, np.ndarray]] = []
-    for ex in tqdm(test, desc=f"{name}: reconstructing", disable=not progress, unit="clip"):
+    for ex in tqdm(test, desc=f"{name or method.name}: reconstructing", disable=not progress,
+                   unit="clip"):
         gt = ex.motion
         t0 = time.perf_counter()
         full = method.reconstruct_signals_full(ex.signals)
@@ -189,13 +206,9 @@ def evaluate_method(
                       "n_frames": gt.num_frames, **values})
         if full.error_m is not None:
             confidence.append(_confidence_rows(full, actual, ex.labels))
-    p50, p99, delay = _latency(method, test[0].signals)
-    cost = {"train_s": train_s, "offline_fps": frames / rec_s if rec_s > 0 else None,
-            "online_latency_ms_p50": p50, "online_latency_ms_p99": p99,
-            "online_delay_ms": delay,
-            "model_bytes": _model_bytes(method)}
-    return {"clips": clips, "cost": cost, "per_joint": None if cross else joint_sum / frames,
-            "curves": curves, "confidence": confidence}
+    return {"clips": clips, "reconstruct_s": rec_s,
+            "per_joint": None if cross else joint_sum / frames, "curves": curves,
+            "confidence": confidence}
 
 
 def _confidence_rows(full, actual: np.ndarray, labels: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -293,7 +306,7 @@ def run_bench(
         types = [t for t in MOTION_TYPES if any(c["motion_type"] == t for c in clips0)]
         types += sorted({c["motion_type"] for c in clips0} - set(types) - {None})
         for mtype in [*types, "all"]:
-            per_seed = [_aggregate([c for c in r["clips"]
+            per_seed = [aggregate([c for c in r["clips"]
                                     if mtype == "all" or c["motion_type"] == mtype])
                         for r in runs[name]]
             costs = [c for r in runs[name] for c in r["costs"]]

@@ -47,11 +47,11 @@ def floor_under(
     steps sat above the heel tolerance (~1.7 cm) and the walks were labelled 44 / 40 % stance
     per foot, 58 / 58 % with this floor (``docs/results/learned/experiments.md``, "A second,
     smaller defect: cmu-iclone's floor slopes"; ``benchmarks/floor_slope.py``: Bandai-Namco's
-    flat floors move under 1 point). So the floor's slope is fitted to the lowest point
-    of each still spell of each part (one per step), by least squares with a Huber loss (robust
-    to a step onto something or a foot paused in the air), as a linear function of the horizontal position
-    along each principal direction of those points that spans at least ``MIN_FLOOR_SPAN`` leg
-    lengths: none for standing or stepping in place (the floor is then level, as before), the
+    flat floors move under 1 point). So the floor's slope is fitted to the lowest point of
+    each still spell of each part (one per step), by least squares with a Huber loss (robust to
+    a step onto something or a foot paused in the air), as a linear function of the horizontal
+    position along each principal direction of those points that spans at least
+    ``MIN_FLOOR_SPAN`` leg lengths: none for standing or stepping in place (the floor is then level, as before), the
     walking direction for a straight walk, both for a path that turns. The floor's level is
     then :func:`floor_height` of the heights with the slope taken out.
 

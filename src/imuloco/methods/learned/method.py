@@ -208,8 +208,7 @@ class Learned(Method):
 
     def _validation_split(self, examples: list[Example]) -> tuple[list[Example], list[Example]]:
         """Training and validation clips: ``validation`` of them by CRC32 of the name."""
-        val = [zlib.crc32(e.labels["name"].encode()) < self.validation * 2**32
-               for e in examples]
+        val = [held_out(e.labels["name"], self.validation) for e in examples]
         if all(val):
             val = [False] * len(examples)
         return ([e for e, v in zip(examples, val) if not v],
@@ -471,6 +470,12 @@ class Learned(Method):
         self.net_.load_state_dict({k[4:]: torch.as_tensor(arrays[k]) for k in arrays
                                    if k.startswith("net.")})
         self.net_.eval()
+
+
+def held_out(name: str, share: float) -> bool:
+    """Whether the clip ``name`` is among the ``share`` of clips a model holds out for its
+    validation curve (by CRC32 of the name, so the same clips for every run)."""
+    return zlib.crc32(name.encode()) < share * 2**32
 
 
 # what members of one ensemble must share: they read the same signals and write the same poses
