@@ -78,6 +78,37 @@ def test_strap_draws_are_worn_on_a_strap_and_none_without(sample_db, monkeypatch
         assert sum(isinstance(w, Strap) for w in worn) == expect and len(worn) == 4
 
 
+def test_inclined_reads_a_sensor_turned_about_its_x_axis(sample_db):
+    """``incline``: the augmented signals are those of a sensor strapped turned about its
+    medio-lateral axis, simulated so (clean); the draws without it are unchanged."""
+    import imuloco.methods.learned.train as tr
+    from imuloco.sensors.placement import get_placement
+    from imuloco.sensors.simulate import simulate
+
+    m = sample_db.clips[12]
+    ankle = get_placement("right_ankle")
+    a = np.deg2rad(15.0)
+    turned = ankle.perturbed(np.array([np.sin(a / 2), 0, 0, np.cos(a / 2)]), np.zeros(3))
+    want = simulate(m, [turned, "right_ankle"])
+    got = tr.inclined(simulate(m, ["right_ankle", "right_ankle"]), [15.0, 0.0])
+    np.testing.assert_allclose(got.acc[:, 0], want.acc[:, 0], atol=1e-6)
+    np.testing.assert_allclose(got.gyro[:, 0], want.gyro[:, 0], atol=1e-9)
+    np.testing.assert_allclose(got.orientation[:, 0], want.orientation[:, 0], atol=1e-9)
+    np.testing.assert_array_equal(got.acc[:, 1], want.acc[:, 1])
+    assert np.abs(got.acc[:, 0] - want.acc[:, 1]).max() > 1.0  # turned: other readings
+
+    base = synthesize(sample_db.subset([0, 12]), ["right_ankle"], "phone", seed=0)
+    args = (["right_ankle"], "phone", 0, 2, 0.15, 2.0, False)
+    plain, tilted = tr.augment(base, *args), tr.augment(base, *args, incline=20.0)
+    for a_, b_ in zip(plain[:2], tilted[:2]):  # the benchmark's own draws are kept
+        np.testing.assert_array_equal(a_.signals, b_.signals)
+    for a_, b_ in zip(plain[2:], tilted[2:]):
+        assert not np.allclose(a_.signals, b_.signals)
+        # a rotation: the specific force's norm is the same, sample for sample
+        np.testing.assert_allclose(np.linalg.norm(a_.signals[:, :3], axis=1),
+                                   np.linalg.norm(b_.signals[:, :3], axis=1), rtol=1e-4)
+
+
 def test_novelty_grows_with_the_distance_from_training_features(tiny):
     w = tiny.novelty_mean_.shape[0]
     at_mean = tiny._novelty(np.tile(tiny.novelty_mean_, (30, 1)))

@@ -103,6 +103,12 @@ class Learned(Method):
         (:mod:`imuloco.sensors.strap`: impacts damped, the phone rolling about the shin); a
         real shin phone rolls so at toe off (docs/results/learned/experiments.md, seventh
         round).
+    incline : every augmented clip's sensors turned about their medio-lateral axis by up to
+        +-``incline`` degrees (:func:`imuloco.methods.learned.train.inclined`). The calibration
+        puts a real shin phone's up axis on gravity at rest, or on the walk's mean force turned
+        by a prior; virtual shank sensors walk 14-29 degrees from their axis depending on the
+        data set, and models trained on all motion read a real walk calibrated 12.8 degrees
+        off that as a backward walk (docs/results/learned/experiments.md, diagnosis round).
     bidirectional : a GRU that reads the recording both ways (offline only: no :meth:`stream`;
         ``lag`` is then not needed and ignored).
     members : networks trained from seeds ``seed``, ``seed + 1``, ... (each with its own
@@ -121,7 +127,8 @@ class Learned(Method):
     # files from before the look-ahead and the heavier acceleration term
     legacy_params: ClassVar[dict[str, Any]] = {"lag": 0, "accel_weight": 30.0,
                                                "proportions": 0.0, "bidirectional": False,
-                                               "reverse": 0.0, "strap": 0.0, "members": 1}
+                                               "reverse": 0.0, "strap": 0.0, "members": 1,
+                                               "incline": 0.0}
     # inputs centred by a causal running mean (``features="centered"``, time constant ``tau``)
     # measured worse (4.06 vs 3.94 cm, docs/results/learned/experiments.md) and were removed
     retired_params: ClassVar[dict[str, Any]] = {"features": "raw", "tau": None}
@@ -132,7 +139,7 @@ class Learned(Method):
                  validation: float = 0.05, dropout: float = 0.0, weight_decay: float = 1e-4,
                  position_weight: float = 10.0, accel_weight: float = 150.0, lag: int = 8,
                  proportions: float = 0.1, reverse: float = 0.3, strap: float = 0.0,
-                 bidirectional: bool = False, members: int = 1, threads: int | None = None,
+                 incline: float = 0.0, bidirectional: bool = False, members: int = 1, threads: int | None = None,
                  seed: int = 0) -> None:
         self.hidden = hidden
         self.layers = layers
@@ -153,6 +160,7 @@ class Learned(Method):
         self.proportions = proportions
         self.reverse = reverse
         self.strap = strap
+        self.incline = incline
         self.bidirectional = bidirectional
         self.members = members
         self.threads = threads
@@ -177,7 +185,8 @@ class Learned(Method):
             can_mirror = False
         train_ex = tr.augment(train_ex, list(data.placements), data.noise, self.seed, self.draws,
                               self.speed, self.noise_scale, can_mirror, progress,
-                              self.proportions, self.reverse, self.strap)
+                              self.proportions, self.reverse, self.strap,
+                              self.incline)
         train_ex = [self._looking_ahead(e) for e in train_ex]
         val_ex = [self._looking_ahead(e) for e in val_ex]
         x, y, c, pos, lengths = tr.stack(train_ex)

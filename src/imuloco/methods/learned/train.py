@@ -8,8 +8,9 @@ timestamp jitter, misalignment, placement offset), other body proportions (the s
 on a body :func:`proportioned` by up to ``proportions``; the targets stay on the training
 skeleton), every other draw left/right mirrored (:func:`imuloco.core.mirror.mirror`), so
 that a model learns both legs' gaits from one sensor, a fraction ``reverse`` of the draws
-played backwards in time (:func:`reversed_motion`) and a fraction ``strap`` worn on a random
-soft-tissue strap (:mod:`imuloco.sensors.strap`).
+played backwards in time (:func:`reversed_motion`), a fraction ``strap`` worn on a random
+soft-tissue strap (:mod:`imuloco.sensors.strap`) and every sensor turned about its
+medio-lateral axis by up to ``incline`` degrees (:func:`inclined`).
 """
 
 from __future__ import annotations
@@ -25,12 +26,13 @@ from tqdm.auto import tqdm
 
 from imuloco.core.mirror import mirror, mirror_frames
 from imuloco.core.motion import Motion
+from imuloco.core.recording import Recording
 from imuloco.methods import pose
 from imuloco.methods.learned.model import Reconstructor, TorchFK, rotation_from_6d
 from imuloco.methods.training import Example, clip_seed, to_frames
 from imuloco.ops.filters import resample_linear
 from imuloco.ops.kinematics import fk
-from imuloco.ops.rotations import from_6d, slerp
+from imuloco.ops.rotations import from_6d, qinv, qmul, qrot, slerp
 from imuloco.phases.contacts import foot_contacts
 from imuloco.sensors.noise import NoiseModel, get_noise
 from imuloco.sensors.simulate import simulate
@@ -97,6 +99,20 @@ def proportioned(motion: Motion, rng: np.random.Generator, spread: float) -> Mot
     return Motion(skel, motion.rotations, motion.root * (height * legs), motion.fps, motion.name)
 
 
+def inclined(rec: Recording, degrees: np.ndarray) -> Recording:
+    """``rec`` read by sensors turned about their own x (medio-lateral) axis by ``degrees``
+    (S,), one angle a sensor: a constant rotation of a sensor on its segment only rotates its
+    signals. Stands for the uncertainty of the calibration's up axis, which is gravity at rest
+    or the walk's mean force turned by a prior (:mod:`imuloco.sensors.calibration`)."""
+    a = np.deg2rad(np.asarray(degrees, float))
+    q = np.zeros((len(a), 4))
+    q[:, 0], q[:, 3] = np.sin(a / 2), np.cos(a / 2)
+    # readings in the turned frame: the inverse rotation applied to the old frame's vectors
+    qi = qinv(q)[None]
+    return replace(rec, acc=qrot(qi, rec.acc), gyro=qrot(qi, rec.gyro), orientation=None
+                   if rec.orientation is None else qmul(rec.orientation, q[None]))
+
+
 def contact_targets(motion: Motion) -> np.ndarray:
     """Heel and toe contacts (T, 4) in :data:`CONTACT_PARTS` order, from
     :func:`imuloco.phases.contacts.foot_contacts`."""
@@ -108,18 +124,21 @@ def contact_targets(motion: Motion) -> np.ndarray:
 def augment(examples: list[Example], placements: list[str], noise: str, seed: int,
             draws: int, speed: float, noise_scale: float, mirrored: bool,
             progress: bool = False, proportions: float = 0.0,
-            reverse: float = 0.0, strap: float = 0.0) -> list[Example]:
+            reverse: float = 0.0, strap: float = 0.0, incline: float = 0.0
+            ) -> list[Example]:
     """The benchmark's examples plus ``draws`` augmented simulations of every clip (see the
     module docstring). Draw ``d`` mirrors the motion when ``mirrored`` and ``d`` is odd; each
     augmented clip is reversed in time with probability ``reverse``, and its sensors sit on a
     random soft-tissue strap (:func:`imuloco.sensors.strap.random_strap`) with probability
-    ``strap``."""
+    ``strap``, and its sensors are turned about their x axes by angles uniform in
+    ``+-incline`` degrees (:func:`inclined`)."""
     out = list(examples)
     if draws <= 0:
         return out
     base = get_noise(noise)
     frames = mirror_frames([e.motion for e in examples]) if mirrored else None
     rng = np.random.default_rng(seed + 1)
+    tilt_rng = np.random.default_rng([seed, 16])  # its own stream: other draws stay the same
     jobs = [(d, e) for d in range(1, draws + 1) for e in examples]
     for d, e in tqdm(jobs, desc="augmenting", disable=not progress, unit="clip"):
         motion = e.motion
@@ -136,6 +155,8 @@ def augment(examples: list[Example], placements: list[str], noise: str, seed: in
         worn = random_strap(rng) if strap > 0 and rng.uniform() < strap else None
         rec = simulate(body, placements, 100.0, model,
                        clip_seed(e.labels["name"], seed + DRAW_SEED_STRIDE * d), worn)
+        if incline > 0:
+            rec = inclined(rec, tilt_rng.uniform(-incline, incline, len(placements)))
         out.append(Example(motion, to_frames(rec, motion), dict(e.labels, draw=str(d))))
     return out
 
