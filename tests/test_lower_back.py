@@ -14,7 +14,8 @@ from imuloco.evaluate.sensorgait import SensorGait, stride_row
 from imuloco.io.realimu import Bout, GaitReference, RealTrial, read_trials
 
 pytest.importorskip("mobgap")
-from imuloco.evaluate.sensorgait import body_axes, lower_back_gait
+from imuloco.evaluate.sensorgait import lower_back_gait
+from imuloco.sensors.calibration import body_axes
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,8 @@
 - Lower back (``lower_back``, L5): Mobilise-D's published pipeline from ``mobgap`` (Iluz gait
   sequence detection, Ionescu initial contacts, Ullrich left/right, Zijlstra's inverted-pendulum
   step length with Mobilise-D's published scaling factor, stride selection and walking-bout
-  assembly), on body axes found from gravity and the fore-aft sway.
+  assembly), on body axes found from gravity and the fore-aft sway
+  (:func:`imuloco.sensors.calibration.body_axes`).
 
 Every figure is derived from the same strides, so they agree by construction:
 ``speed = stride length x cadence / 120`` and ``steps = 2 x strides`` for a foot sensor.
@@ -29,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imuloco.errors import MissingExtraError, UnknownNameError
+from imuloco.sensors.calibration import body_axes
 from imuloco.sensors.foottrack import NoWalking, foot_track, uniform
 
 FOOT_PLACEMENTS = ("right_foot", "left_foot")
@@ -207,42 +209,11 @@ BACK_METHOD = ("mobgap MobilisedPipelineHealthy (Mobilise-D P1: GsdIluz, IcdIone
                "walking-bout assembly)")
 
 
-def body_axes(acc: np.ndarray, rate: float) -> np.ndarray:
-    """Rows: Mobilise-D's body axes (up, medio-lateral, forward) in sensor axes, found from the
-    signal alone so that the sensor may be worn in any axes.
-
-    acc : ndarray, shape (T, 3), m/s² (+9.81 up at rest), sampled at ``rate`` Hz.
-
-    Up is the mean acceleration's direction (gravity). The fore-aft line is the principal
-    direction of the horizontal acceleration: walking shakes the trunk more fore-aft than
-    sideways. Forward is the direction along it whose acceleration runs against the vertical
-    velocity: over each stance the body vaults over its leg as an inverted pendulum, slowing
-    while it rises and speeding up while it falls (Cavagna et al. 1977, J Physiol 268:467),
-    compared in walking's step band (cadence 60-180 steps/min: 1-3 Hz; band 0.5-3 Hz). The
-    medio-lateral axis completes the right-handed frame of Mobilise-D's sensor (x up,
-    z forward: y = z x x, to the right).
-    """
-    from scipy.signal import butter, sosfiltfilt
-
-    up = acc.mean(axis=0)
-    up = up / np.linalg.norm(up)
-    h = acc - np.outer(acc @ up, up)
-    _, _, vt = np.linalg.svd(h - h.mean(axis=0), full_matrices=False)
-    pa = vt[0] - up * (vt[0] @ up)
-    pa /= np.linalg.norm(pa)
-    band = butter(4, [0.5, min(3.0, 0.45 * rate)], "bandpass", fs=rate, output="sos")
-    vertical = sosfiltfilt(band, acc @ up)
-    speed_up = sosfiltfilt(band, np.cumsum(vertical) / rate)
-    if np.dot(sosfiltfilt(band, acc @ pa), speed_up) > 0:
-        pa = -pa
-    return np.stack([up, np.cross(pa, up), pa])
-
-
 def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
                     sensor_height_m: float) -> SensorGait:
     """Gait from a lower-back (L5) IMU by Mobilise-D's published pipeline (mobgap's
     ``MobilisedPipelineHealthy``, its published defaults), on the body axes of
-    :func:`body_axes`.
+    :func:`imuloco.sensors.calibration.body_axes`.
 
     Two choices are ours: Zijlstra's step length takes Mobilise-D's scaling factor fitted on
     all participants (``step_length_scaling_factor_ms_all``), not the pipeline's default one

@@ -37,7 +37,18 @@ while the foot is flat: at rest its y and z are turned about x by that slope,
 clean virtual sensors, the median), which the calibration puts back. The foot's toe-out angle
 (its axis against the walking direction, a few degrees) is left in.
 
-Only leg placements (shank, thigh and foot) are calibrated. A recording rotated as a whole
+A sensor at the lower back (``lower_back``, L5; anatomical frame x left, y up the trunk,
+z forward) is turned by the body's axes (:func:`body_axes`): up from gravity (the mean specific
+force), forward along the trunk's fore-aft sway, signed by the inverted pendulum of walking.
+The virtual L5 sensor follows the pelvis, whose y leans back from the vertical while walking:
+:data:`BACK_WALK_INCLINATION` (4.2 +- 1.6 deg, the median on the bundled sample's 12 walking
+clips, clean virtual sensors), which the calibration puts back. Left in: the pelvis's roll
+(1.5 +- 0.7 deg to the right) and its yaw against the sway's fore-aft line (4.5 +- 8.9 deg). The
+pendulum's sign holds for walking only: running (a spring, slowest at the bottom) turns
+forward backwards (all four running clips of the sample), so a lower-back sensor is calibrated
+on walking.
+
+Shank, thigh, foot and lower-back placements are calibrated. A recording rotated as a whole
 gives the same result rotated, so calibrating a phone strapped in any orientation yields the
 signals of one strapped in the anatomical frame.
 """
@@ -49,7 +60,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
-from scipy.signal import find_peaks
+from scipy.signal import butter, find_peaks, sosfiltfilt
 from scipy.stats import skew
 
 from imuloco.core.recording import Recording
@@ -62,6 +73,8 @@ log = logging.getLogger(__name__)
 
 # placement names calibrated: shank and thigh by the swing of the leg, the foot by its walk
 LEG_PLACEMENTS = ("ankle", "thigh", "foot")
+LOWER_BACK = "lower_back"  # by the body's axes (gravity and the trunk's sway)
+CALIBRATED = (*LEG_PLACEMENTS, LOWER_BACK)
 # Mean forward inclination (degrees) of the segment's y axis while walking, from the average
 # specific force of clean virtual sensors on the bundled sample's walking clips (see module
 # docstring): the angle that average sits behind the segment's long axis.
@@ -70,6 +83,12 @@ WALK_INCLINATION = {"ankle": 21.2, "thigh": -9.6}
 # (see module docstring): measured on the bundled sample's walking clips, both feet, with
 # imuloco's own foot track on clean virtual sensors.
 FOOT_REST_INCLINATION = 39.6
+# Backward lean (degrees) of the virtual L5 sensor's y from the vertical while walking (see
+# module docstring): the mean specific force of clean virtual sensors on the bundled sample's
+# 12 walking clips (walk, walk-turn-left, walk-turn-right), the median.
+BACK_WALK_INCLINATION = 4.2
+# Walking's step band: cadence 60-180 steps/min
+STEP_BAND_HZ = (0.5, 3.0)
 
 
 @dataclass(frozen=True)
@@ -80,12 +99,14 @@ class Mounting:
     ----------
     rotation : ndarray, shape (4,), quaternion x, y, z, w from the phone's axes to the
         segment's anatomical frame (``acc_segment = qrot(rotation, acc_phone)``).
-    up_source : ``"still"`` (gravity at rest), ``"walk"`` (mean over the walk) or, for a
-        foot, ``"stances"`` (gravity while the foot rests).
-    still_s : seconds of stillness found (0 for a foot).
-    swings : number of mid-swing peaks (strides of this leg) found.
+    up_source : ``"still"`` (gravity at rest), ``"walk"`` (mean over the walk), for a
+        foot ``"stances"`` (gravity while the foot rests), for the lower back ``"mean"`` (the
+        mean specific force of the whole recording).
+    still_s : seconds of stillness found (0 for a foot and the lower back).
+    swings : number of mid-swing peaks (strides of this leg) found; for the lower back, half
+        the steps (the trunk's vertical bounces) found.
     axis_ratio : second over first singular value of the gyroscope (0: a perfect hinge; NaN
-        for a foot, whose frame does not come from it).
+        for a foot or the lower back, whose frame does not come from it).
     """
 
     rotation: np.ndarray
@@ -133,11 +154,14 @@ def estimate_mounting(rec: Recording, placement: str | int | None = None,
     else:
         k = placement if isinstance(placement, int) else rec.placements.index(placement)
     name = rec.placements[k]
-    if not any(p in name for p in LEG_PLACEMENTS):
-        raise InputError(f"calibration needs a leg placement ({', '.join(LEG_PLACEMENTS)}), "
-                         f"got {name!r}: the swing of the leg defines the medio-lateral axis")
+    if not any(p in name for p in CALIBRATED):
+        raise InputError(f"calibration needs a leg placement ({', '.join(LEG_PLACEMENTS)}) or "
+                         f"{LOWER_BACK!r}, got {name!r}: the swing of the leg or the trunk's "
+                         "sway defines the axes")
     if "foot" in name:
         return _foot_mounting(rec, k)
+    if name == LOWER_BACK:
+        return _back_mounting(rec, k)
     rate = 100.0
     _, acc = _uniform(rec.times, rec.acc[:, k], rate)
     _, gyro = _uniform(rec.times, rec.gyro[:, k], rate)
@@ -200,8 +224,69 @@ def _foot_mounting(rec: Recording, k: int) -> Mounting:
                     float("nan"))
 
 
+def step_band(x: np.ndarray, rate: float) -> np.ndarray:
+    """``x`` (T, ...) sampled at ``rate`` Hz, band-passed along time to walking's step band
+    (:data:`STEP_BAND_HZ`; 4th-order Butterworth, zero phase)."""
+    band = butter(4, [STEP_BAND_HZ[0], min(STEP_BAND_HZ[1], 0.45 * rate)], "bandpass",
+                  fs=rate, output="sos")
+    return sosfiltfilt(band, x, axis=0)
+
+
+def body_axes(acc: np.ndarray, rate: float) -> np.ndarray:
+    """Rows: Mobilise-D's body axes (up, medio-lateral, forward) in sensor axes, found from the
+    signal of a walking trunk alone so that the sensor may be worn in any axes.
+
+    acc : ndarray, shape (T, 3), m/s² (+9.81 up at rest), sampled at ``rate`` Hz.
+
+    Up is the mean acceleration's direction (gravity). The fore-aft line is the principal
+    direction of the horizontal acceleration: walking shakes the trunk more fore-aft than
+    sideways. Forward is the direction along it whose acceleration runs against the vertical
+    velocity: over each stance the body vaults over its leg as an inverted pendulum, slowing
+    while it rises and speeding up while it falls (Cavagna et al. 1977, J Physiol 268:467),
+    compared in walking's step band (:func:`step_band`). Running is a spring, not a pendulum:
+    there forward comes out backwards. The medio-lateral axis completes the right-handed frame
+    of Mobilise-D's sensor (x up, z forward: y = z x x, to the right).
+    """
+    up = acc.mean(axis=0)
+    up = up / np.linalg.norm(up)
+    h = acc - np.outer(acc @ up, up)
+    _, _, vt = np.linalg.svd(h - h.mean(axis=0), full_matrices=False)
+    pa = vt[0] - up * (vt[0] @ up)
+    pa /= np.linalg.norm(pa)
+    vertical = step_band(acc @ up, rate)
+    speed_up = step_band(np.cumsum(vertical) / rate, rate)
+    if np.dot(step_band(acc @ pa, rate), speed_up) > 0:
+        pa = -pa
+    return np.stack([up, np.cross(pa, up), pa])
+
+
+def _back_mounting(rec: Recording, k: int, rate: float = 100.0) -> Mounting:
+    """Rotation from a lower-back sensor's axes to the virtual L5 sensor's frame (module
+    docstring)."""
+    name = rec.placements[k]
+    _, acc = _uniform(rec.times, rec.acc[:, k], rate)
+    if len(acc) < 3 * rate:
+        raise InputError(f"{name}: a lower-back sensor is calibrated from walking, and the "
+                         "recording is shorter than 3 s")
+    up, right, forward = body_axes(acc, rate)
+    # steps: the trunk's bounces, at most 3 a second, of at least 0.5 m/s² (a walking trunk's
+    # vertical acceleration swings by 1-3 m/s²; a resting sensor's noise by hundredths)
+    steps, _ = find_peaks(step_band(acc @ up, rate), height=0.5, distance=int(rate / 3))
+    if len(steps) < 4:
+        log.warning("%s: %d steps found: forward comes from walking, so the mounting is "
+                    "unreliable", name, len(steps))
+    a = np.deg2rad(BACK_WALK_INCLINATION)
+    # rows: the sensor's axes (x left, y up the trunk, z forward) in the level frame (left, up,
+    # forward): y leans back by the inclination
+    level_to_back = np.array([[1.0, 0.0, 0.0],
+                              [0.0, np.cos(a), -np.sin(a)],
+                              [0.0, np.sin(a), np.cos(a)]])
+    rows = level_to_back @ np.stack([-right, up, forward])  # in the sensor's axes
+    return Mounting(from_matrix(rows), "mean", 0.0, len(steps) // 2, float("nan"))
+
+
 def calibrate(rec: Recording, min_still_s: float = 1.0) -> tuple[Recording, list[Mounting]]:
-    """Rotate every leg sensor of ``rec`` into its segment's anatomical frame.
+    """Rotate every leg or lower-back sensor of ``rec`` into its segment's anatomical frame.
 
     Other sensors are left as they are (and logged). The orientation, when present, becomes
     segment-to-world: ``q_segment = q_phone * qinv(rotation)``.
@@ -214,8 +299,8 @@ def calibrate(rec: Recording, min_still_s: float = 1.0) -> tuple[Recording, list
     ori = None if rec.orientation is None else rec.orientation.copy()
     mounts = []
     for k, name in enumerate(rec.placements):
-        if not any(p in name for p in LEG_PLACEMENTS):
-            log.info("%s: not a leg placement, left uncalibrated", name)
+        if not any(p in name for p in CALIBRATED):
+            log.info("%s: neither a leg nor the lower back, left uncalibrated", name)
             mounts.append(Mounting(np.array([0.0, 0.0, 0.0, 1.0]), "none", 0.0, 0, np.nan))
             continue
         m = estimate_mounting(rec, k, min_still_s)

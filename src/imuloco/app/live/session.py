@@ -193,8 +193,8 @@ class LiveSession:
         every sample carries, in order.
     calibrate_s : seconds of samples to calibrate how the phone sits on the leg
         (:func:`imuloco.sensors.calibration.calibrate`); the first frames come out then. While
-        a leg sensor shows fewer than two leg swings the calibration waits up to three times
-        as long for the walk to start. ``0`` skips calibration (phone strapped in the segment's
+        a leg or lower-back sensor shows fewer than two strides the calibration waits up to
+        three times as long for the walk to start. ``0`` skips calibration (phone strapped in the segment's
         anatomical frame). At most :data:`MAX_CALIBRATE_S`.
     sigma_s, radius_s : resampling kernel (see the module docstring).
     calibration : a calibration found earlier for the same phone (skips calibrating).
@@ -318,7 +318,7 @@ class LiveSession:
 
     def _calibrate(self, final: bool = False) -> bool:
         from imuloco.errors import MissingExtraError
-        from imuloco.sensors.calibration import LEG_PLACEMENTS, calibrate
+        from imuloco.sensors.calibration import CALIBRATED, calibrate
 
         raw, s = self._raw[:self._n], self.num_sensors
         t = raw[:, 0]
@@ -329,9 +329,9 @@ class LiveSession:
         except (ValueError, np.linalg.LinAlgError, MissingExtraError) as e:  # e.g. no swing yet
             mounts, why = None, f"{type(e).__name__}: {e}"
         else:
-            legs = [m for p, m in zip(self.placements, mounts)
-                    if any(s in p for s in LEG_PLACEMENTS)]
-            why = "fewer than two leg swings" if any(m.swings < 2 for m in legs) else ""
+            walked = [m for p, m in zip(self.placements, mounts)
+                      if any(s in p for s in CALIBRATED)]
+            why = "fewer than two strides" if any(m.swings < 2 for m in walked) else ""
         span = t[-1] - t[0]
         if why and span < 3 * self.calibrate_s and not final:
             self._next_try = span + 1.0
