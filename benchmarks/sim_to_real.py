@@ -1,6 +1,7 @@
 """Where a real shin phone's signals differ from the virtual sensors the models train on.
 
-    python benchmarks/sim_to_real.py [--data ../shared/data] [-o TABLE.md] [--foot]
+    python benchmarks/sim_to_real.py [--data ../shared/data] [-o TABLE.md] [--foot | --back]
+                                     [--model FILE]
 
 The real ``realworld-shin`` walk (without its first and last 10 s) against clean virtual
 right-ankle sensors on 9 straight walks of ``bandai-namco-2`` and of ``cmu-iclone``, all
@@ -16,6 +17,10 @@ of ``real-imu/pyshoe-vicon``, in their makers' axes and calibrated, against clea
 right-foot sensors on 6 walks of ``bandai-namco-2`` (mean and standard deviation per axis,
 < 8 Hz), then the share of frames the shipped foot model flags unreliable and its median
 predicted error, both ways.
+
+``--back`` does the same for the lower-back sensors: 8 trials of ``real-imu/ipol-gait`` and
+the 7 of ``real-imu/mobilise-d-lab``, against clean virtual L5 sensors, with the shipped
+lower-back model (or ``--model FILE``, a model of that placement).
 """
 
 from __future__ import annotations
@@ -59,8 +64,13 @@ def virtual(files: list[tuple[Path, int]], fraction: float | None = None) -> lis
                                 noise="clean", seed=0))[0] for f, skip in files]
 
 
-def foot_table(data: Path) -> list[str]:
-    """The ``--foot`` tables (module docstring)."""
+SENSOR_SETS = {"right_foot": ("ipol-gait", "pyshoe-vicon"),
+               "lower_back": ("ipol-gait", "mobilise-d-lab")}
+
+
+def sensor_table(data: Path, placement: str, model_file: Path | None = None) -> list[str]:
+    """The ``--foot`` (``right_foot``) and ``--back`` (``lower_back``) tables (module
+    docstring)."""
     from imuloco.app.pipeline import reconstruct_recording, shipped_model
     from imuloco.io.motionfile import read_motion
     from imuloco.io.realimu import read_trials
@@ -74,13 +84,13 @@ def foot_table(data: Path) -> list[str]:
         x = sosfiltfilt(sos, np.concatenate([rec.acc[:, 0], rec.gyro[:, 0]], 1), axis=0)
         return np.r_[x.mean(0), x.std(0)]
 
-    model = load_model(shipped_model("learned", "right_foot"))
+    model = load_model(model_file or shipped_model("learned", placement))
     head = ["acc x", "acc y", "acc z", "gyro x", "gyro y", "gyro z"]
     lines = ["| source | axes | " + " | ".join(f"{a} mean" for a in head) + " | "
              + " | ".join(f"{a} std" for a in head) + " | flagged % | predicted cm |",
              "|---|---|" + "---:|" * 14]
-    for name in ("ipol-gait", "pyshoe-vicon"):
-        recs = [t.recording.select(["right_foot"]) for t in
+    for name in SENSOR_SETS[placement]:
+        recs = [t.recording.select([placement]) for t in
                 read_trials(data / "real-imu" / name, limit=8)]
         for axes, cal in (("maker's", False), ("calibrated", True)):
             rows, flagged, predicted = [], [], []
@@ -93,9 +103,9 @@ def foot_table(data: Path) -> list[str]:
                          + " | ".join(f"{v:.2f}" for v in np.mean(rows, 0))
                          + f" | {100 * np.mean(flagged):.0f} | {100 * np.median(predicted):.1f} |")
     walks = sorted((data / "bandai-namco-2").glob("*_walk_normal_*.bvh"))[:6]
-    virt = [stats(simulate(read_motion(f), ["right_foot"], rate=100.0, noise="clean", seed=0))
+    virt = [stats(simulate(read_motion(f), [placement], rate=100.0, noise="clean", seed=0))
             for f in walks]
-    lines.append(f"| virtual, bandai-namco-2 ({len(walks)} walks) | foot's | "
+    lines.append(f"| virtual, bandai-namco-2 ({len(walks)} walks) | anatomical | "
                  + " | ".join(f"{v:.2f}" for v in np.mean(virt, 0)) + " | | |")
     return lines
 
@@ -104,11 +114,16 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", type=Path, default=Path("../shared/data"))
     ap.add_argument("-o", "--output", type=Path, help="also write the table to this file")
-    ap.add_argument("--foot", action="store_true", help="the shoe sensors (module docstring)")
+    which = ap.add_mutually_exclusive_group()
+    which.add_argument("--foot", action="store_true", help="the shoe sensors (module docstring)")
+    which.add_argument("--back", action="store_true", help="the lower-back sensors")
+    ap.add_argument("--model", type=Path, help="with --foot/--back: this model file instead of "
+                    "the shipped one")
     args = ap.parse_args()
     logging.disable(logging.WARNING)  # the real log's sampling gaps are reported, not errors
-    if args.foot:
-        return write("\n".join(foot_table(args.data)), args.output)
+    if args.foot or args.back:
+        placement = "right_foot" if args.foot else "lower_back"
+        return write("\n".join(sensor_table(args.data, placement, args.model)), args.output)
     from imuloco.app.pipeline import calibrated
     from imuloco.sensors.reallog import read_log
 
