@@ -26,18 +26,28 @@ def walks(sample_db):
             .clips]
 
 
-def test_recovers_random_mountings(walks):
-    rng = np.random.default_rng(0)
-    errors = []
-    for rec in walks:
+def _random_mountings(recs: list[Recording], seed: int, up_source: str, swings: int
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Each recording turned three times at random: the errors (degrees) of the mountings
+    found against the truth, in total and of the y axis alone. Checks on the way that each
+    estimate turns with the phone (exactly the unturned one composed with the turn)."""
+    rng = np.random.default_rng(seed)
+    errors, tilts = [], []
+    for rec in recs:
         base = estimate_mounting(rec)
-        assert base.up_source == "walk" and base.swings >= 3
+        assert base.up_source == up_source and base.swings >= swings
         for _ in range(3):
             rot = from_rotvec(rng.normal(size=3) * 1.5)
             est = estimate_mounting(_turned(rec, rot))
-            # the estimate turns with the phone: exactly the unturned one composed with rot
             assert np.degrees(geodesic(est.rotation, qmul(base.rotation, rot))) < 1e-6
             errors.append(np.degrees(geodesic(est.rotation, rot)))
+            y_est, y_true = to_matrix(est.rotation)[1], to_matrix(rot)[1]
+            tilts.append(np.degrees(np.arccos(np.clip(y_est @ y_true, -1, 1))))
+    return np.array(errors), np.array(tilts)
+
+
+def test_recovers_random_mountings(walks):
+    errors, _ = _random_mountings(walks, 0, "walk", 3)
     assert np.median(errors) < 10.0 and max(errors) < TOLERANCE_DEG, np.round(errors, 1)
 
 
@@ -85,18 +95,7 @@ def test_recovers_random_lower_back_mountings(back_walks):
     sway. The total error is mostly yaw: the pelvis against the sway's fore-aft line, which a
     turning walk yaws further (one turning clip: 29 degrees); a walk read backwards would be
     about 180 degrees off."""
-    rng = np.random.default_rng(2)
-    errors, tilts = [], []
-    for rec in back_walks:
-        base = estimate_mounting(rec)
-        assert base.up_source == "mean" and base.swings >= 2
-        for _ in range(3):
-            rot = from_rotvec(rng.normal(size=3) * 1.5)
-            est = estimate_mounting(_turned(rec, rot))
-            assert np.degrees(geodesic(est.rotation, qmul(base.rotation, rot))) < 1e-6
-            errors.append(np.degrees(geodesic(est.rotation, rot)))
-            y_est, y_true = to_matrix(est.rotation)[1], to_matrix(rot)[1]
-            tilts.append(np.degrees(np.arccos(np.clip(y_est @ y_true, -1, 1))))
+    errors, tilts = _random_mountings(back_walks, 2, "mean", 2)
     assert np.median(errors) < 10.0 and max(errors) < 35.0, np.round(errors, 1)
     assert max(tilts) < 5.0, np.round(tilts, 1)
 
