@@ -16,7 +16,9 @@ the virtual sensors, never a fit: nothing here changes a constant.
 of ``real-imu/pyshoe-vicon``, in their makers' axes and calibrated, against clean virtual
 right-foot sensors on 6 walks of ``bandai-namco-2`` (mean and standard deviation per axis,
 < 8 Hz), then the share of frames the shipped foot model flags unreliable and its median
-predicted error, both ways.
+predicted error, both ways; and how plausible the calibrated trials' reconstructed gait is (its
+cadence against the sensor-level estimator's, each foot's stance, a normal walk's about 60 %,
+and the feet's skate while down).
 
 ``--back`` does the same for the lower-back sensors: 8 trials of ``real-imu/ipol-gait`` and
 the 7 of ``real-imu/mobilise-d-lab``, against clean virtual L5 sensors, with the shipped
@@ -89,25 +91,53 @@ def sensor_table(data: Path, placement: str, model_file: Path | None = None) -> 
     lines = ["| source | axes | " + " | ".join(f"{a} mean" for a in head) + " | "
              + " | ".join(f"{a} std" for a in head) + " | flagged % | predicted cm |",
              "|---|---|" + "---:|" * 14]
+    gait = ["", ("| source (calibrated) | cadence, reconstruction | cadence, sensor's own | "
+                 "stance % L / R | foot skate cm/s |"), "|---|---:|---:|---:|---:|"]
     for name in SENSOR_SETS[placement]:
-        recs = [t.recording.select([placement]) for t in
-                read_trials(data / "real-imu" / name, limit=8)]
+        trials = list(read_trials(data / "real-imu" / name, limit=8))
         for axes, cal in (("maker's", False), ("calibrated", True)):
-            rows, flagged, predicted = [], [], []
-            for rec in recs:
+            rows, flagged, predicted, plausible = [], [], [], []
+            for trial in trials:
+                rec = trial.recording.select([placement])
                 rows.append(stats(calibrate(rec)[0] if cal else rec))
-                _, info = reconstruct_recording(rec, model, calibrate=cal)
+                motion, info = reconstruct_recording(rec, model, calibrate=cal)
                 flagged.append(np.mean(info["confidence"].unreliable))
                 predicted.append(np.median(info["confidence"].error_m))
-            lines.append(f"| {name} ({len(recs)} trials) | {axes} | "
+                if cal:
+                    plausible.append(gait_check(motion, trial, placement))
+            lines.append(f"| {name} ({len(trials)} trials) | {axes} | "
                          + " | ".join(f"{v:.2f}" for v in np.mean(rows, 0))
                          + f" | {100 * np.mean(flagged):.0f} | {100 * np.median(predicted):.1f} |")
+        c = np.nanmean(plausible, 0)
+        gait.append(f"| {name} ({len(trials)} trials) | {c[0]:.1f} | {c[1]:.1f} | "
+                    f"{c[2]:.0f} / {c[3]:.0f} | {c[4]:.1f} |")
     walks = sorted((data / "bandai-namco-2").glob("*_walk_normal_*.bvh"))[:6]
     virt = [stats(simulate(read_motion(f), [placement], rate=100.0, noise="clean", seed=0))
             for f in walks]
     lines.append(f"| virtual, bandai-namco-2 ({len(walks)} walks) | anatomical | "
                  + " | ".join(f"{v:.2f}" for v in np.mean(virt, 0)) + " | | |")
-    return lines
+    return lines + gait
+
+
+def gait_check(motion, trial, placement: str) -> list[float]:
+    """Plausibility of a real trial's reconstruction (on the walker's height when known):
+    its cadence, the sensor-level estimator's (:func:`imuloco.evaluate.sensorgait.
+    sensor_gait`), each foot's stance % and the feet's skate (cm/s, as ``reconstruct``
+    reports it)."""
+    from imuloco.evaluate.gait import gait_parameters, plausibility, to_height
+    from imuloco.evaluate.sensorgait import sensor_gait
+
+    ref = trial.reference
+    if np.isfinite(ref.height_m):
+        motion = to_height(motion, ref.height_m)
+    g = gait_parameters(motion)
+    try:
+        own = sensor_gait(trial.recording, placement, height_m=ref.height_m,
+                          sensor_height_m=ref.sensor_height_m).summary()["cadence_spm"]
+    except ValueError:  # a lower back without the walker's height (as bench --real)
+        own = np.nan
+    return [g["cadence_spm"], own, g["left_stance_pct"], g["right_stance_pct"],
+            plausibility(motion)["foot_skate_cm_s"]]
 
 
 def main() -> None:

@@ -348,6 +348,49 @@ def test_a_shoe_sensor_in_its_makers_axes_reconstructs_as_one_in_the_foot_s(demo
     assert near < 1.5 and lost > 4 * near, (near, lost)  # measured: 0.25 and 8.5 cm
 
 
+def test_a_lower_back_sensor_uses_the_shipped_lower_back_model(tmp_path, demo_rec):
+    """``reconstruct`` on a lower-back recording: the shipped lower-back model (no baseline
+    fitted on the fly), the sensor calibrated from its own walk, the gait from its signal."""
+    from imuloco.app.pipeline import choose_model, reconstruct_file
+    from imuloco.core.recording import Recording
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.ops.rotations import from_rotvec, qrot
+
+    choice = choose_model(placement="lower_back")
+    assert choice.source == "shipped" and choice.path.name == "learned_lower_back.npz"
+    assert choice.method.name == "learned" and choice.method.placements_ == ["lower_back"]
+    rec = demo_rec.select(["lower_back"])
+    turn = from_rotvec(np.array([0.3, 2.6, -0.9]))  # worn upside down and turned
+    rec = Recording(rec.times, qrot(turn, rec.acc), qrot(turn, rec.gyro), ["lower_back"])
+    motion, report = reconstruct_file(write_generic_csv(rec, tmp_path / "back.csv"),
+                                      fitted=choice.method, placement="lower_back",
+                                      height=1.7)
+    assert report["calibration"][0]["up_from"] == "mean"
+    assert "lower_back sensor" in report["gait_source"] and report["gait_note"] is None
+    assert motion.num_frames == pytest.approx((rec.times[-1] - rec.times[0]) * 30, abs=2)
+
+
+def test_a_lower_back_sensor_in_its_makers_axes_reconstructs_as_one_in_the_l5_frame(
+        demo_rec, demo_clip):
+    """As for the shoe: calibrated, the lower-back model's motion is near the one it gives
+    for a sensor in the L5 frame (what is left is the calibration's few degrees); fed in the
+    sensor's own axes, the model is lost."""
+    from imuloco.app.pipeline import choose_method, reconstruct_recording
+    from imuloco.core.recording import Recording
+    from imuloco.evaluate.metrics import mpjpe
+    from imuloco.ops.rotations import from_rotvec, qrot
+
+    fitted, _ = choose_method(placement="lower_back")
+    rec = demo_rec.select(["lower_back"])
+    turn = from_rotvec(np.array([2.2, -0.4, 1.1]))
+    turned = Recording(rec.times, qrot(turn, rec.acc), qrot(turn, rec.gyro), ["lower_back"])
+    ref, _ = reconstruct_recording(rec, fitted, calibrate=False, pin=False)
+    cal, _ = reconstruct_recording(turned, fitted, pin=False)
+    raw, _ = reconstruct_recording(turned, fitted, calibrate=False, pin=False)
+    near, lost = mpjpe(ref, cal), mpjpe(ref, raw)  # cm
+    assert near < 1.5 and lost > 4 * near, (near, lost)  # measured: 0.25 and 14.3 cm
+
+
 def test_a_model_refuses_a_placement_it_does_not_know(tmp_path, ridge_without_demo_clip):
     from imuloco.app.pipeline import choose_method
 
