@@ -22,6 +22,8 @@ import contextlib
 import faulthandler
 import json
 import os
+import signal
+import time
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -158,13 +160,18 @@ def read_trials(folder: str | Path, layout: str | None = None, limit: int | None
         yield from reader(path)
 
 
+LOADMAT_TIMEOUT_S = 30.0  # seconds a MAT file's trial read may take, besides 2 s a megabyte
+
+
 def _loadmat(path: Path, **kw) -> dict:
     """``scipy.io.loadmat``, or a FormatError for a file it cannot read.
 
     scipy's MAT reader is not hardened against damaged files (its docstring says so): some
     crash the process (a segmentation fault on an out-of-range element type, scipy PR
     25349). A forked child reads the file first and only its exit status is looked at (no
-    data comes back from it), which costs one more read (30 ms for a mobilise-d-lab file)."""
+    data comes back from it), which costs one more read (30 ms for a mobilise-d-lab file). A
+    child still reading after :data:`LOADMAT_TIMEOUT_S` (plus 2 s a megabyte) is killed and the
+    file refused, so that no file can hang the program."""
     from scipy.io import loadmat
 
     if hasattr(os, "fork"):
@@ -178,7 +185,16 @@ def _loadmat(path: Path, **kw) -> dict:
                     loadmat(path, **kw)
             finally:
                 os._exit(0)
-        _, status = os.waitpid(pid, 0)
+        limit = LOADMAT_TIMEOUT_S + 2.0 * path.stat().st_size / 1e6
+        deadline = time.monotonic() + limit
+        while not (done := os.waitpid(pid, os.WNOHANG))[0]:
+            if time.monotonic() > deadline:
+                os.kill(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+                raise FormatError(path, None, f"not a readable MATLAB v5 file (scipy's reader "
+                                  f"was still reading it after {limit:.0f} s)")
+            time.sleep(0.005)
+        status = done[1]
         if os.WIFSIGNALED(status):
             raise FormatError(path, None, f"not a readable MATLAB v5 file (scipy's reader "
                               f"crashed on it with signal {os.WTERMSIG(status)})")
