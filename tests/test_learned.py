@@ -14,7 +14,7 @@ from imuloco.core.mirror import _reflection, mirror, mirror_frames, mirror_pairs
 from imuloco.errors import InputError
 from imuloco.methods import get_method, load_model
 from imuloco.methods.learned.method import ensemble
-from imuloco.methods.learned.model import Reconstructor, TorchFK, rotation_from_6d
+from imuloco.methods.learned.model import Ensemble, Reconstructor, TorchFK, rotation_from_6d
 from imuloco.methods.training import synthesize
 from imuloco.ops.heading import heading_from_hips
 from imuloco.ops.kinematics import fk
@@ -320,6 +320,30 @@ def test_an_ensemble_averages_its_members(tiny_ensemble, tiny_model, test_signal
     assert model.novelty_threshold_ == pytest.approx(
         (tiny_model.novelty_threshold_ + other.novelty_threshold_) / 2)
     assert_stream_equals_offline(model, test_signals)
+
+
+def test_stacked_members_equal_their_modules():
+    """In inference an ensemble runs its members' weights stacked (a GRU written out over
+    them); in training mode the members' own torch modules: the same outputs, whole sequences
+    or frame by frame with the state carried, and new weights are seen."""
+    torch.manual_seed(0)
+    net = Ensemble.of_size(3, 6, 34, hidden=16, layers=2)
+    x, h = torch.randn(2, 9, 6), 0.5 * torch.randn(6, 2, 16)
+    with torch.no_grad():
+        want = net.train()(x, h)
+        whole = net.eval()(x, h)
+        hs, frames = h, []
+        for t in range(9):
+            *out, hs = net(x[:, t:t + 1], hs)
+            frames.append(out)
+        stepped = [torch.cat(v, dim=1) for v in zip(*frames)] + [hs]
+        for got in (whole, stepped):
+            for a, b in zip(want, got, strict=True):
+                np.testing.assert_allclose(b.numpy(), a.numpy(), atol=1e-5)
+        other = Ensemble.of_size(3, 6, 34, hidden=16, layers=2)
+        net.load_state_dict(other.state_dict())
+        np.testing.assert_allclose(net(x, h)[0].numpy(), other.train()(x, h)[0].numpy(),
+                                   atol=1e-5)
 
 
 def test_an_ensemble_file_round_trip_and_mirror(tiny_ensemble, sample_db, test_signals,

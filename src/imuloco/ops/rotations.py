@@ -184,7 +184,7 @@ def from_6d(d: np.ndarray) -> np.ndarray:
     a = d[..., :3] / np.linalg.norm(d[..., :3], axis=-1, keepdims=True)
     b = d[..., 3:] - np.sum(a * d[..., 3:], axis=-1, keepdims=True) * a
     b = b / np.linalg.norm(b, axis=-1, keepdims=True)
-    return from_matrix(np.stack([a, b, np.cross(a, b)], axis=-1))
+    return from_matrix(np.stack([a, b, _cross(a, b)], axis=-1))
 
 
 def about_y(theta: np.ndarray) -> np.ndarray:
