@@ -1,10 +1,11 @@
 """How shipped-style model files do in and out of the lab they were trained on (issue 16).
 
     python benchmarks/model_generalization.py --models shipped,A.npz,... [--data ../shared/data]
+                                              [--placement right_ankle]
 
-For each model file (``--models``, comma separated; ``shipped``: the shipped right-ankle
-model), one phone at the right ankle, ``phone`` noise, test seed 1000, measured as ``imuloco
-bench`` measures a test clip (:func:`imuloco.evaluate.bench.measure`):
+For each model file (``--models``, comma separated; ``shipped``: the shipped model of the
+placement), one sensor at ``--placement`` (default the right ankle), ``phone`` noise, test seed
+1000, measured as ``imuloco bench`` measures a test clip (:func:`imuloco.evaluate.bench.measure`):
 
 - ``lab``: the ``bandai-namco-2`` clips every such model holds out for its validation curve
   (:func:`imuloco.methods.learned.method.held_out`, the method's default share);
@@ -41,6 +42,7 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=Path("../shared/data"))
     ap.add_argument("--models", required=True)
     ap.add_argument("--limit", type=int, default=80)
+    ap.add_argument("--placement", default="right_ankle")
     ap.add_argument("-o", "--output", type=Path, default=None)
     args = ap.parse_args()
     if args.output is not None:
@@ -51,16 +53,17 @@ def main() -> None:
     other = load_database(args.data / "bandai-namco-1", limit=args.limit, progress=False)
     cmu = load_database(args.data / "cmu-iclone", progress=False)
     cmu = MotionDatabase([resampled(c, float(lab.clips[0].fps)) for c in cmu.clips], cmu.labels)
-    sets = {name: synthesize(db, ["right_ankle"], "phone", SEED)
+    sets = {name: synthesize(db, [args.placement], "phone", SEED)
             for name, db in (("lab", lab), ("bn1", other), ("cmu", cmu))}
     contents = sorted({c["content"] for c in other.labels})
     lines = [(f"Test clips: lab {len(lab)} (bandai-namco-2 validation), bandai-namco-1 "
-              f"{len(other)}, cmu-iclone {len(cmu)}; right ankle, phone noise, seed {SEED}."),
+              f"{len(other)}, cmu-iclone {len(cmu)}; {args.placement}, phone noise, seed {SEED}."),
              "", "| model | lab | bandai-namco-1 | " + " | ".join(contents) +
              " | skate: walk-back (truth) | cmu-iclone |",
              "|---|" + "---:|" * (len(contents) + 4)]
     for name in args.models.split(","):
-        model = load_model(shipped_model("learned", "right_ankle") if name == "shipped" else name)
+        model = load_model(shipped_model("learned", args.placement) if name == "shipped"
+                           else name)
         clips = {k: measure(model, ex)["clips"] for k, ex in sets.items()}
         by = {c: aggregate([r for r in clips["bn1"] if r["motion_type"] == c]) for c in contents}
         back = by.get("walk-back", {"foot_skate_cm_s": float("nan"),

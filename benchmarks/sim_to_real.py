@@ -16,7 +16,8 @@ the virtual sensors, never a fit: nothing here changes a constant.
 of ``real-imu/pyshoe-vicon``, in their makers' axes and calibrated, against clean virtual
 right-foot sensors on 6 walks of ``bandai-namco-2`` (mean and standard deviation per axis,
 < 8 Hz), then the share of frames the shipped foot model flags unreliable and its median
-predicted error, both ways; and how plausible the calibrated trials' reconstructed gait is (its
+predicted error, both ways (calibrated, also inside the reference's walking bouts alone, when
+it has them); and how plausible the calibrated trials' reconstructed gait is (its
 cadence against the sensor-level estimator's, each foot's stance, a normal walk's about 60 %,
 and the feet's skate while down).
 
@@ -80,10 +81,13 @@ def sensor_table(data: Path, placement: str, model_file: Path | None = None) -> 
     from imuloco.sensors.calibration import calibrate
     from imuloco.sensors.simulate import simulate
 
-    def stats(rec) -> np.ndarray:  # mean (6,) and std (6,) below 8 Hz
+    def stats(rec, bouts=()) -> np.ndarray:  # mean (6,) and std (6,) below 8 Hz
         rate = 1.0 / np.median(np.diff(rec.times))
         sos = butter(4, 8.0, fs=rate, output="sos")
         x = sosfiltfilt(sos, np.concatenate([rec.acc[:, 0], rec.gyro[:, 0]], 1), axis=0)
+        if bouts:  # only inside the reference's walking bouts (seconds from the first sample)
+            t = rec.times - rec.times[0]
+            x = x[np.any([(t >= b.start) & (t <= b.end) for b in bouts], axis=0)]
         return np.r_[x.mean(0), x.std(0)]
 
     model = load_model(model_file or shipped_model("learned", placement))
@@ -96,10 +100,12 @@ def sensor_table(data: Path, placement: str, model_file: Path | None = None) -> 
     for name in SENSOR_SETS[placement]:
         trials = list(read_trials(data / "real-imu" / name, limit=8))
         for axes, cal in (("maker's", False), ("calibrated", True)):
-            rows, flagged, predicted, plausible = [], [], [], []
+            rows, flagged, predicted, plausible, walking = [], [], [], [], []
             for trial in trials:
                 rec = trial.recording.select([placement])
                 rows.append(stats(calibrate(rec)[0] if cal else rec))
+                if cal and trial.reference.bouts:
+                    walking.append(stats(calibrate(rec)[0], trial.reference.bouts))
                 motion, info = reconstruct_recording(rec, model, calibrate=cal)
                 flagged.append(np.mean(info["confidence"].unreliable))
                 predicted.append(np.median(info["confidence"].error_m))
@@ -108,6 +114,9 @@ def sensor_table(data: Path, placement: str, model_file: Path | None = None) -> 
             lines.append(f"| {name} ({len(trials)} trials) | {axes} | "
                          + " | ".join(f"{v:.2f}" for v in np.mean(rows, 0))
                          + f" | {100 * np.mean(flagged):.0f} | {100 * np.median(predicted):.1f} |")
+        if len(walking) == len(trials):
+            lines.append(f"| {name} ({len(trials)} trials) | calibrated, walking bouts only | "
+                         + " | ".join(f"{v:.2f}" for v in np.mean(walking, 0)) + " | | |")
         c = np.nanmean(plausible, 0)
         gait.append(f"| {name} ({len(trials)} trials) | {c[0]:.1f} | {c[1]:.1f} | "
                     f"{c[2]:.0f} / {c[3]:.0f} | {c[4]:.1f} |")
