@@ -278,7 +278,8 @@ def _folders(values: tuple[str, ...]) -> list[Path] | None:
               default=None, help="Instead: the real-data gait protocol on this folder (real "
                                  "IMUs with references, imuloco.evaluate.real).")
 @click.option("--baseline", is_flag=True,
-              help="With --real: also measure a right-ankle reconstruction's gait.")
+              help="With --real: also measure the gait of the motion the placement's shipped "
+                   "model reconstructs (the right-ankle one where it has none).")
 @click.option("--batch", "batch_walkers", type=click.IntRange(1), default=None, metavar="N",
               help="Instead: the batch benchmark (imuloco.evaluate.batchbench) on N simulated "
                    "walkers of 60 s; writes batch_bench.md and batch_bench.json.")
