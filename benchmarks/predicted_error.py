@@ -1,0 +1,75 @@
+"""A shin model file's predicted error against its actual error (issue 16's confidence).
+
+    python benchmarks/predicted_error.py --models shipped,A.npz,... [--data ../shared/data]
+        [-o TABLE.md]
+
+For each model file (``shipped``: the shipped right-ankle model), one phone at the right
+ankle, ``phone`` noise, test seed 1000, measured as ``imuloco bench`` measures a clip
+(:func:`imuloco.evaluate.bench.measure`): the rms over frames of the actual error (rms over
+joints a frame), of the predicted error (``error_m``, calibrated when the file holds a
+calibration) and of the network's own estimate (``sigma_m``), in cm, on the ``bandai-namco-2``
+clips every shipped-style model holds out (:func:`imuloco.methods.learned.method.held_out`)
+and on ``bandai-namco-1`` (per content too). Models trained on ``bandai-namco-1`` are
+in-sample there.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+SEED = 1000
+
+
+def rms_cm(rows: list[dict], key: str, content: str | None = None) -> float:
+    v = np.concatenate([r[key] if content is None else r[key][r["content"] == content]
+                        for r in rows])
+    return float(100 * np.sqrt(np.mean(np.square(v))))
+
+
+def main() -> None:
+    from imuloco.app.pipeline import shipped_model
+    from imuloco.evaluate.bench import measure
+    from imuloco.io.atomic import atomic_write, check_output
+    from imuloco.io.database import load_database
+    from imuloco.methods import get_method, load_model
+    from imuloco.methods.learned.method import held_out
+    from imuloco.methods.training import synthesize
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", type=Path, default=Path("../shared/data"))
+    ap.add_argument("--models", required=True)
+    ap.add_argument("-o", "--output", type=Path, default=None)
+    args = ap.parse_args()
+    if args.output is not None:
+        check_output(args.output)
+    share = get_method("learned").validation
+    lab = load_database(args.data / "bandai-namco-2", progress=False)
+    lab = lab.subset([i for i, c in enumerate(lab.labels) if held_out(c["name"], share)])
+    other = load_database(args.data / "bandai-namco-1", progress=False)
+    sets = {"lab": synthesize(lab, ["right_ankle"], "phone", SEED),
+            "bandai-namco-1": synthesize(other, ["right_ankle"], "phone", SEED)}
+    contents = sorted({c["content"] for c in other.labels})
+    cols = ["lab", "bandai-namco-1", *contents]
+    lines = [f"Actual / predicted / network's own estimate, rms over frames, cm (right ankle, "
+             f"phone noise, seed {SEED}; lab: {len(lab)} held-out bandai-namco-2 clips; "
+             f"bandai-namco-1: {len(other)} clips).", "",
+             "| model | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
+    for name in args.models.split(","):
+        model = load_model(shipped_model("learned", "right_ankle") if name == "shipped" else name)
+        rows = {k: measure(model, ex)["confidence"] for k, ex in sets.items()}
+        cells = [(rows[c], None) for c in ("lab", "bandai-namco-1")]
+        cells += [(rows["bandai-namco-1"], c) for c in contents]
+        lines.append(f"| {Path(name).name} | " + " | ".join(
+            " / ".join(f"{rms_cm(r, k, c):.2f}" for k in ("actual_m", "error_m", "score_sigma_m"))
+            for r, c in cells) + " |")
+        print(lines[-1], flush=True)
+    if args.output is not None:
+        with atomic_write(args.output, "w") as f:
+            f.write("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
