@@ -69,10 +69,10 @@ def main() -> None:
         keep = [i for i, c in enumerate(other.labels) if c["content"] == content][:args.limit]
         sets[content] = synthesize(other.subset(keep), ["right_ankle"], "phone", SEED)
     cols = [f"{k} {a:+.0f}°" for k in sets for a in angles]
-    lines = [f"Virtual right-ankle sensors turned about x (phone noise, seed {SEED}); lab: "
+    lines = [(f"Virtual right-ankle sensors turned about x (phone noise, seed {SEED}); lab: "
              f"{len(sets['lab'])} bandai-namco-2 validation clips; walk and walk-back: "
              f"{len(sets['walk'])} and {len(sets['walk-back'])} bandai-namco-1 clips. MPJPE cm "
-             "(walk-back: MPJPE / foot skate cm/s).", "",
+             "(walk-back: MPJPE / foot skate cm/s)."), "",
              "| model | " + " | ".join(cols) + " |", "|---|" + "---:|" * len(cols)]
     for name in args.models.split(","):
         model = load_model(shipped_model("learned", "right_ankle") if name == "shipped" else name)

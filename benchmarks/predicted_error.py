@@ -53,9 +53,9 @@ def main() -> None:
             "bandai-namco-1": synthesize(other, ["right_ankle"], "phone", SEED)}
     contents = sorted({c["content"] for c in other.labels})
     cols = ["lab", "bandai-namco-1", *contents]
-    lines = [f"Actual / predicted / network's own estimate, rms over frames, cm (right ankle, "
+    lines = [(f"Actual / predicted / network's own estimate, rms over frames, cm (right ankle, "
              f"phone noise, seed {SEED}; lab: {len(lab)} held-out bandai-namco-2 clips; "
-             f"bandai-namco-1: {len(other)} clips).", "",
+             f"bandai-namco-1: {len(other)} clips)."), "",
              "| model | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
     for name in args.models.split(","):
         model = load_model(shipped_model("learned", "right_ankle") if name == "shipped" else name)
