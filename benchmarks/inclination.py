@@ -8,7 +8,7 @@ turned by a prior. The two can differ by 10-15 degrees about the shin's medio-la
 (docs/results/learned/experiments.md, the diagnosis round), and virtual shank sensors walk
 14-29 degrees from their axis depending on the data set. This measures, on virtual sensors
 only, what such an error costs: the ``bandai-namco-2`` clips every shipped-style model holds
-out (:func:`imuloco.methods.learned.method.held_out`) and ``--limit`` ``bandai-namco-1``
+out (:func:`imuloco.methods.learned.method.held_out_clips`) and ``--limit`` ``bandai-namco-1``
 walks and backward walks, right ankle, ``phone`` noise, test seed 1000, with every clip's
 sensor turned about its x axis by each angle (:func:`imuloco.methods.learned.train.inclined`),
 measured as ``imuloco bench`` measures a clip (:func:`imuloco.evaluate.bench.measure`):
@@ -46,8 +46,8 @@ def main() -> None:
     from imuloco.evaluate.bench import aggregate, measure
     from imuloco.io.atomic import atomic_write, check_output
     from imuloco.io.database import load_database
-    from imuloco.methods import get_method, load_model
-    from imuloco.methods.learned.method import held_out
+    from imuloco.methods import load_model
+    from imuloco.methods.learned.method import held_out_clips
     from imuloco.methods.training import synthesize
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -60,9 +60,7 @@ def main() -> None:
     if args.output is not None:
         check_output(args.output)
     angles = [float(a) for a in args.angles.split(",")]
-    share = get_method("learned").validation
-    lab = load_database(args.data / "bandai-namco-2", progress=False)
-    lab = lab.subset([i for i, c in enumerate(lab.labels) if held_out(c["name"], share)])
+    lab = held_out_clips(load_database(args.data / "bandai-namco-2", progress=False))
     other = load_database(args.data / "bandai-namco-1", progress=False)
     sets = {"lab": synthesize(lab, ["right_ankle"], "phone", SEED)}
     for content in ("walk", "walk-back"):

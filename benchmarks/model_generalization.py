@@ -8,7 +8,7 @@ placement), one sensor at ``--placement`` (default the right ankle), ``phone`` n
 1000, measured as ``imuloco bench`` measures a test clip (:func:`imuloco.evaluate.bench.measure`):
 
 - ``lab``: the ``bandai-namco-2`` clips every such model holds out for its validation curve
-  (:func:`imuloco.methods.learned.method.held_out`, the method's default share);
+  (:func:`imuloco.methods.learned.method.held_out_clips`, the method's default share);
 - ``bandai-namco-1``: ``--limit`` clips of its styles (none in ``bandai-namco-2``) and contents
   (adds dash, walking backwards, side steps), MPJPE per content and foot skate on walking
   backwards (the ground truth's beside it);
@@ -34,8 +34,8 @@ def main() -> None:
     from imuloco.evaluate.bench import aggregate, measure
     from imuloco.io.atomic import atomic_write, check_output
     from imuloco.io.database import load_database
-    from imuloco.methods import get_method, load_model
-    from imuloco.methods.learned.method import held_out
+    from imuloco.methods import load_model
+    from imuloco.methods.learned.method import held_out_clips
     from imuloco.methods.training import synthesize
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -47,9 +47,7 @@ def main() -> None:
     args = ap.parse_args()
     if args.output is not None:
         check_output(args.output)
-    share = get_method("learned").validation
-    lab = load_database(args.data / "bandai-namco-2", progress=False)
-    lab = lab.subset([i for i, c in enumerate(lab.labels) if held_out(c["name"], share)])
+    lab = held_out_clips(load_database(args.data / "bandai-namco-2", progress=False))
     other = load_database(args.data / "bandai-namco-1", limit=args.limit, progress=False)
     cmu = load_database(args.data / "cmu-iclone", progress=False)
     cmu = MotionDatabase([resampled(c, float(lab.clips[0].fps)) for c in cmu.clips], cmu.labels)

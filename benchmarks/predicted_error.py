@@ -8,7 +8,7 @@ ankle, ``phone`` noise, test seed 1000, measured as ``imuloco bench`` measures a
 (:func:`imuloco.evaluate.bench.measure`): the rms over frames of the actual error (rms over
 joints a frame), of the predicted error (``error_m``, calibrated when the file holds a
 calibration) and of the network's own estimate (``sigma_m``), in cm, on the ``bandai-namco-2``
-clips every shipped-style model holds out (:func:`imuloco.methods.learned.method.held_out`)
+clips every shipped-style model holds out (:func:`imuloco.methods.learned.method.held_out_clips`)
 and on ``bandai-namco-1`` (per content too). Models trained on ``bandai-namco-1`` are
 in-sample there.
 """
@@ -34,8 +34,8 @@ def main() -> None:
     from imuloco.evaluate.bench import measure
     from imuloco.io.atomic import atomic_write, check_output
     from imuloco.io.database import load_database
-    from imuloco.methods import get_method, load_model
-    from imuloco.methods.learned.method import held_out
+    from imuloco.methods import load_model
+    from imuloco.methods.learned.method import held_out_clips
     from imuloco.methods.training import synthesize
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -45,9 +45,7 @@ def main() -> None:
     args = ap.parse_args()
     if args.output is not None:
         check_output(args.output)
-    share = get_method("learned").validation
-    lab = load_database(args.data / "bandai-namco-2", progress=False)
-    lab = lab.subset([i for i, c in enumerate(lab.labels) if held_out(c["name"], share)])
+    lab = held_out_clips(load_database(args.data / "bandai-namco-2", progress=False))
     other = load_database(args.data / "bandai-namco-1", progress=False)
     sets = {"lab": synthesize(lab, ["right_ankle"], "phone", SEED),
             "bandai-namco-1": synthesize(other, ["right_ankle"], "phone", SEED)}

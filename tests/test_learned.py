@@ -418,3 +418,17 @@ def test_cli_ensemble(tmp_path):
     res = CliRunner().invoke(cli, ["ensemble", str(tmp_path / "m0.npz"), str(out), "-o",
                                    str(tmp_path / "x.npz")])
     assert res.exit_code == 2 and "member 1: expected a learned model of one network" in res.output
+
+
+def test_held_out_clips_are_the_clips_a_fit_validates_on(sample_db):
+    """The benchmarks' "lab" set is exactly the clips a fit leaves out of training."""
+    from imuloco.methods.learned.method import Learned, held_out_clips
+    from imuloco.methods.training import synthesize
+
+    share = 0.3
+    examples = synthesize(sample_db, ["right_ankle"], "phone", seed=0)
+    _, val = Learned(validation=share)._validation_split(examples)
+    held = held_out_clips(sample_db, share)
+    assert 0 < len(held) < len(sample_db)
+    assert [c["name"] for c in held.labels] == [e.labels["name"] for e in val]
+    assert len(held_out_clips(sample_db)) < len(held)  # the default share is smaller

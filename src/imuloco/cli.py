@@ -434,12 +434,18 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
     for path in method.write_training_report(output):
         click.echo(f"wrote {path}")
     if mirrored_path is not None:
-        try:
-            other = method.mirrored(db.clips[:: max(len(db) // MIRROR_CLIPS, 1)])
-        except ValueError as e:
-            raise click.UsageError(f"--mirrored: {e}") from None
-        other.save(mirrored_path, overwrite=True)  # checked before training
-        click.echo(f"wrote {mirrored_path} (for {', '.join(other.placements_)})")
+        _save_mirrored(method, db, mirrored_path)
+
+
+def _save_mirrored(model, db, path: Path) -> None:
+    """Write ``model``'s mirror (the other side's placements), fitted on a spread of ``db``'s
+    clips, to ``path`` (checked for overwriting by the caller before any work)."""
+    try:
+        other = model.mirrored(db.clips[:: max(len(db) // MIRROR_CLIPS, 1)])
+    except ValueError as e:
+        raise click.UsageError(f"--mirrored: {e}") from None
+    other.save(path, overwrite=True)
+    click.echo(f"wrote {path} (for {', '.join(other.placements_)})")
 
 
 @cli.command()
@@ -476,14 +482,8 @@ def ensemble(members: tuple[Path, ...], output: Path, mirrored_path: Path | None
     for path in model.write_training_report(output):
         click.echo(f"wrote {path}")
     if mirrored_path is not None:
-        db = load_data(_folders(data_items), limit, progress=True, up=up,
-                       skip_frames=skip_frames)
-        try:
-            other = model.mirrored(db.clips[:: max(len(db) // MIRROR_CLIPS, 1)])
-        except ValueError as e:
-            raise click.UsageError(f"--mirrored: {e}") from None
-        other.save(mirrored_path, overwrite=True)  # checked above
-        click.echo(f"wrote {mirrored_path} (for {', '.join(other.placements_)})")
+        _save_mirrored(model, load_data(_folders(data_items), limit, progress=True, up=up,
+                                        skip_frames=skip_frames), mirrored_path)
 
 
 @cli.command("export-onnx")

@@ -51,9 +51,9 @@ def floor_under(
     each still spell of each part (one per step), by least squares with a Huber loss (robust to
     a step onto something or a foot paused in the air), as a linear function of the horizontal
     position along each principal direction of those points that spans at least
-    ``MIN_FLOOR_SPAN`` leg lengths: none for standing or stepping in place (the floor is then level, as before), the
-    walking direction for a straight walk, both for a path that turns. The floor's level is
-    then :func:`floor_height` of the heights with the slope taken out.
+    ``MIN_FLOOR_SPAN`` leg lengths: none for standing or stepping in place (the floor is then
+    level, as before), the walking direction for a straight walk, both for a path that turns.
+    The floor's level is then :func:`floor_height` of the heights with the slope taken out.
 
     Parameters
     ----------

@@ -160,7 +160,7 @@ def estimate_mounting(rec: Recording, placement: str | int | None = None,
                          "sway defines the axes")
     if "foot" in name:
         return _foot_mounting(rec, k)
-    if name == LOWER_BACK:
+    if LOWER_BACK in name:
         return _back_mounting(rec, k)
     rate = 100.0
     _, acc = _uniform(rec.times, rec.acc[:, k], rate)

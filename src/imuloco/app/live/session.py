@@ -194,8 +194,8 @@ class LiveSession:
     calibrate_s : seconds of samples to calibrate how the phone sits on the leg
         (:func:`imuloco.sensors.calibration.calibrate`); the first frames come out then. While
         a leg or lower-back sensor shows fewer than two strides the calibration waits up to
-        three times as long for the walk to start. ``0`` skips calibration (phone strapped in the segment's
-        anatomical frame). At most :data:`MAX_CALIBRATE_S`.
+        three times as long for the walk to start. ``0`` skips calibration (phone strapped in
+        the segment's anatomical frame). At most :data:`MAX_CALIBRATE_S`.
     sigma_s, radius_s : resampling kernel (see the module docstring).
     calibration : a calibration found earlier for the same phone (skips calibrating).
     max_gap_s : a longer pause between samples is a dropout (see :meth:`push`).

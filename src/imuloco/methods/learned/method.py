@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from imuloco.core.mirror import mirror, mirror_frames, mirror_pairs, mirror_rotations
-from imuloco.core.motion import Motion
+from imuloco.core.motion import Motion, MotionDatabase
 from imuloco.errors import InputError
 from imuloco.methods import pose
 from imuloco.methods.base import Method, Reconstruction, Stream, calibrated_error
@@ -139,8 +139,8 @@ class Learned(Method):
                  validation: float = 0.05, dropout: float = 0.0, weight_decay: float = 1e-4,
                  position_weight: float = 10.0, accel_weight: float = 150.0, lag: int = 8,
                  proportions: float = 0.1, reverse: float = 0.3, strap: float = 0.0,
-                 incline: float = 0.0, bidirectional: bool = False, members: int = 1, threads: int | None = None,
-                 seed: int = 0) -> None:
+                 incline: float = 0.0, bidirectional: bool = False, members: int = 1,
+                 threads: int | None = None, seed: int = 0) -> None:
         self.hidden = hidden
         self.layers = layers
         self.epochs = epochs
@@ -319,8 +319,8 @@ class Learned(Method):
         note, from a prediction's network sigma and novelty (see :attr:`calibration_`)."""
         flag = None if self.novelty_mean_ is None else out.novelty > self.novelty_threshold_
         why = ("no frames flagged (a model file from before novelty was measured)"
-               if flag is None else f"frames flagged where the features are farther from the training data than "
-               f"{FLAG_QUANTILE:.0%} of held-out training-motion frames'")
+               if flag is None else "frames flagged where the features are farther from the "
+               f"training data than {FLAG_QUANTILE:.0%} of held-out training-motion frames'")
         cal = self.calibration_
         if cal is None:
             return out.sigma, flag, "error_m: the network's own estimate, not calibrated; " + why
@@ -487,6 +487,14 @@ def held_out(name: str, share: float) -> bool:
     """Whether the clip ``name`` is among the ``share`` of clips a model holds out for its
     validation curve (by CRC32 of the name, so the same clips for every run)."""
     return zlib.crc32(name.encode()) < share * 2**32
+
+
+def held_out_clips(db: MotionDatabase, share: float | None = None) -> MotionDatabase:
+    """The clips of ``db`` that every model of ``share`` (the method's default ``validation``
+    when None) holds out for its validation curve (:func:`held_out`): the only clips of its
+    training data a shipped model never saw."""
+    share = Learned().validation if share is None else share
+    return db.subset([i for i, c in enumerate(db.labels) if held_out(c["name"], share)])
 
 
 # what members of one ensemble must share: they read the same signals and write the same poses
