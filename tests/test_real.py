@@ -56,6 +56,20 @@ def test_foot_gait_on_a_simulated_foot_imu(demo_rec, demo_clip):
         assert all(r["foot"] == foot and r["end_s"] > r["start_s"] for r in g.strides)
 
 
+def test_a_foot_s_swings_end_at_its_contacts(demo_rec):
+    """``swings_m[k]`` is the swing that ends at contact k: a stride's length is the swing
+    ending at its last contact, and a window keeps the two aligned."""
+    g = foot_gait(demo_rec.times, demo_rec.acc[:, 0], demo_rec.gyro[:, 0], "right")
+    assert len(g.swings_m) == len(g.initial_contacts)
+    by_end = dict(zip(g.initial_contacts.tolist(), g.swings_m.tolist(), strict=True))
+    lengths = [(by_end[r["end_s"]], r["length_m"]) for r in g.strides
+               if np.isfinite(r["length_m"])]
+    assert len(lengths) >= 3
+    np.testing.assert_allclose(*zip(*lengths, strict=True))
+    w = g.window(g.initial_contacts[2], g.initial_contacts[-1])
+    np.testing.assert_array_equal(w.swings_m, g.swings_m[2:])
+
+
 def test_a_foot_never_under_the_zupt_threshold_still_gets_its_strides(demo_rec, demo_clip):
     """Some walkers' feet never get under the ZUPT detector's 34 deg/s: a 60 deg/s tremor
     (25 Hz, 0.4 degrees) on the simulated shoe IMU keeps every 50 ms window above it, yet the
@@ -166,6 +180,44 @@ def test_match_events_one_to_one():
                                        np.array([1.02, 1.05, 2.9, 5.0]))
     assert sorted(np.round(errs, 3)) == [-0.1, 0.02]
     assert (missed, extra) == (1, 2)
+
+
+def test_ipol_stride_and_speed_follow_the_reference_s_definition():
+    """ipol-gait spreads a bout's distance over all its steps (2 x distance / steps) and over
+    its time from the first foot-off. A right foot whose swings cover exactly that distance,
+    with exactly the reference's steps, must score no error, though its complete strides
+    (without the short first swing from standing) average longer and its contacts' span is
+    shorter than the bout. The walk's last contact comes 20 ms after the trial's end (its
+    last strike) and still counts; a turning step just after the bout (within the matching
+    tolerance) does not."""
+    from imuloco.evaluate.real import evaluate_gait
+    from imuloco.evaluate.sensorgait import SensorGait, stride_row
+    from imuloco.io.realimu import Bout, GaitReference, RealTrial
+
+    right = np.array([0.5, 1.6, 2.7, 3.8, 4.9, 6.0])  # the reference's strikes, bout [0, 6]
+    swings = np.array([0.4, 1.4, 1.4, 1.4, 1.4, 0.7, 0.9])  # the first from standing
+    est = np.append(right + [0.01, 0.0, -0.01, 0.0, 0.01, 0.02], 6.2)  # then a turning step
+    left = np.array([1.05, 2.15, 3.25, 4.35, 5.45, 5.95])
+    dist, steps, end = float(swings[:6].sum()), 12, 6.0
+    bout = Bout(0.0, end, dist, steps / 2, 60.0 * steps / end, 2 * dist / steps, dist / end)
+    ref = GaitReference(initial_contacts={"right": np.append(right, 6.21), "left": left},
+                        bouts=[bout])
+    strides = [stride_row("right", a, b, n, 0.6) for a, b, n in
+               zip(est[:-1], est[1:], swings[1:], strict=True)]
+    gait = SensorGait("right_foot", "test", strides=strides, initial_contacts=est,
+                      steps_per_contact=2, swings_m=swings)
+    row = evaluate_gait(gait, RealTrial("ipol-gait", "t", None, ref), "imuloco")
+    assert row["stride_ref"] == pytest.approx(2 * 6.7 / 12)
+    assert row["stride_err_pct"] == pytest.approx(0, abs=1e-9)
+    assert row["speed_err_pct"] == pytest.approx(0, abs=1e-9)
+    # the walk's summary (the complete strides in the window, the contacts' span) differs
+    assert row["stride_mean_est"] == pytest.approx(np.mean(swings[1:]))
+    assert row["stride_mean_err_pct"] > 5 and row["speed_mean_err_pct"] > 10
+    # a foot whose swings walked 5 % further is 5 % off in both
+    gait.swings_m = swings * 1.05
+    row = evaluate_gait(gait, RealTrial("ipol-gait", "t", None, ref), "imuloco")
+    assert row["stride_err_pct"] == pytest.approx(5.0)
+    assert row["speed_err_pct"] == pytest.approx(5.0)
 
 
 def test_path_errors_ignore_start_pose():

@@ -14,6 +14,12 @@ reference's windows:
   one to the reference's (nearest within :data:`IC_TOLERANCE_S`), with the missed and extra.
 - ``stride_err_m`` / ``stride_err_pct``: mean stride length per bout against the reference's.
 - ``speed_err_pct``: walking speed per bout.
+- ipol-gait's foot sensors: stride and speed by the reference's own definition, its 10 m
+  over all the bout's steps (2 x 10 m / steps) and over the bout's time (from the first
+  foot-off): the foot's distance over the swings that end at its contacts in the bout
+  (:func:`bout_contacts`), over its steps and over the same time. ``stride_mean_err_pct`` /
+  ``speed_mean_err_pct``: the estimate as a walk's summary reports it (the mean of the
+  complete strides, speed from the contacts' span), against the same reference.
 - ``bouts_ref`` / ``bouts_measured``: the reference's bouts, and those in which the estimate
   has a stride (the errors above average over these only: an estimator that misses a hard
   bout is not scored on it, so its figures read together with this share).
@@ -75,18 +81,40 @@ def match_events(ref: np.ndarray, est: np.ndarray, tol: float = IC_TOLERANCE_S
     events left unmatched and the estimated events left unmatched.
     """
     ref, est = np.sort(np.asarray(ref, float)), np.sort(np.asarray(est, float))
+    pairs = matched_pairs(ref, est, tol)
+    errs = np.asarray([est[j] - ref[i] for i, j in pairs], float)
+    return errs, len(ref) - len(pairs), len(est) - len(pairs)
+
+
+def matched_pairs(ref: np.ndarray, est: np.ndarray, tol: float = IC_TOLERANCE_S
+                  ) -> list[tuple[int, int]]:
+    """The ``(ref index, est index)`` pairs of :func:`match_events`' one-to-one matching."""
+    ref, est = np.asarray(ref, float), np.asarray(est, float)
     if not len(ref) or not len(est):
-        return np.zeros(0), len(ref), len(est)
+        return []
     d = np.abs(ref[:, None] - est[None, :])
     pairs = np.argwhere(d <= tol)
     order = np.argsort(d[pairs[:, 0], pairs[:, 1]], kind="stable")
-    used_r, used_e, errs = set(), set(), []
-    for i, j in pairs[order]:
+    used_r, used_e, out = set(), set(), []
+    for i, j in pairs[order].tolist():
         if i not in used_r and j not in used_e:
             used_r.add(i)
             used_e.add(j)
-            errs.append(est[j] - ref[i])
-    return np.asarray(errs), len(ref) - len(used_r), len(est) - len(used_e)
+            out.append((i, j))
+    return out
+
+
+def bout_contacts(est: np.ndarray, ref: np.ndarray, start: float, end: float) -> np.ndarray:
+    """Mask of the estimated contacts ``est`` that are steps of the reference's bout
+    ``[start, end]`` s: those matched (:func:`matched_pairs`) to a reference contact of
+    ``ref`` inside it, and the unmatched ones inside it. A strike belongs to the same bout on
+    both sides whichever side of an edge its estimate falls (ipol-gait's trials end on the
+    last strike, which its estimate may follow by a few samples)."""
+    inside = lambda t: (t >= start - 1e-9) & (t <= end + 1e-9)
+    mask = inside(est)
+    for i, j in matched_pairs(ref, est):
+        mask[j] = inside(ref[i])
+    return mask
 
 
 def _pct(est: float, ref: float) -> float:
@@ -140,6 +168,16 @@ def _bout_rows(gait: SensorGait, trial: RealTrial, ref_ic: np.ndarray, per_conta
                    else _span_cadence(inside, per_contact))
         ref_len = b.stride_length_m
         ref_speed = b.speed_mps
+        if trial.dataset == "ipol-gait" and gait.swings_m is not None:
+            # the reference spreads the bout's 10 m over all its steps, the first from
+            # standing and the last into the U-turn or the stop included, and over its time
+            # from the first foot-off: so does the estimate, with its own distance (the
+            # foot's swings ending at its contacts in the bout) and its own steps
+            w["stride_mean_m"], w["speed_mean_mps"] = w["stride_length_m"], w["speed_mps"]
+            sel = bout_contacts(gait.initial_contacts, ref_ic, b.start, b.end)
+            dist, steps = float(gait.swings_m[sel].sum()), per_contact * int(sel.sum())
+            w["stride_length_m"] = 2.0 * dist / steps if steps else math.nan
+            w["speed_mps"] = dist / (b.end - b.start) if steps else math.nan
         if trial.dataset == "pyshoe-vicon":  # foot flat to foot flat, the contacts between
             # the reference counts strides over the whole trial, pauses included: so does
             # the estimate (its contacts in the same window), not over its contacts' span
@@ -153,6 +191,9 @@ def _bout_rows(gait: SensorGait, trial: RealTrial, ref_ic: np.ndarray, per_conta
         row = {"cadence_ref": ref_cad, "cadence_est": w["cadence_spm"],
                "stride_ref_m": ref_len, "stride_est_m": w["stride_length_m"],
                "speed_ref_mps": ref_speed, "speed_est_mps": w["speed_mps"]}
+        if "stride_mean_m" in w:  # the estimate as a walk's summary reports it
+            row.update(stride_mean_est_m=w["stride_mean_m"],
+                       speed_mean_est_mps=w["speed_mean_mps"])
         if side in ref.final_contacts:
             row.update(stance_est=w["stance_pct"], stance_ref=reference_stance(
                 ref.initial_contacts[side], ref.final_contacts[side], b.start, b.end))
@@ -222,6 +263,11 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
         row[f"{key}_ref"], row[f"{key}_est"] = r, e
         row[f"{key}_err_pct"] = _mean([_pct(b[f"{key}_est{unit}"], b[f"{key}_ref{unit}"])
                                       for b in bouts])
+    if bouts and "stride_mean_est_m" in bouts[0]:
+        for key, unit in (("stride", "_m"), ("speed", "_mps")):
+            row[f"{key}_mean_est"] = _mean([b[f"{key}_mean_est{unit}"] for b in bouts])
+            row[f"{key}_mean_err_pct"] = _mean([_pct(b[f"{key}_mean_est{unit}"],
+                                                     b[f"{key}_ref{unit}"]) for b in bouts])
     row["stride_err_m"] = _mean([b["stride_est_m"] - b["stride_ref_m"] for b in bouts])
     row["bouts_ref"] = len(bouts)
     row["bouts_measured"] = sum(bool(np.isfinite(b["stride_est_m"])) for b in bouts)
@@ -340,7 +386,7 @@ def run_real(folder: str | Path, out: str | Path | None = None, limit: int | Non
 
 SUMMARY_KEYS = ("steps_err_pct", "cadence_err_pct", "ic_median_ms", "stride_err_m",
                 "stride_err_pct", "speed_err_pct", "stance_err_pp", "stride_mae_m",
-                "path_final_pct")
+                "path_final_pct", "stride_mean_err_pct", "speed_mean_err_pct")
 
 
 def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -406,6 +452,27 @@ def table(summary: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+LATER_COLUMNS = ("stride_mean_est", "stride_mean_err_pct", "speed_mean_est",
+                 "speed_mean_err_pct")
+
+
+def _mean_note(summary: list[dict[str, Any]]) -> str:
+    """The README's sentence on the rows whose stride and speed follow the reference's
+    definition: what the walk's summary (the strides' mean) gives there."""
+    rows = [s for s in summary if "stride_mean_err_pct" in s]
+    if not rows:
+        return ""
+    figs = "; ".join(f"{s['dataset']} {s['sensor']} ({s['estimator']}) stride "
+                     f"{s['stride_mean_err_pct']:.1f} %, speed {s['speed_mean_err_pct']:.1f} %"
+                     for s in rows)
+    return ("ipol-gait's feet: stride and speed by the reference's definition, its 10 m over "
+            "all the bout's steps and over the bout's time from the first foot-off, the "
+            "foot's distance over its swings in the bout in its place. The mean of the "
+            "complete strides and speed from the contacts' span, as a walk's summary reports "
+            f"them, against the same reference (`stride_mean_err_pct`, "
+            f"`speed_mean_err_pct`): {figs}.\n\n")
+
+
 def write_results(rows: list[dict[str, Any]], out: str | Path) -> None:
     """``real.json`` (rows, summary, anchors), ``real.csv`` (rows) and ``README.md``."""
     import csv
@@ -424,6 +491,9 @@ def write_results(rows: list[dict[str, Any]], out: str | Path) -> None:
     with atomic_write(out / "real.json", "w") as fh:
         fh.write(json.dumps(payload, indent=1) + "\n")
     keys = list(dict.fromkeys(k for r in rows for k in r))
+    # columns added since the first release go last: the others keep their place
+    keys = [k for k in keys if k not in LATER_COLUMNS] + [k for k in LATER_COLUMNS
+                                                          if k in keys]
     buf = io.StringIO()
     writer = csv.DictWriter(buf, keys)
     writer.writeheader()
@@ -439,5 +509,5 @@ def write_results(rows: list[dict[str, Any]], out: str | Path) -> None:
                  "bouts in which the estimate has a stride, the bouts that stride, cadence and "
                  "speed errors average over; stance pp: a foot's stance against the "
                  "reference's foot-off and foot-strike events, in percentage points).\n\n"
-                 + table(summary) + "\n\nAnchors from the literature: "
+                 + table(summary) + "\n\n" + _mean_note(summary) + "Anchors from the literature: "
                  + "; ".join(ANCHORS.values()) + ".\n")

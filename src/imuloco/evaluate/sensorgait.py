@@ -59,6 +59,9 @@ class SensorGait:
     steps_per_contact : steps the walker takes per initial contact found (2 for one foot).
     times, path : ndarray (T,) and (T, 3), the sensor's path in metres, x and y on the floor,
         z up (foot sensors), or None.
+    swings_m : ndarray (K,), a foot sensor's horizontal distance (m) moved in the swing that
+        ends at each initial contact, from the rest before it to the rest after (the first
+        swing from standing included, which no stride's length covers); None otherwise.
     """
 
     placement: str
@@ -70,15 +73,17 @@ class SensorGait:
     steps_per_contact: int = 1
     times: np.ndarray | None = None
     path: np.ndarray | None = None
+    swings_m: np.ndarray | None = None
 
     def window(self, start: float, end: float) -> SensorGait:
         """The same gait restricted to strides and contacts within ``[start, end]`` s."""
         ic = self.initial_contacts
+        keep = (ic >= start) & (ic <= end)
         return SensorGait(self.placement, self.method, self.measured, self.reason,
                           [s for s in self.strides if s["start_s"] >= start and
                            s["end_s"] <= end],
-                          ic[(ic >= start) & (ic <= end)], self.steps_per_contact,
-                          self.times, self.path)
+                          ic[keep], self.steps_per_contact, self.times, self.path,
+                          None if self.swings_m is None else self.swings_m[keep])
 
     def summary(self) -> dict[str, float]:
         """``steps``, ``strides``, ``cadence_spm``, ``stride_length_m``, ``step_length_m``,
@@ -200,8 +205,10 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
     if len(rows) < MIN_STRIDES:
         return not_measured(placement, FOOT_METHOD, f"{len(rows)} stride(s) with both "
                             "contacts found: no walking")
+    # swing k (its contact ic[k]) moves the foot from rest k to rest k + 1
+    swing_m = np.linalg.norm(np.diff(pos[rest, :2], axis=0), axis=1)[np.isfinite(ic)]
     return SensorGait(placement, FOOT_METHOD, strides=rows, initial_contacts=ics,
-                      steps_per_contact=2, times=t, path=pos)
+                      steps_per_contact=2, times=t, path=pos, swings_m=swing_m)
 
 
 BACK_METHOD = ("mobgap MobilisedPipelineHealthy (Mobilise-D P1: GsdIluz, IcdIonescu, LrcUllrich, "
