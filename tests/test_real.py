@@ -70,6 +70,34 @@ def test_a_foot_s_swings_end_at_its_contacts(demo_rec):
     np.testing.assert_array_equal(w.swings_m, g.swings_m[2:])
 
 
+def test_a_reconstruction_s_swings_end_at_its_strikes(demo_rec, demo_clip, monkeypatch):
+    """The reconstruction baseline's ``swings_m`` (what ipol-gait's definition sums) is each
+    strike's ankle distance from that foot's previous strike: a right stride's length is the
+    swing ending at its last strike, and the swings sum to both ankles' floor distance."""
+    from imuloco.app import pipeline
+    from imuloco.evaluate.real import reconstruction_gait
+    from imuloco.io.realimu import GaitReference, RealTrial
+    from imuloco.phases import gait_phases
+
+    # the reconstruction is the clip itself, so the swings can be read off the clip
+    monkeypatch.setattr(pipeline, "reconstruct_recording", lambda rec, fitted: (demo_clip, {}))
+    fitted = type("Stub", (), {"name": "stub", "placements_": ["right_ankle"]})()
+    trial = RealTrial("ipol-gait", "t", demo_rec, GaitReference(initial_contacts={}, bouts=[]))
+    g = reconstruction_gait(trial, "right_foot", fitted)
+    assert len(g.swings_m) == len(g.initial_contacts) >= 6
+    by_end = dict(zip(np.round(g.initial_contacts - demo_rec.times[0], 4).tolist(),
+                      g.swings_m.tolist(), strict=False))
+    pairs = [(by_end[round(r["end_s"], 4)], r["length_m"]) for r in g.strides]
+    assert len(pairs) >= 2
+    np.testing.assert_allclose(*zip(*pairs, strict=True), atol=1e-3)
+    steps = gait_phases(demo_clip).steps
+    walked = 0.0
+    for side in ("left", "right"):
+        floor = demo_clip.part_positions([f"{side}_ankle"])[:, 0][:, [0, 2]]
+        walked += np.linalg.norm(floor[steps[side][-1]] - floor[0]) if len(steps[side]) else 0
+    assert g.swings_m.sum() == pytest.approx(walked, rel=0.05)
+
+
 def test_a_foot_never_under_the_zupt_threshold_still_gets_its_strides(demo_rec, demo_clip):
     """Some walkers' feet never get under the ZUPT detector's 34 deg/s: a 60 deg/s tremor
     (25 Hz, 0.4 degrees) on the simulated shoe IMU keeps every 50 ms window above it, yet the

@@ -322,14 +322,24 @@ def reconstruction_gait(trial: RealTrial, placement: str, fitted) -> SensorGait:
     if np.isfinite(trial.reference.height_m):
         motion = to_height(motion, trial.reference.height_m)
     ph = gait_phases(motion)
-    strikes = np.sort(np.concatenate([ph.steps["left"], ph.steps["right"]])) / motion.fps
+    frames = np.concatenate([ph.steps["left"], ph.steps["right"]]).astype(int)
+    order = np.argsort(frames, kind="stable")
+    # each strike's swing: its ankle's floor distance from its previous strike (the first:
+    # from the recording's start), as a foot sensor's swings_m
+    swings = []
+    for side in ("left", "right"):
+        floor = motion.part_positions([f"{side}_ankle"])[:, 0][:, [0, 2]]
+        at = np.asarray(ph.steps[side], int)
+        swings.append(np.linalg.norm(np.diff(floor[np.r_[0, at]], axis=0), axis=1))
     ankle = motion.part_positions(["right_ankle"])[:, 0]
     rows = [r for r in stride_rows(motion, ph) if r["foot"] == "right"]
     t = np.arange(motion.num_frames) / motion.fps + rec.times[0]
     return SensorGait(placement, f"reconstruction ({fitted.name}, "
                       f"{fitted.placements_[0]} model) strikes", strides=rows,
-                      initial_contacts=strikes + rec.times[0], steps_per_contact=1, times=t,
-                      path=ankle[:, [0, 2, 1]] * [1.0, -1.0, 1.0])  # z up: (x, -z, y)
+                      initial_contacts=frames[order] / motion.fps + rec.times[0],
+                      steps_per_contact=1, times=t,
+                      path=ankle[:, [0, 2, 1]] * [1.0, -1.0, 1.0],  # z up: (x, -z, y)
+                      swings_m=np.concatenate(swings)[order])
 
 
 def run_real(folder: str | Path, out: str | Path | None = None, limit: int | None = None,
