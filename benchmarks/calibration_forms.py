@@ -51,7 +51,7 @@ from scipy.stats import spearmanr
 from sklearn.isotonic import IsotonicRegression
 
 from imuloco.evaluate import confidence as conf
-from imuloco.io.atomic import atomic_write, check_output
+from imuloco.io.atomic import atomic_write_text, check_output
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs/results/generalization"
 HELDOUT = [RESULTS / "learned-heldout-contents-reverse" / d
@@ -260,8 +260,7 @@ def main() -> None:
     out = "\n".join(text) + "\n"
     print(out)
     if args.output is not None:
-        with atomic_write(args.output, "w") as f:
-            f.write(out)
+        atomic_write_text(args.output, out)
 
 
 if __name__ == "__main__":

@@ -68,10 +68,9 @@ def main() -> None:
                          f"{np.nanmean(r[:, 6]):.2f} |")
             print(lines[-1], flush=True)
     if args.output:
-        from imuloco.io.atomic import atomic_write
+        from imuloco.io.atomic import atomic_write_text
 
-        with atomic_write(args.output, "w") as f:
-            f.write("\n".join(lines) + "\n")
+        atomic_write_text(args.output, "\n".join(lines))
 
 
 if __name__ == "__main__":

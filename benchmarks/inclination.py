@@ -44,7 +44,7 @@ def turned(examples: list, degrees: float) -> list:
 def main() -> None:
     from imuloco.app.pipeline import shipped_model
     from imuloco.evaluate.bench import aggregate, measure
-    from imuloco.io.atomic import atomic_write, check_output
+    from imuloco.io.atomic import atomic_write_text, check_output
     from imuloco.io.database import load_database
     from imuloco.methods import load_model
     from imuloco.methods.learned.method import held_out_clips
@@ -83,8 +83,7 @@ def main() -> None:
         lines.append(f"| {Path(name).name} | " + " | ".join(cells) + " |")
         print(lines[-1], flush=True)
     if args.output is not None:
-        with atomic_write(args.output, "w") as f:
-            f.write("\n".join(lines) + "\n")
+        atomic_write_text(args.output, "\n".join(lines))
 
 
 if __name__ == "__main__":

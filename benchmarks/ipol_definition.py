@@ -107,10 +107,9 @@ def main() -> None:
     text = tables(rows)
     print(text)
     if args.out:
-        from imuloco.io.atomic import atomic_write
+        from imuloco.io.atomic import atomic_write_text
 
-        with atomic_write(args.out, "w") as fh:
-            fh.write(text + "\n")
+        atomic_write_text(args.out, text)
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ from threadpoolctl import threadpool_limits
 from imuloco.app.pipeline import shipped_model
 from imuloco.evaluate import speed
 from imuloco.evaluate.bench import load_data
-from imuloco.io.atomic import atomic_write
+from imuloco.io.atomic import atomic_write, atomic_write_text
 from imuloco.methods import load_model
 from imuloco.methods.training import TEST_SEED_OFFSET, synthesize
 
@@ -139,8 +139,7 @@ def main() -> None:
     print(text)
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
-        with atomic_write(args.out / "learned_step.md", "w") as f:
-            f.write(text + "\n")
+        atomic_write_text(args.out / "learned_step.md", text)
         with atomic_write(args.out / "learned_step.json", "w") as f:
             f.write(json.dumps({"model": str(args.model), "timings": rows,
                                 "breakdown_ms": parts}, indent=1) + "\n")

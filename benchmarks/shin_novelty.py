@@ -254,10 +254,9 @@ def main() -> None:
                       novelty_rows(args.data))
     print(table)
     if args.output:
-        from imuloco.io.atomic import atomic_write
+        from imuloco.io.atomic import atomic_write_text
 
-        with atomic_write(args.output, "w") as f:
-            f.write(table + "\n")
+        atomic_write_text(args.output, table)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,7 @@
 import pytest
 
 from imuloco.errors import ImulocoError, OutputExistsError
-from imuloco.io.atomic import atomic_write, check_output
+from imuloco.io.atomic import atomic_write, atomic_write_text, check_output
 
 
 def test_atomic_write_replaces_only_on_success(tmp_path):
@@ -17,6 +17,16 @@ def test_atomic_write_replaces_only_on_success(tmp_path):
     with atomic_write(target, "w") as f:
         f.write("new")
     assert target.read_text() == "new"
+
+
+def test_atomic_write_text_ends_with_one_newline(tmp_path):
+    target = tmp_path / "table.md"
+    target.write_text("old")
+    atomic_write_text(target, "| a |\n| b |\n\n")
+    assert target.read_text(encoding="utf-8") == "| a |\n| b |\n"
+    atomic_write_text(target, "é")
+    assert target.read_bytes() == "é\n".encode()
+    assert list(tmp_path.iterdir()) == [target]
 
 
 def test_check_output_refuses_existing_and_inputs(tmp_path):

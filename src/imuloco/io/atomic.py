@@ -100,3 +100,10 @@ def atomic_write(path: str | Path, mode: str = "wb", durable: bool = True) -> It
         f.flush()
         if durable:
             os.fsync(f.fileno())
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically, ending it with one newline: a report or
+    table a script prints and keeps."""
+    with atomic_write(path, "w") as f:
+        f.write(text.rstrip("\n") + "\n")
