@@ -246,6 +246,18 @@ def test_ipol_stride_and_speed_follow_the_reference_s_definition():
     row = evaluate_gait(gait, RealTrial("ipol-gait", "t", None, ref), "imuloco")
     assert row["stride_err_pct"] == pytest.approx(5.0)
     assert row["speed_err_pct"] == pytest.approx(5.0)
+    # both feet's strikes (a reconstruction's: one step each), the left's swings as long:
+    # each foot walks the distance once, so the sum over both is twice it, and no error
+    both = np.sort(np.concatenate([est[:-1], left]))
+    side = np.isin(both, left)
+    lswings = np.array([0.7, 1.4, 1.4, 1.4, 1.4, 0.4])
+    sw = np.empty(len(both))
+    sw[~side], sw[side] = swings[:6], lswings
+    recon = SensorGait("right_foot", "test", strides=strides[:5], initial_contacts=both,
+                       steps_per_contact=1, swings_m=sw)
+    row = evaluate_gait(recon, RealTrial("ipol-gait", "t", None, ref), "reconstruction")
+    assert row["stride_err_pct"] == pytest.approx(0, abs=1e-9)
+    assert row["speed_err_pct"] == pytest.approx(0, abs=1e-9)
 
 
 def test_path_errors_ignore_start_pose():

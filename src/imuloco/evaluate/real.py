@@ -172,12 +172,15 @@ def _bout_rows(gait: SensorGait, trial: RealTrial, ref_ic: np.ndarray, per_conta
             # the reference spreads the bout's 10 m over all its steps, the first from
             # standing and the last into the U-turn or the stop included, and over its time
             # from the first foot-off: so does the estimate, with its own distance (the
-            # foot's swings ending at its contacts in the bout) and its own steps
+            # feet's swings ending at its contacts in the bout) and its own steps. Each foot
+            # walks the distance: one foot's contacts (2 steps each) carry it once, both
+            # feet's (1 step each) twice, so a stride is the swings' sum over the contacts.
             w["stride_mean_m"], w["speed_mean_mps"] = w["stride_length_m"], w["speed_mps"]
             sel = bout_contacts(gait.initial_contacts, ref_ic, b.start, b.end)
-            dist, steps = float(gait.swings_m[sel].sum()), per_contact * int(sel.sum())
-            w["stride_length_m"] = 2.0 * dist / steps if steps else math.nan
-            w["speed_mps"] = dist / (b.end - b.start) if steps else math.nan
+            swung, contacts = float(gait.swings_m[sel].sum()), int(sel.sum())
+            walked = swung * per_contact / 2.0
+            w["stride_length_m"] = swung / contacts if contacts else math.nan
+            w["speed_mps"] = walked / (b.end - b.start) if contacts else math.nan
         if trial.dataset == "pyshoe-vicon":  # foot flat to foot flat, the contacts between
             # the reference counts strides over the whole trial, pauses included: so does
             # the estimate (its contacts in the same window), not over its contacts' span

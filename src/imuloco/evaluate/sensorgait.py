@@ -61,7 +61,8 @@ class SensorGait:
         z up (foot sensors), or None.
     swings_m : ndarray (K,), a foot sensor's horizontal distance (m) moved in the swing that
         ends at each initial contact, from the rest before it to the rest after (the first
-        swing from standing included, which no stride's length covers); None otherwise.
+        swing from standing included, which no stride's length covers); with both feet's
+        contacts (a reconstruction's strikes), each its own foot's swing; None otherwise.
     """
 
     placement: str
