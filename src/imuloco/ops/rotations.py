@@ -173,8 +173,8 @@ def from_matrix(m: np.ndarray, orthonormal: bool = False) -> np.ndarray:
     """Rotation matrices (..., 3, 3) -> q (..., 4).
 
     ``orthonormal``: the matrices are rotations already (orthonormal, determinant 1), so SciPy
-    may skip the SVD that finds the nearest rotation (where SciPy offers it: 1.17+); a
-    per-frame pose's 23 joints convert 7 times faster."""
+    may skip the SVD that finds the nearest rotation (where SciPy offers it: 1.17+): half
+    the time of :func:`from_6d` on a pose's 23 joints (0.30 -> 0.15 ms, idle machine)."""
     kw = _SKIP_ORTHOGONALIZATION if orthonormal else {}
     return _apply(lambda x: Rotation.from_matrix(x, **kw).as_quat(), m, 2)
 
