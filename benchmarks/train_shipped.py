@@ -105,10 +105,12 @@ def run(step: Step, out: Path) -> Step:
 
 def weight_distance(a: Path, b: Path) -> float:
     """Largest absolute difference between two model files' common weight arrays."""
-    with np.load(a, allow_pickle=False) as x, np.load(b, allow_pickle=False) as y:
-        keys = [k for k in x.files if k in y.files and not k.startswith("__")
-                and x[k].shape == y[k].shape and x[k].dtype.kind == "f"]
-        return max((float(np.abs(x[k] - y[k]).max()) for k in keys), default=float("nan"))
+    with np.load(a, allow_pickle=False) as fa, np.load(b, allow_pickle=False) as fb:
+        # each access to an npz member decompresses it again: read every array once
+        x = {k: fa[k] for k in fa.files if not k.startswith("__")}
+        y = {k: fb[k] for k in fb.files if k in x}
+    pairs = [(x[k], y[k]) for k in y if x[k].shape == y[k].shape and x[k].dtype.kind == "f"]
+    return max((float(np.abs(u - v).max()) for u, v in pairs), default=float("nan"))
 
 
 class LoadSampler(threading.Thread):
