@@ -11,9 +11,10 @@ from tests.test_retarget import other_rig
 from imuloco.cli import cli
 from imuloco.core.motion import Motion
 from imuloco.core.retarget import resampled
+from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
 from imuloco.evaluate.bench import run_bench
-from imuloco.evaluate.metrics import METRIC_KEYS, evaluate_parts
+from imuloco.evaluate.metrics import METRIC_KEYS, RETARGETED_KEYS, evaluate_parts
 from imuloco.evaluate.protocols import folds
 from imuloco.io.bvh import write_bvh
 from imuloco.io.database import (
@@ -103,6 +104,27 @@ def test_evaluate_parts_compares_skeletons_that_differ(sample):
     assert values["mpjpe_cm"] < 1e-6 and values["path_err_cm"] < 1e-6
     assert values["angle_deg"] is None and values["dpv"] is None
     assert values["jitter"] == pytest.approx(values["jitter_gt"], rel=1e-6)
+    assert all(values[k] is None for k in RETARGETED_KEYS)  # no retargeted truth given
+
+
+def test_evaluate_parts_also_scores_against_the_retargeted_truth(sample):
+    c = sample.clips[0]
+    other = other_rig(c, 1.3)
+    moved = Motion(c.skeleton, c.rotations[::-1].copy(), c.root, c.fps)  # another motion
+    values = evaluate_parts(other, moved, retargeted=c)
+    assert values["mpjpe_retargeted_cm"] > 1.0
+    # the same error, measured on the 1.3 times larger body's scale or on the truth's own
+    assert values["mpjpe_cm"] == pytest.approx(1.3 * values["mpjpe_retargeted_cm"], rel=1e-6)
+    o = other_rig(c, 1.3)
+    arms = [i for i, n in enumerate(o.skeleton.names) if "Arm" in n or "Hand" in n]
+    offsets = o.skeleton.offsets.copy()
+    offsets[arms] *= 1.3  # a body with longer arms, moving alike
+    longer = Motion(Skeleton(o.skeleton.names, o.skeleton.parents, offsets), o.rotations,
+                    o.root, o.fps)
+    perfect = evaluate_parts(longer, c, retargeted=c)
+    assert perfect["mpjpe_cm"] > 0.5  # the other body's proportions: a floor above zero
+    assert perfect["mpjpe_retargeted_cm"] < 1e-6
+    assert perfect["upper_retargeted_cm"] < 1e-6 and perfect["lower_retargeted_cm"] < 1e-6
 
 
 def test_heldout_contents_has_a_fold_per_content(sample):
@@ -139,6 +161,24 @@ def test_cross_dataset_from_the_command_line(rig_folder, tmp_path):
     total = next(r for r in recs if r["motion_type"] == "all")
     assert total["data"] == f"sample -> {rig_folder.name}" and total["n_clips"] == 4
     assert total["angle_deg"] is None and 3 < total["mpjpe_cm"] < 30
+    assert 3 < total["mpjpe_retargeted_cm"] < 30
+    assert "retargeted onto the training skeleton" in (tmp_path / "results.md").read_text()
     res = CliRunner().invoke(cli, ["bench", "--method", "mean", "--split", "cross-dataset",
                                    "--out", str(tmp_path / "x")])
     assert res.exit_code != 0 and "--train" in res.output
+
+
+def test_the_truth_on_the_training_rig_is_the_motion_the_test_clip_was_made_from(
+        sample, rig_folder):
+    from imuloco.evaluate.bench import truth_on_training_rig
+    from imuloco.evaluate.metrics import mpjpe
+
+    test = load_database(rig_folder, progress=False)
+    test = type(test)([resampled(c, 30.0) for c in test.clips], test.labels)
+    truths = truth_on_training_rig(sample, test)
+    assert list(truths) == [lab["name"] for lab in test.labels]
+    made_from = sample.clips[4]  # rig_folder's second clip (the first lost its T-pose)
+    moved = truths[test.labels[1]["name"]]
+    assert moved.skeleton.names == made_from.skeleton.names
+    assert moved.num_frames == made_from.num_frames and mpjpe(made_from, moved) < 2.0
+    assert mpjpe(sample.clips[8], truths[test.labels[2]["name"]]) < 2.0

@@ -23,7 +23,10 @@ Protocol details fixed here (see also :mod:`imuloco.evaluate.protocols`):
 - ``cross-dataset``: the training folders become one set on the first one's skeleton
   (:func:`imuloco.io.database.load_databases`); test clips stay on their own skeleton,
   resampled to the training frame rate, their sensors simulated there, and are compared on
-  canonical body parts (:func:`imuloco.evaluate.metrics.evaluate_parts`).
+  canonical body parts (:func:`imuloco.evaluate.metrics.evaluate_parts`), both against
+  their own ground truth and against it retargeted onto the training skeleton as the
+  training clips of other rigs are (:func:`truth_on_training_rig`; the ``*_retargeted_cm``
+  keys), which takes the bodies' differences out of the error.
 - Cost: ``train_s`` is the wall time of ``fit`` (signal synthesis included: one bench run
   simulates each training clip once, :func:`imuloco.methods.training.cached_signals`, and
   adds the time that saved back);
@@ -57,11 +60,11 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
-from imuloco.core.motion import MotionDatabase
+from imuloco.core.motion import Motion, MotionDatabase
 from imuloco.errors import UnknownNameError
 from imuloco.evaluate import metrics
 from imuloco.evaluate.protocols import MOTION_TYPES, PROTOCOL_VERSION, folds
-from imuloco.io.atomic import atomic_write
+from imuloco.io.atomic import atomic_write, atomic_write_text
 from imuloco.methods.training import (
     TEST_SEED_OFFSET,
     Example,
@@ -109,7 +112,7 @@ def aggregate(clips: list[dict[str, Any]]) -> dict[str, Any]:
                                                                       for c in clips))}
     w = np.array([c["n_frames"] for c in clips], dtype=np.float64)
     for key in metrics.METRIC_KEYS:
-        v = np.array([c[key] for c in clips], dtype=np.float64)
+        v = np.array([c.get(key) for c in clips], dtype=np.float64)  # None: nan
         ok = np.isfinite(v)
         out[key] = float(np.average(v[ok], weights=w[ok])) if ok.any() else None
     return out
@@ -144,8 +147,9 @@ def evaluate_method(
     seed: int = 0,
     params: dict[str, Any] | None = None,
     progress: bool = False,
+    truths: dict[str, Motion] | None = None,
 ) -> dict[str, Any]:
-    """Fit one method and measure it on the test examples.
+    """Fit one method and measure it on the test examples (``truths``: see :func:`measure`).
 
     Returns a dict with ``clips`` (per-clip metric dicts with ``name``, ``motion_type``,
     ``n_frames``), ``cost`` (train_s, offline_fps, latencies, the stream's look-ahead delay,
@@ -164,7 +168,7 @@ def evaluate_method(
     t0, saved = time.perf_counter(), saved_seconds()
     method.fit(train, placements, noise, seed, progress=progress)
     train_s = time.perf_counter() - t0 + (saved_seconds() - saved)  # as if nothing cached
-    out = measure(method, test, progress, name)
+    out = measure(method, test, progress, name, truths)
     p50, p99, delay = _latency(method, test[0].signals)
     frames = sum(c["n_frames"] for c in out["clips"])
     rec_s = out.pop("reconstruct_s")
@@ -174,12 +178,13 @@ def evaluate_method(
     return out
 
 
-def measure(method, test: list[Example], progress: bool = False, name: str = ""
-            ) -> dict[str, Any]:
+def measure(method, test: list[Example], progress: bool = False, name: str = "",
+            truths: dict[str, Motion] | None = None) -> dict[str, Any]:
     """Reconstruct every test example with a fitted method and measure it (the module
     docstring's protocol): ``clips``, ``per_joint``, ``curves`` and ``confidence`` as
     :func:`evaluate_method` returns them, and ``reconstruct_s``, the wall time of the
-    reconstructions."""
+    reconstructions. ``truths``: test clip name -> its ground truth on the training
+    skeleton, for clips on another skeleton (:func:`truth_on_training_rig`)."""
     clips, rec_s, joint_sum, frames, curves = [], 0.0, 0.0, 0, {}
     cross = False
     confidence: list[dict[str, np.ndarray]] = []
@@ -193,7 +198,7 @@ def measure(method, test: list[Example], progress: bool = False, name: str = ""
         frames += gt.num_frames
         if gt.skeleton.names != rec.skeleton.names:
             cross = True
-            values = metrics.evaluate_parts(gt, rec)
+            values = metrics.evaluate_parts(gt, rec, (truths or {}).get(ex.labels["name"]))
             actual = np.sqrt((metrics.part_errors(gt, rec)[0][:, 1:] ** 2).mean(axis=1))
         else:
             rec = metrics.align_heading(rec, gt, 0)
@@ -278,11 +283,13 @@ def run_bench(
         test_db = load_data(test, limit, progress, up, skip_frames)
         test_db = MotionDatabase([resampled(c, fps) for c in test_db.clips], test_db.labels)
         protocol = [("all", train_db, test_db)]
+        truths = truth_on_training_rig(train_db, test_db)
         label = f"{data_label(train)} -> {data_label(test)}"
     else:
         if train is not None or test is not None:
             raise UnknownNameError("--train/--test are for --split cross-dataset; use --data")
         protocol = folds(load_data(data, limit, progress, up, skip_frames), split_name)
+        truths = None
         if only_folds:
             unknown = sorted(set(only_folds) - {f for f, _, _ in protocol})
             if unknown:
@@ -298,7 +305,7 @@ def run_bench(
     with cached_signals():
         for fold, train_db, test_db in protocol:
             all_test += _run_fold(fold, train_db, test_db, methods, specs, runs, placements,
-                                  noise, seed, seeds, progress)
+                                  noise, seed, seeds, progress, truths)
 
     records = []
     for name in methods:
@@ -323,17 +330,29 @@ def run_bench(
     return records
 
 
+def truth_on_training_rig(train: MotionDatabase, test: MotionDatabase) -> dict[str, Motion]:
+    """Test clip name -> its ground truth moved onto the training skeleton as a training
+    clip of its rig would be (:func:`imuloco.io.database.combine`): what a perfect
+    reconstruction on that skeleton would be."""
+    from imuloco.io.database import combine
+
+    moved = combine([train, test]).clips[len(train):]
+    return {lab["name"]: m for lab, m in zip(test.labels, moved)}
+
+
 def _run_fold(fold: str, train_db: MotionDatabase, test_db: MotionDatabase,
               methods: Sequence[str], specs: dict[str, tuple[str, dict[str, Any]]],
               runs: dict[str, list[dict[str, Any]]], placements: list[str], noise: str,
-              seed: int, seeds: int, progress: bool) -> list[Example]:
+              seed: int, seeds: int, progress: bool,
+              truths: dict[str, Motion] | None = None) -> list[Example]:
     """Fit every method with every seed on one fold; add their results to ``runs``."""
     test_ex = synthesize(test_db, placements, noise, seed + TEST_SEED_OFFSET, progress=progress)
     for name in tqdm(methods, desc=f"methods ({fold})", disable=not progress):
         for k in range(seeds):
             with threadpool_limits(limits=1):
                 res = evaluate_method(specs[name][0], train_db, test_ex, placements, noise,
-                                      seed + k, params=specs[name][1], progress=progress)
+                                      seed + k, params=specs[name][1], progress=progress,
+                                      truths=truths)
             for c in res["clips"]:
                 c["fold"] = fold
             for rows in res["confidence"]:
@@ -384,11 +403,11 @@ def write_results(records: list[dict[str, Any]], details: dict[str, dict[str, An
     from imuloco.evaluate.report import write_report
 
     out.mkdir(parents=True, exist_ok=True)
-    (out / "results.json").write_text(json.dumps(records, indent=1) + "\n")
+    atomic_write_text(out / "results.json", json.dumps(records, indent=1) + "\n")
     per_clip = [{"method": m, **{k: (None if isinstance(v, float) and not np.isfinite(v) else v)
                                   for k, v in c.items()}}
                 for m, d in details.items() for c in d["clips"]]
-    (out / "per_clip.json").write_text(json.dumps(per_clip, indent=1) + "\n")
+    atomic_write_text(out / "per_clip.json", json.dumps(per_clip, indent=1) + "\n")
     for m, d in details.items():
         if d.get("confidence"):
             rows = d["confidence"]

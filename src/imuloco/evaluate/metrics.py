@@ -306,10 +306,13 @@ def path_error_of(a: np.ndarray, heading_a: np.ndarray, b: np.ndarray, heading_b
 
 
 # ---- everything --------------------------------------------------------------------------------
+# cross-dataset only: part errors against the ground truth retargeted onto the
+# reconstruction's skeleton (:func:`evaluate_parts`; :func:`evaluate` has no such keys)
+RETARGETED_KEYS = ("mpjpe_retargeted_cm", "upper_retargeted_cm", "lower_retargeted_cm")
 METRIC_KEYS = ("mpjpe_cm", "rmse_cm", "upper_cm", "lower_cm", "upper_rmse_cm",
                "lower_rmse_cm", "angle_deg", "dpv", "jitter",
                "jitter_gt", "foot_skate_cm_s", "foot_skate_gt_cm_s", "root_speed_err_cm_s",
-               "path_err_cm")
+               "path_err_cm", *RETARGETED_KEYS)
 
 
 def evaluate(gt: Motion, rec: Motion) -> dict[str, float]:
@@ -403,7 +406,8 @@ def part_errors(gt: Motion, rec: Motion) -> tuple[np.ndarray, np.ndarray, np.nda
     return err, pg, pr, hg, hr
 
 
-def evaluate_parts(gt: Motion, rec: Motion) -> dict[str, float | None]:
+def evaluate_parts(gt: Motion, rec: Motion, retargeted: Motion | None = None
+                   ) -> dict[str, float | None]:
     """:func:`evaluate`'s metrics for a reconstruction on another skeleton than its ground
     truth's (the ``cross-dataset`` protocol), on the canonical body parts only.
 
@@ -413,6 +417,11 @@ def evaluate_parts(gt: Motion, rec: Motion) -> dict[str, float | None]:
     are in the heading frame at the pelvis (parts but the pelvis; upper and lower halves as
     :data:`imuloco.core.bodymap.UPPER_PARTS` / ``LOWER_PARTS``), jitter is over the parts,
     the root is the pelvis. ``angle_deg`` and ``dpv`` compare joint by joint and are None.
+
+    Bodies of other proportions put a floor under these errors: the ground truth itself,
+    retargeted onto the reconstruction's skeleton, is not at zero. ``retargeted`` (that
+    motion) adds :data:`RETARGETED_KEYS`, the same part errors against it, whose floor is
+    zero: the reconstruction's own error, without the rigs' differences.
     """
     from imuloco.core.bodymap import LOWER_PARTS, PARTS, UPPER_PARTS
 
@@ -427,10 +436,16 @@ def evaluate_parts(gt: Motion, rec: Motion) -> dict[str, float | None]:
     def rms(idx: list[int]) -> float:
         return float(np.sqrt((err[:, idx] ** 2).mean(axis=1)).mean() * CM)
 
+    def means(e: np.ndarray) -> tuple[float, float, float]:
+        return tuple(float(e[:, i].mean() * CM) for i in (body, upper, lower))
+
     short = gt.num_frames < 4
+    against = (dict.fromkeys(RETARGETED_KEYS) if retargeted is None else
+               dict(zip(RETARGETED_KEYS, means(part_errors(retargeted, rec)[0]))))
+    mpjpe_cm, upper_cm, lower_cm = means(err)
     return {
-        "mpjpe_cm": float(err[:, body].mean() * CM), "rmse_cm": rms(body),
-        "upper_cm": float(err[:, upper].mean() * CM), "lower_cm": float(err[:, lower].mean() * CM),
+        "mpjpe_cm": mpjpe_cm, "rmse_cm": rms(body),
+        "upper_cm": upper_cm, "lower_cm": lower_cm,
         "upper_rmse_cm": rms(upper), "lower_rmse_cm": rms(lower),
         "angle_deg": None, "dpv": None,
         "jitter": 0.0 if short else float(jerk(pr, gt.fps).mean()),
@@ -439,4 +454,5 @@ def evaluate_parts(gt: Motion, rec: Motion) -> dict[str, float | None]:
         "foot_skate_gt_cm_s": skate(pg[:, feet], contacts, gt.fps),
         "root_speed_err_cm_s": speed_error(pg[:, k["pelvis"]], pr[:, k["pelvis"]], gt.fps),
         "path_err_cm": path_error_of(pg[:, k["pelvis"]], hg, pr[:, k["pelvis"]], hr, gt.fps),
+        **against,
     }
