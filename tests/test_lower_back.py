@@ -4,6 +4,8 @@ feet on real recordings."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -11,7 +13,7 @@ from scipy.spatial.transform import Rotation
 from imuloco.core.recording import Recording
 from imuloco.evaluate.real import evaluate_gait, summarize
 from imuloco.evaluate.sensorgait import SensorGait, stride_row
-from imuloco.io.realimu import Bout, GaitReference, RealTrial, read_trials
+from imuloco.io.realimu import Bout, GaitDefinition, GaitReference, RealTrial, read_trials
 
 pytest.importorskip("mobgap")
 from imuloco.evaluate.sensorgait import lower_back_gait
@@ -89,7 +91,9 @@ def test_lower_back_gait_does_not_depend_on_how_the_sensor_is_worn(walk):
 
 
 def test_bouts_without_an_estimated_stride_are_counted():
-    """Errors average over the bouts the estimate measured; the share says how many."""
+    """Errors average over the bouts the estimate measured; the share says how many. A
+    reference of per-bout means counts the steps inside its bouts only (a contact between
+    them is not one), one over the whole trial counts it."""
     rec = Recording(np.arange(0, 30, 0.01), np.zeros((3000, 1, 3)), np.zeros((3000, 1, 3)),
                     ["lower_back"])
     ics = np.arange(2.0, 8.0, 0.5)
@@ -97,11 +101,14 @@ def test_bouts_without_an_estimated_stride_are_counted():
                         bouts=[Bout(2.0, 7.5, cadence_spm=120, stride_length_m=1.2,
                                     speed_mps=1.2),
                                Bout(20.0, 25.5, cadence_spm=120, stride_length_m=1.2,
-                                    speed_mps=1.2)])
-    gait = SensorGait("lower_back", "test", initial_contacts=ics, strides=[
+                                    speed_mps=1.2)], definition=GaitDefinition.BOUT_MEANS)
+    gait = SensorGait("lower_back", "test", initial_contacts=np.append(ics, 14.0), strides=[
         stride_row("either", a, a + 1.0, 1.32, np.nan) for a in ics[:-2]])
     row = evaluate_gait(gait, RealTrial("mobilise-d-lab", "x", rec, ref), "test")
     assert (row["bouts_ref"], row["bouts_measured"]) == (2, 1)
+    assert row["steps_est"] == len(ics)
+    whole = replace(ref, definition=GaitDefinition.DISTANCE_OVER_STEPS)
+    assert evaluate_gait(gait, RealTrial("x", "x", rec, whole), "test")["steps_est"] == len(ics) + 1
     assert row["stride_err_pct"] == pytest.approx(10.0)  # the measured bout only
     assert summarize([row])[0]["bouts_measured_pct"] == pytest.approx(50.0)
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ import pytest
 from imuloco.errors import FormatError
 from imuloco.evaluate.gait import gait_parameters
 from imuloco.evaluate.real import match_events, path_errors, reference_stance, run_real
-from imuloco.io.realimu import detect_layout, read_trials
+from imuloco.io.realimu import GaitDefinition, detect_layout, read_trials
 
 pytest.importorskip("gaitmap")
 pytest.importorskip("mobgap")
@@ -217,10 +218,13 @@ def test_ipol_stride_and_speed_follow_the_reference_s_definition():
     (without the short first swing from standing) average longer and its contacts' span is
     shorter than the bout. The walk's last contact comes 20 ms after the trial's end (its
     last strike) and still counts; a turning step just after the bout (within the matching
-    tolerance) does not."""
+    tolerance) does not. Read by the per-bout means' definition, the same reference gives the
+    walk summary's error."""
+    from dataclasses import replace
+
     from imuloco.evaluate.real import evaluate_gait
     from imuloco.evaluate.sensorgait import SensorGait, stride_row
-    from imuloco.io.realimu import Bout, GaitReference, RealTrial
+    from imuloco.io.realimu import Bout, GaitDefinition, GaitReference, RealTrial
 
     right = np.array([0.5, 1.6, 2.7, 3.8, 4.9, 6.0])  # the reference's strikes, bout [0, 6]
     swings = np.array([0.4, 1.4, 1.4, 1.4, 1.4, 0.7, 0.9])  # the first from standing
@@ -229,7 +233,7 @@ def test_ipol_stride_and_speed_follow_the_reference_s_definition():
     dist, steps, end = float(swings[:6].sum()), 12, 6.0
     bout = Bout(0.0, end, dist, steps / 2, 60.0 * steps / end, 2 * dist / steps, dist / end)
     ref = GaitReference(initial_contacts={"right": np.append(right, 6.21), "left": left},
-                        bouts=[bout])
+                        bouts=[bout], definition=GaitDefinition.DISTANCE_OVER_STEPS)
     strides = [stride_row("right", a, b, n, 0.6) for a, b, n in
                zip(est[:-1], est[1:], swings[1:], strict=True)]
     gait = SensorGait("right_foot", "test", strides=strides, initial_contacts=est,
@@ -241,6 +245,10 @@ def test_ipol_stride_and_speed_follow_the_reference_s_definition():
     # the walk's summary (the complete strides in the window, the contacts' span) differs
     assert row["stride_mean_est"] == pytest.approx(np.mean(swings[1:]))
     assert row["stride_mean_err_pct"] > 5 and row["speed_mean_err_pct"] > 10
+    means = evaluate_gait(gait, RealTrial("t", "t", None, replace(
+        ref, definition=GaitDefinition.BOUT_MEANS)), "imuloco")
+    assert means["stride_err_pct"] == pytest.approx(row["stride_mean_err_pct"])
+    assert means["steps_ref"] == row["steps_ref"] - 2  # the trial's last strike: after the bout
     # a foot whose swings walked 5 % further is 5 % off in both
     gait.swings_m = swings * 1.05
     row = evaluate_gait(gait, RealTrial("ipol-gait", "t", None, ref), "imuloco")
@@ -258,6 +266,35 @@ def test_ipol_stride_and_speed_follow_the_reference_s_definition():
     row = evaluate_gait(recon, RealTrial("ipol-gait", "t", None, ref), "reconstruction")
     assert row["stride_err_pct"] == pytest.approx(0, abs=1e-9)
     assert row["speed_err_pct"] == pytest.approx(0, abs=1e-9)
+
+
+def test_strides_over_the_whole_trial_count_its_pauses(tmp_path):
+    """pyshoe-vicon's reference (as its reader declares it) counts strides from foot flat to
+    foot flat over the whole trial, a 2 s pause included: a foot with a contact before each
+    foot flat and strides of the reference's length scores no cadence, speed or steps error,
+    though the walk's summary (two contacts a stride over their span) gives 80 steps/min
+    against the reference's 90."""
+    from scipy.io import savemat
+
+    from imuloco.evaluate.real import evaluate_gait
+    from imuloco.evaluate.sensorgait import SensorGait, stride_row
+
+    t = np.arange(1000) / 200.0
+    imu = np.zeros((len(t), 6))
+    imu[:, 2] = -9.81
+    savemat(tmp_path / "a_LLIO.mat", {"imu_data": imu, "timestamps_all": t[None],
+                                      "strideIndex": [[0, 200, 400, 800]],  # 0, 1, 2, 4 s
+                                      "GCP": np.array([[0, 0], [1, 0], [2, 0], [3, 0]])})
+    (trial,) = read_trials(tmp_path)
+    ic = np.array([0.9, 1.9, 3.9])  # each just before its stride's foot flat
+    gait = SensorGait("right_foot", "test", initial_contacts=ic, steps_per_contact=2,
+                      strides=[stride_row("right", a, b, 1.0, 0.6) for a, b in pairwise(ic)])
+    row = evaluate_gait(gait, trial, "imuloco")
+    assert (row["steps_ref"], row["cadence_ref"], row["stride_ref"]) == (6, 90, 1)
+    assert row["speed_ref"] == pytest.approx(0.75)
+    for key in ("steps", "cadence", "stride", "speed"):
+        assert row[f"{key}_err_pct"] == pytest.approx(0, abs=1e-9), key
+    assert gait.summary()["cadence_spm"] == pytest.approx(80)
 
 
 def test_path_errors_ignore_start_pose():
@@ -288,6 +325,7 @@ def test_readers_on_generated_files(tmp_path):
     assert trial.recording.placements == ["right_foot"]
     assert trial.reference.bouts[0].distance_m == pytest.approx(2.0)
     assert trial.reference.stride_ends[1] == pytest.approx(1.0)
+    assert trial.reference.definition is GaitDefinition.STRIDES_OVER_TRIAL
 
     ipol = tmp_path / "ipol"
     ipol.mkdir()
@@ -303,6 +341,7 @@ def test_readers_on_generated_files(tmp_path):
     assert trial.recording.placements == ["right_foot", "left_foot", "lower_back"]
     assert trial.reference.initial_contacts["left"].tolist() == [0.2, 0.7]
     assert trial.reference.height_m == pytest.approx(1.7)
+    assert trial.reference.definition is GaitDefinition.DISTANCE_OVER_STEPS
     (ipol / "1-1_lb.txt").write_text("Acquisition rate 100\n")
     with pytest.raises(FormatError, match="1-1_lb.txt:1"):
         list(read_trials(ipol))

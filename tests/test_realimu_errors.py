@@ -14,7 +14,7 @@ import pytest
 
 from imuloco.errors import FormatError
 from imuloco.evaluate import fuzz_real as fr
-from imuloco.io.realimu import read_trials
+from imuloco.io.realimu import GaitDefinition, read_trials
 
 
 def _folder(tmp_path, layout: int, **replace: bytes):
@@ -59,6 +59,8 @@ CASES = {
     "mat-struct": (0, {fr.PYSHOE: _pyshoe(GCP={"a": 1.0})}, "a_LLIO.mat", "'GCP'"),
     "stride-index-huge": (0, {fr.PYSHOE: _pyshoe(strideIndex=np.full((1, 3), 1e300))},
                           "a_LLIO.mat", "strideIndex"),
+    "stride-index-one-sample": (0, {fr.PYSHOE: _pyshoe(strideIndex=[[0.2, 0.7]])},
+                                "a_LLIO.mat", "different samples"),
     "times-back": (0, {fr.PYSHOE: _pyshoe(timestamps_all=np.arange(200)[None, ::-1] / 200)},
                    "a_LLIO.mat", "increasing"),
     # TypeError ("in" on an int), ValueError (float of "x", a reshape), RecursionError
@@ -122,9 +124,13 @@ def test_a_malformed_real_folder_is_a_format_error(tmp_path, case):
 
 
 def test_the_seed_folders_read(tmp_path):
-    for layout in range(3):
+    """Each layout's trial, its reference declaring its data set's gait definition."""
+    definitions = (GaitDefinition.STRIDES_OVER_TRIAL, GaitDefinition.DISTANCE_OVER_STEPS,
+                   GaitDefinition.BOUT_MEANS)
+    for layout, definition in enumerate(definitions):
         (trial,) = read_trials(_folder(tmp_path / str(layout), layout))
         assert trial.recording.num_samples > 50
+        assert trial.reference.definition is definition
 
 
 def test_a_file_that_crashes_scipys_reader_is_a_format_error(tmp_path):

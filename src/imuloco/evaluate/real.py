@@ -5,31 +5,35 @@ For every trial of every data set found under ``DIR`` (:mod:`imuloco.io.realimu`
 sensor it has, the gait is measured once over the whole recording, as a user would, by the
 estimator for that placement (:mod:`imuloco.evaluate.sensorgait`; ``reconstruction``: the
 former path, a right-ankle reconstruction's gait, with ``--baseline``) and compared within the
-reference's windows:
+reference's windows, by the reference's own definitions of a bout's stride, speed and cadence
+and of its steps' window, which each reader declares (:class:`~imuloco.io.realimu.
+GaitDefinition`), the estimate read the same way:
 
 - ``steps_err_pct``: steps found against the reference's (a foot sensor: twice its foot's
   contacts against twice the reference's contacts of that foot).
-- ``cadence_err_pct``: cadence from the contacts' span (steps/min), per bout.
+- ``cadence_err_pct``: cadence from the contacts' span (steps/min), per bout (strides over the
+  whole trial: the contacts over its time, pauses included).
 - ``ic_median_ms`` / ``ic_mean_ms``: absolute timing error of initial contacts matched one to
   one to the reference's (nearest within :data:`IC_TOLERANCE_S`), with the missed and extra.
 - ``stride_err_m`` / ``stride_err_pct``: mean stride length per bout against the reference's.
 - ``speed_err_pct``: walking speed per bout.
-- ipol-gait's foot sensors: stride and speed by the reference's own definition, its 10 m
-  over all the bout's steps (2 x 10 m / steps) and over the bout's time (from the first
-  foot-off): the foot's distance over the swings that end at its contacts in the bout
-  (:func:`bout_contacts`), over its steps and over the same time. ``stride_mean_err_pct`` /
-  ``speed_mean_err_pct``: the estimate as a walk's summary reports it (the mean of the
-  complete strides, speed from the contacts' span), against the same reference.
+- a foot sensor against a bout's distance over all its steps (ipol-gait's 10 m: 2 x 10 m /
+  steps, over the bout's time from the first foot-off): the foot's distance over the swings
+  that end at its contacts in the bout (:func:`bout_contacts`), over its steps and over the
+  same time. ``stride_mean_err_pct`` / ``speed_mean_err_pct``: the estimate as a walk's
+  summary reports it (the mean of the complete strides, speed from the contacts' span),
+  against the same reference.
 - ``bouts_ref`` / ``bouts_measured``: the reference's bouts, and those in which the estimate
   has a stride (the errors above average over these only: an estimator that misses a hard
   bout is not scored on it, so its figures read together with this share).
 - ``stance_err_pp``: a foot sensor's mean stance (share of the stride in contact, %) per
   bout against the reference's strides (ipol-gait: from its hand-checked foot-off and
   foot-strike events), in percentage points.
-- pyshoe-vicon only: the foot's path against Vicon after aligning the start (the first
-  stride's end position and direction): error at each stride end (``path_mean_m``) and the
-  final error as % of the distance walked (``path_final_pct``); PyShoe's published path is
-  aligned and measured the same way (``pyshoe_published`` rows).
+- a reference with the foot's positions at its stride ends (pyshoe-vicon's Vicon): the foot's
+  path against them after aligning the start (the first stride's end position and
+  direction): error at each stride end (``path_mean_m``) and the final error as % of the
+  distance walked (``path_final_pct``); PyShoe's published path is aligned and measured the
+  same way (``pyshoe_published`` rows).
 
 Nothing here is fitted to these data: every threshold is the estimator's published default, a
 physical bound or the tolerance below.
@@ -48,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from imuloco.evaluate.sensorgait import SensorGait, not_measured, sensor_gait
-from imuloco.io.realimu import RealTrial, find_datasets, read_trials
+from imuloco.io.realimu import GaitDefinition, GaitReference, RealTrial, find_datasets, read_trials
 
 log = logging.getLogger(__name__)
 
@@ -155,20 +159,18 @@ def path_errors(est_times: np.ndarray, est_xy: np.ndarray, ref_times: np.ndarray
             "distance_m": walked}
 
 
-def _bout_rows(gait: SensorGait, trial: RealTrial, ref_ic: np.ndarray, per_contact: int,
+def _bout_rows(gait: SensorGait, ref: GaitReference, ref_ic: np.ndarray, per_contact: int,
                side: str | None = None) -> list[dict[str, float]]:
-    """Cadence, stride length and speed against each reference bout, and a foot's stance
-    when the reference has that foot's foot-off events (``side``)."""
-    ref = trial.reference
+    """Cadence, stride length and speed against each reference bout, by the reference's
+    definition, and a foot's stance when the reference has that foot's foot-off events
+    (``side``)."""
     out = []
     for b in ref.bouts:
         w = gait.window(b.start - IC_TOLERANCE_S, b.end + IC_TOLERANCE_S).summary()
         inside = ref_ic[(ref_ic >= b.start - 1e-9) & (ref_ic <= b.end + 1e-9)]
-        ref_cad = (b.cadence_spm if trial.dataset == "mobilise-d-lab"
-                   else _span_cadence(inside, per_contact))
-        ref_len = b.stride_length_m
-        ref_speed = b.speed_mps
-        if trial.dataset == "ipol-gait" and gait.swings_m is not None:
+        ref_cad = (_span_cadence(inside, per_contact)
+                   if ref.definition is GaitDefinition.DISTANCE_OVER_STEPS else b.cadence_spm)
+        if ref.definition is GaitDefinition.DISTANCE_OVER_STEPS and gait.swings_m is not None:
             # the reference spreads the bout's 10 m over all its steps, the first from
             # standing and the last into the U-turn or the stop included, and over its time
             # from the first foot-off: so does the estimate, with its own distance (the
@@ -181,19 +183,16 @@ def _bout_rows(gait: SensorGait, trial: RealTrial, ref_ic: np.ndarray, per_conta
             walked = swung * per_contact / 2.0
             w["stride_length_m"] = swung / contacts if contacts else math.nan
             w["speed_mps"] = walked / (b.end - b.start) if contacts else math.nan
-        if trial.dataset == "pyshoe-vicon":  # foot flat to foot flat, the contacts between
+        if ref.definition is GaitDefinition.STRIDES_OVER_TRIAL:  # foot flat to foot flat:
             # the reference counts strides over the whole trial, pauses included: so does
             # the estimate (its contacts in the same window), not over its contacts' span
-            ref_len = b.distance_m / b.strides
-            ref_cad = 120.0 * b.strides / (b.end - b.start)
-            ref_speed = b.distance_m / (b.end - b.start)
             inner = gait.initial_contacts[(gait.initial_contacts > b.start) &
                                           (gait.initial_contacts <= b.end)]
             w["cadence_spm"] = 60.0 * per_contact * len(inner) / (b.end - b.start)
             w["speed_mps"] = w["stride_length_m"] * w["cadence_spm"] / 120.0
         row = {"cadence_ref": ref_cad, "cadence_est": w["cadence_spm"],
-               "stride_ref_m": ref_len, "stride_est_m": w["stride_length_m"],
-               "speed_ref_mps": ref_speed, "speed_est_mps": w["speed_mps"]}
+               "stride_ref_m": b.stride_length_m, "stride_est_m": w["stride_length_m"],
+               "speed_ref_mps": b.speed_mps, "speed_est_mps": w["speed_mps"]}
         if "stride_mean_m" in w:  # the estimate as a walk's summary reports it
             row.update(stride_mean_est_m=w["stride_mean_m"],
                        speed_mean_est_mps=w["speed_mean_mps"])
@@ -225,13 +224,12 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
     if not gait.measured:
         return row
     per_contact = gait.steps_per_contact
-    if trial.dataset == "pyshoe-vicon":
-        se = ref.stride_ends
-        start, end = se[0], se[-1]
+    if ref.definition is GaitDefinition.STRIDES_OVER_TRIAL:
+        se, ref_ic = ref.stride_ends, np.zeros(0)
         # the contact that starts a stride precedes its foot-flat end: count the contacts
         # between the first and the last foot flat
-        est_ic = gait.initial_contacts[(gait.initial_contacts > start) &
-                                       (gait.initial_contacts <= end)]
+        est_ic = gait.initial_contacts[(gait.initial_contacts > se[0]) &
+                                       (gait.initial_contacts <= se[-1])]
         row["steps_ref"] = 2.0 * (len(se) - 1)
         row["steps_est"] = float(per_contact * len(est_ic))
     else:
@@ -240,12 +238,12 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
                   np.sort(np.concatenate(list(ref.initial_contacts.values()))))
         start = min(b.start for b in ref.bouts)
         end = max(b.end for b in ref.bouts)
-        if trial.dataset == "ipol-gait":  # the whole trial, U-turn included
+        if ref.definition is GaitDefinition.DISTANCE_OVER_STEPS:  # the whole trial, U-turn
             start, end = float(ref_ic.min()), float(ref_ic.max())
         sel = (gait.initial_contacts >= start - IC_TOLERANCE_S) & (
             gait.initial_contacts <= end + IC_TOLERANCE_S)
         in_ref = ref_ic[(ref_ic >= start) & (ref_ic <= end)]
-        if trial.dataset == "mobilise-d-lab":  # contacts inside the reference bouts only
+        if ref.definition is GaitDefinition.BOUT_MEANS:  # contacts inside the bouts only
             sel &= np.any([(gait.initial_contacts >= b.start - IC_TOLERANCE_S) &
                            (gait.initial_contacts <= b.end + IC_TOLERANCE_S)
                            for b in ref.bouts], axis=0)
@@ -257,8 +255,7 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
                    ic_mean_ms=1e3 * float(np.mean(np.abs(errs))) if len(errs) else math.nan,
                    ic_bias_ms=1e3 * float(np.mean(errs)) if len(errs) else math.nan)
     row["steps_err_pct"] = _pct(row["steps_est"], row["steps_ref"])
-    bouts = _bout_rows(gait, trial, ref_ic if trial.dataset != "pyshoe-vicon" else
-                       np.zeros(0), per_contact, side if per_contact == 2 else None)
+    bouts = _bout_rows(gait, ref, ref_ic, per_contact, side if per_contact == 2 else None)
     for key in ("cadence", "stride", "speed"):
         unit = {"cadence": "", "stride": "_m", "speed": "_mps"}[key]
         r = _mean([b[f"{key}_ref{unit}"] for b in bouts])
@@ -278,7 +275,7 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
         row["stance_est"] = _mean([b["stance_est"] for b in bouts])
         row["stance_ref"] = _mean([b["stance_ref"] for b in bouts])
         row["stance_err_pp"] = _mean([b["stance_est"] - b["stance_ref"] for b in bouts])
-    if trial.dataset == "pyshoe-vicon" and gait.path is not None:
+    if ref.stride_ends is not None and gait.path is not None:  # a path known at stride ends
         if ref.stride_points is not None and len(ref.stride_points) >= 2:
             xy = gait.path[:, :2] * ([1.0, -1.0] if ref.path_z_down else [1.0, 1.0])
             row.update(path_errors(gait.times, xy, ref.stride_ends, ref.stride_points))
@@ -388,10 +385,8 @@ def run_real(folder: str | Path, out: str | Path | None = None, limit: int | Non
                         rows.append({"dataset": trial.dataset, "recording": trial.name,
                                      "sensor": placement, "estimator": "reconstruction",
                                      "measured": False, "reason": str(e)})
-            if layout == "pyshoe-vicon":
-                row = published_path_row(trial)
-                if row:
-                    rows.append(row)
+            if row := published_path_row(trial):
+                rows.append(row)
     if out is not None:
         write_results(rows, out)
     return rows

@@ -13,7 +13,8 @@ Three layouts (``../shared/data/real-imu``, see its README), detected from a fol
 
 Each trial becomes a :class:`RealTrial`: a :class:`~imuloco.core.recording.Recording` in m/s²
 and rad/s in the sensor's own axes (placements ``right_foot``, ``left_foot``, ``lower_back``)
-and a :class:`GaitReference` in seconds and metres on the recording's time line.
+and a :class:`GaitReference` in seconds and metres on the recording's time line, which
+declares how its reference defines stride, speed, cadence and steps (:class:`GaitDefinition`).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import time
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from enum import Enum
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +64,23 @@ class Bout:
     speed_mps: float = float("nan")
 
 
+class GaitDefinition(Enum):
+    """How a reference defines its bouts' stride, speed and cadence and which window its step
+    count covers (what :func:`imuloco.evaluate.real.evaluate_gait` measures the estimate by)."""
+
+    BOUT_MEANS = "bout-means"
+    """The reference's own per-bout means, steps from its contacts inside its bouts:
+    mobilise-d-lab's INDIP, which measures every stride of its walking bouts."""
+    DISTANCE_OVER_STEPS = "distance-over-steps"
+    """The bout's fixed distance over all its steps and its time from the first foot-off, cadence
+    from its contacts' span, steps over the whole trial (turn included): ipol-gait, which
+    measures no distance but the course's 10 m."""
+    STRIDES_OVER_TRIAL = "strides-over-trial"
+    """Strides from foot flat to foot flat counted over the whole trial, pauses included, with its
+    distance and time, steps between the first and last foot flat: pyshoe-vicon, whose Vicon
+    positions are known at the stride ends only."""
+
+
 @dataclass
 class GaitReference:
     """What a real recording's reference measured (times in seconds from its first sample).
@@ -82,6 +101,7 @@ class GaitReference:
     height_m : the walker's body height, NaN when unknown.
     sensor_height_m : height of a lower-back sensor above the floor, NaN when unknown.
     source : the reference system, e.g. ``"Vicon"``, ``"hand-checked events"``, ``"INDIP"``.
+    definition : how the reference defines the bouts' figures and the steps.
     """
 
     initial_contacts: dict[str, np.ndarray] = field(default_factory=dict)
@@ -96,6 +116,7 @@ class GaitReference:
     height_m: float = float("nan")
     sensor_height_m: float = float("nan")
     source: str = ""
+    definition: GaitDefinition = GaitDefinition.BOUT_MEANS
 
 
 @dataclass
@@ -275,17 +296,22 @@ def read_pyshoe(path: str | Path) -> Iterator[RealTrial]:
         raise FormatError(path, None, f"strideIndex: expected at least two increasing sample "
                           f"indices in 0-{len(t)}, got {idx[:6].tolist()}")
     idx = np.clip(idx.astype(np.int64), 0, len(t) - 1)
+    if idx[-1] == idx[0]:  # e.g. [0.2, 0.7]: a bout of no time
+        raise FormatError(path, None, f"strideIndex: expected the first and last stride ends "
+                          f"on different samples, got {idx[:6].tolist()}")
     gcp = _field(d, "GCP", path, (None, 2))
     rec = Recording(t, imu[:, None, :3], imu[:, None, 3:], ["right_foot"])
+    # one bout from the first foot flat to the last, pauses included
+    start, end, strides = float(t[idx[0]]), float(t[idx[-1]]), float(len(idx) - 1)
+    dist = float(np.linalg.norm(np.diff(gcp, axis=0), axis=-1).sum())
     ref = GaitReference(
         stride_ends=t[idx], stride_points=gcp, path_times=t,
         path=_field(d, "gt", path, (None, 2), finite=False) if "gt" in d else None,
         published_path=(_field(d, "pyshoeTrajectory", path, (None, 2), finite=False)
                         if "pyshoeTrajectory" in d else None),
-        bouts=[Bout(float(t[idx[0]]), float(t[idx[-1]]),
-                    float(np.linalg.norm(np.diff(gcp, axis=0), axis=-1).sum()),
-                    strides=float(len(idx) - 1))],
-        path_z_down=True, source="Vicon")
+        bouts=[Bout(start, end, dist, strides, cadence_spm=120.0 * strides / (end - start),
+                    stride_length_m=dist / strides, speed_mps=dist / (end - start))],
+        path_z_down=True, source="Vicon", definition=GaitDefinition.STRIDES_OVER_TRIAL)
     yield RealTrial("pyshoe-vicon", path.name.removesuffix("_LLIO.mat"), rec, ref)
 
 
@@ -394,7 +420,8 @@ def read_ipol(path: str | Path) -> Iterator[RealTrial]:
     ref = GaitReference(initial_contacts=ics, bouts=bouts,
                         final_contacts={side: e[:, 0] for side, e in events.items()},
                         height_m=float(height) / 100,
-                        source="hand-checked events, 10 m bouts")
+                        source="hand-checked events, 10 m bouts",
+                        definition=GaitDefinition.DISTANCE_OVER_STEPS)
     yield RealTrial("ipol-gait", stem, rec, ref)
 
 
@@ -470,7 +497,7 @@ def read_mobilise(path: str | Path, standard: str = "INDIP") -> Iterator[RealTri
                                                finite=False) for w in _as_list(std["MicroWB"])])
                 ref = GaitReference(initial_contacts={"any": ics[np.isfinite(ics)]},
                                     bouts=wbs, height_m=heights[0], sensor_height_m=heights[1],
-                                    source=standard)
+                                    source=standard, definition=GaitDefinition.BOUT_MEANS)
                 rec = Recording(t, acc[:, None], gyro[:, None], ["lower_back"])
                 yield RealTrial("mobilise-d-lab", f"{cohort}-{pid}-{test_name}-{trial_name}",
                                 rec, ref)
