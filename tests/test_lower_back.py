@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from imuloco.core.recording import Recording
 from imuloco.evaluate.real import evaluate_gait, summarize
-from imuloco.evaluate.sensorgait import SensorGait, stride_row
+from imuloco.evaluate.sensorgait import SensorGait, chord_factor, stride_row
 from imuloco.io.realimu import Bout, GaitDefinition, GaitReference, RealTrial, read_trials
 
 pytest.importorskip("mobgap")
@@ -88,6 +88,36 @@ def test_lower_back_gait_does_not_depend_on_how_the_sensor_is_worn(walk):
         assert np.allclose([r["length_m"] for r in g.strides],
                            [r["length_m"] for r in ref.strides], rtol=1e-6)
         assert np.array_equal(g.initial_contacts, ref.initial_contacts)
+
+
+def test_chord_factor_is_a_circle_s_chord_over_its_arc():
+    r, turn = 3.0, np.radians([0.0, 20.0, 90.0, 180.0])
+    chord = np.hypot(r * np.sin(turn), r - r * np.cos(turn))
+    assert np.allclose(chord_factor(turn) * r * turn, chord)
+    assert chord_factor(0.0) == 1.0 and np.isclose(chord_factor(np.pi / 2), 2 ** 1.5 / np.pi)
+
+
+@pytest.mark.parametrize("name", ["dataset-2_walk-turn-left_exhausted_001",
+                                  "dataset-2_walk-turn-right_exhausted_001"])
+def test_turning_strides_are_the_chords_of_the_pelvis_s_path(sample_db, name):
+    """On a turning walk each stride's length is the pendulum's times the chord factor of the
+    angle the pelvis turned between its contacts, that of the motion capture's hip line (not
+    the sensor's): up to 61 degrees in one stride here."""
+    from imuloco.phases.events import heading_angle
+    from imuloco.sensors.simulate import simulate
+
+    clip = next(c for c in sample_db.clips if c.name == name)
+    l5 = simulate(clip, ["lower_back"], rate=100.0, noise="clean", seed=0)
+    rot = Rotation.random(random_state=3).as_matrix()  # worn in any axes
+    args = (l5.times, l5.acc[:, 0] @ rot.T, l5.gyro[:, 0] @ rot.T, 0.9)
+    chord, arc = lower_back_gait(*args), lower_back_gait(*args, chord=False)
+    hips = clip.part_positions(["left_hip", "right_hip"])
+    heading = heading_angle(hips[:, 0], hips[:, 1])
+    at = lambda s: np.interp(s, np.arange(len(heading)) / clip.fps, heading)
+    truth = [chord_factor(abs(at(s["end_s"]) - at(s["start_s"]))) for s in chord.strides]
+    ratio = [c["length_m"] / a["length_m"] for c, a in zip(chord.strides, arc.strides)]
+    assert len(ratio) >= 8 and min(ratio) < 0.975
+    assert np.allclose(ratio, truth, atol=2e-3)
 
 
 def test_bouts_without_an_estimated_stride_are_counted():
