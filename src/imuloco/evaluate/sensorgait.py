@@ -326,6 +326,9 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
                             "sequence detection)")
     t = times[0] + np.arange(len(frame)) / rate
     strides = pipe.per_stride_parameters_
+    if len(strides) < MIN_STRIDES:
+        return not_measured(LOWER_BACK, BACK_METHOD, f"{len(strides)} stride(s) in "
+                            "Mobilise-D's walking bouts: no walking")
     # the frame's x is up: its rotation rate is the turning about the vertical, deg/s
     turn = turned(frame["gyr_x"].to_numpy(), rate, strides["start"], strides["end"])
     lengths = strides["stride_length_m"].to_numpy(float) * (
@@ -333,9 +336,6 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
     rows = [stride_row(str(s.lr_label), float(t[int(s.start)]), float(t[int(s.end)]),
                        float(length), math.nan)
             for s, length in zip(strides.itertuples(), lengths)]
-    if len(rows) < MIN_STRIDES:
-        return not_measured(LOWER_BACK, BACK_METHOD, f"{len(rows)} stride(s) in Mobilise-D's "
-                            "walking bouts: no walking")
     return SensorGait(LOWER_BACK, BACK_METHOD, strides=rows,
                       initial_contacts=t[np.sort(pipe.raw_ic_list_["ic"].to_numpy(int))],
                       steps_per_contact=1)
