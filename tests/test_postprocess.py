@@ -62,3 +62,115 @@ def test_online_pinner_gives_the_offline_roots(sliding, smoothing):
     online = np.stack([pinner.step(drifted.root[t], pos[t, idx] - drifted.root[t], soft[t])
                        for t in range(drifted.num_frames)])
     np.testing.assert_allclose(online, offline.root, atol=1e-9)
+
+
+def _leg(m: Motion, side: str = "left") -> tuple[int, int, int]:
+    return tuple(m.skeleton.part(f"{side}_{p}") for p in ("hip", "knee", "ankle"))
+
+
+def test_two_bone_ik_puts_the_ankle_on_its_target(sliding):
+    from imuloco.ops.ik import two_bone
+
+    walk = sliding[0]
+    glob, pos = walk.fk()
+    hip, knee, ankle = chain = _leg(walk)
+    target = pos[:, ankle] + [0.03, 0.02, -0.04]
+    moved = Motion(walk.skeleton, two_bone(glob, pos, walk.skeleton.parents, chain, target,
+                                           walk.rotations), walk.root, walk.fps)
+    glob2, pos2 = moved.fk()
+    np.testing.assert_allclose(pos2[:, ankle], target, atol=1e-6)
+    np.testing.assert_allclose(pos2[:, hip], pos[:, hip], atol=1e-9)
+    # the foot keeps its orientation, the rest of the body its pose
+    np.testing.assert_allclose(np.abs(np.sum(glob2[:, ankle] * glob[:, ankle], -1)), 1.0,
+                               atol=1e-9)
+    other = [j for j in range(walk.skeleton.num_joints)
+             if not _below(walk.skeleton.parents, j, hip)]
+    np.testing.assert_allclose(pos2[:, other], pos[:, other], atol=1e-9)
+    # a target beyond reach: the leg stretches towards it
+    far = pos[:, hip] + 2.0 * (pos[:, ankle] - pos[:, hip])
+    reach = Motion(walk.skeleton, two_bone(glob, pos, walk.skeleton.parents, chain, far,
+                                           walk.rotations), walk.root, walk.fps).positions()
+    length = (np.linalg.norm(pos[:, knee] - pos[:, hip], axis=-1)
+              + np.linalg.norm(pos[:, ankle] - pos[:, knee], axis=-1))
+    np.testing.assert_allclose(np.linalg.norm(reach[:, ankle] - pos[:, hip], axis=-1), length,
+                               atol=1e-5)
+    toward = (reach[:, ankle] - pos[:, hip]) / length[:, None]
+    wanted = (far - pos[:, hip]) / np.linalg.norm(far - pos[:, hip], axis=-1, keepdims=True)
+    np.testing.assert_allclose(toward, wanted, atol=1e-5)
+
+
+def _below(parents: np.ndarray, j: int, top: int) -> bool:
+    while j >= 0:
+        if j == top:
+            return True
+        j = parents[j]
+    return False
+
+
+def _steps(m: Motion, joint: int) -> np.ndarray:
+    """Horizontal distance a joint moves between frames (T - 1,)."""
+    return np.linalg.norm(np.diff(m.positions()[:, joint][:, [0, 2]], axis=0), axis=-1)
+
+
+def test_locking_holds_planted_feet_where_they_landed(sliding):
+    from imuloco.methods.postprocess import lock_feet
+
+    walk, _, contacts = sliding
+    t = walk.times
+    heel, toe = contacts[:, :2], contacts[:, 2:]
+    root = walk.root.copy()
+    root[:, 0] += 0.1 * t + 0.01 * np.sin(2 * np.pi * 3.0 * t)  # feet slide as the hips drift
+    drifted = Motion(walk.skeleton, walk.rotations, root, walk.fps, walk.name)
+    locked = lock_feet(drifted, heel, toe)
+    for side, name in enumerate(("left", "right")):
+        down = heel[:-1, side].astype(bool) & heel[1:, side].astype(bool)
+        j = walk.skeleton.part(f"{name}_ankle")
+        before, after = _steps(drifted, j)[down], _steps(locked, j)[down]
+        assert before.mean() > 2e-3  # the drift: 3 mm a frame
+        # held still, but where the heel lifts the hips have drifted out of the leg's reach
+        assert np.median(after) < 1e-9 and np.mean(after < 1e-4) > 0.9
+        assert after.mean() < 0.1 * before.mean()
+    # hips swaying sideways: a heel is held exactly wherever the leg reaches, at the height
+    # the motion gives it; a rolling toe (heel up) mostly lies beyond the stretched leg's
+    # reach, and is held as far as it goes
+    root = walk.root.copy()
+    root[:, 0] += 0.005 * np.sin(2 * np.pi * 3.0 * t)
+    swaying = Motion(walk.skeleton, walk.rotations, root, walk.fps, walk.name)
+    locked = lock_feet(swaying, heel, toe)
+    pos, raw = locked.positions(), swaying.positions()
+    for side, name in enumerate(("left", "right")):
+        hip, knee, ankle = _leg(walk, name)
+        stretched = np.linalg.norm(pos[:, ankle] - pos[:, hip], axis=-1) > (
+            np.linalg.norm(pos[:, knee] - pos[:, hip], axis=-1)
+            + np.linalg.norm(pos[:, ankle] - pos[:, knee], axis=-1) - 1e-5)
+        h, o = heel[:, side].astype(bool), toe[:, side].astype(bool)
+        held = h[:-1] & h[1:] & ~stretched[1:]
+        assert held.sum() > 10
+        assert _steps(swaying, ankle)[held].mean() > 1e-3
+        assert _steps(locked, ankle)[held].max() < 1e-6
+        np.testing.assert_allclose(pos[~stretched, ankle, 1], raw[~stretched, ankle, 1],
+                                   atol=1e-9)
+        j = walk.skeleton.part(f"{name}_toe")
+        roll = (o & ~h)[:-1] & (o & ~h)[1:]
+        assert _steps(locked, j)[roll].mean() < _steps(swaying, j)[roll].mean()
+    never = lock_feet(drifted, np.zeros_like(heel), np.zeros_like(toe))
+    np.testing.assert_allclose(never.rotations, drifted.rotations, atol=1e-12)
+
+
+def test_foot_lock_frame_by_frame_gives_the_offline_motion(sliding):
+    from imuloco.methods.postprocess import FootLock, lock_feet
+
+    _, drifted, contacts = sliding
+    rng = np.random.default_rng(1)
+    soft = np.clip(contacts + rng.normal(0, 0.3, contacts.shape), 0, 1)
+    offline = lock_feet(drifted, soft[:, :2], soft[:, 2:], smoothing=0.7)
+    glob, pos = drifted.fk()
+    lock = FootLock(drifted.skeleton, drifted.fps, 0.7)
+    online = np.concatenate([
+        lock.bend(glob[i:i + 1], pos[i:i + 1],
+                  lock.targets(pos[i, lock.feet], soft[i, :2], soft[i, 2:])[None],
+                  drifted.rotations[i:i + 1]) for i in range(drifted.num_frames)])
+    np.testing.assert_allclose(online, offline.rotations, atol=1e-12)
+    assert np.abs(offline.rotations - drifted.rotations).max() > 0.01  # it did bend legs
+    with pytest.raises(ValueError, match="smoothing"):
+        FootLock(drifted.skeleton, drifted.fps, 0.0)

@@ -7,6 +7,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from imuloco.core.motion import Motion
+from imuloco.ops.rotations import normalize
 
 
 def _check_smoothing(smoothing: float) -> None:
@@ -60,6 +61,108 @@ def pin_feet(motion: Motion, contacts: np.ndarray, feet: tuple[str, ...] = ("lef
     root = motion.root.copy()
     root[1:, [0, 2]] = motion.root[0, [0, 2]] + np.cumsum(step + correction, axis=0)
     return Motion(motion.skeleton, motion.rotations, root, motion.fps, motion.name)
+
+
+LEGS = (("left_hip", "left_knee", "left_ankle", "left_toe"),
+        ("right_hip", "right_knee", "right_ankle", "right_toe"))
+
+
+def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: float = 1.0,
+              release_s: float = 0.1, threshold: float = 0.5) -> Motion:
+    """Keep each planted foot where it landed on the floor by bending its leg (two-bone IK,
+    :func:`imuloco.ops.ik.two_bone`), after :func:`pin_feet` has moved the root.
+
+    Moving the root can hold one foot still, not two that drift apart, nor the sliding that
+    its smoothing leaves. Causally, frame by frame (:class:`FootLock`, which a stream runs):
+    when a heel comes down the ankle is held where it stands; when only the toe is down (the
+    heel rising) the toe is held and the ankle follows the foot's own orientation; when the
+    foot lifts, the correction fades out with time constant ``release_s``. Only the position
+    on the floor is held: the height stays the network's (holding it too cost accuracy and
+    smoothness on unseen contents, ``benchmarks/foot_lock.py``). The foot's orientation, the
+    hips and every other joint keep their rotations; a target out of the leg's reach is
+    approached as far as the leg stretches.
+
+    Parameters
+    ----------
+    motion : the reconstruction (world positions after root pinning).
+    heel, toe : (T, 2) contact probabilities of the left and right heel (ankle) and toe.
+    smoothing : in (0, 1]; the correction goes through a causal exponential moving average
+        with this weight per frame, as :func:`pin_feet`'s.
+    release_s : time constant of the fade-out after a foot lifts, seconds.
+    threshold : a probability above it is a contact.
+    """
+    if motion.num_frames < 2:
+        return motion
+    glob, pos = motion.fk()
+    lock = FootLock(motion.skeleton, motion.fps, smoothing, release_s, threshold)
+    heel, toe = np.asarray(heel, dtype=np.float64), np.asarray(toe, dtype=np.float64)
+    feet = pos[:, lock.feet]
+    targets = np.stack([lock.targets(f, h, t) for f, h, t in zip(feet, heel, toe)])
+    return Motion(motion.skeleton, lock.bend(glob, pos, targets, motion.rotations),
+                  motion.root, motion.fps, motion.name)
+
+
+class FootLock:
+    """:func:`lock_feet` one frame at a time (bounded state: per foot the held point and
+    the correction): :meth:`targets` for where the ankles should be, :meth:`bend` for the
+    legs that put them there."""
+
+    def __init__(self, skeleton, fps: float, smoothing: float = 1.0, release_s: float = 0.1,
+                 threshold: float = 0.5) -> None:
+        _check_smoothing(smoothing)
+        if not release_s > 0:
+            raise ValueError(f"foot locking: release_s must be positive, got {release_s}")
+        self.chains = [tuple(skeleton.part(p) for p in leg[:3]) for leg in LEGS]
+        # the joints :meth:`targets` reads: the left and right ankle, then toe
+        self.feet = [c[2] for c in self.chains] + [skeleton.part(leg[3]) for leg in LEGS]
+        self.parents = skeleton.parents
+        self.smoothing, self.threshold = smoothing, threshold
+        self.decay = float(np.exp(-1.0 / (release_s * fps)))
+        self.held: list[tuple[str, np.ndarray] | None] = [None] * len(LEGS)
+        self.offset = np.zeros((len(LEGS), 3))
+        self.applied = np.zeros((len(LEGS), 3))
+
+    def targets(self, feet: np.ndarray, heel: np.ndarray, toe: np.ndarray) -> np.ndarray:
+        """feet : (4, 3) one frame's positions of the joints :attr:`feet`; heel, toe : (2,)
+        contact probabilities -> (2, 3) where each ankle should be."""
+        out = np.empty((len(LEGS), 3))
+        for side in range(len(LEGS)):
+            ankle, tip = feet[side], feet[len(LEGS) + side]
+            kind = ("heel" if heel[side] > self.threshold else
+                    "toe" if toe[side] > self.threshold else None)
+            held = self.held[side]
+            if kind is None:
+                self.held[side] = None
+                self.offset[side] *= self.decay
+            else:
+                point = ankle if kind == "heel" else tip
+                if held is None or held[0] != kind:  # lands (or rolls onto its toe) here
+                    held = self.held[side] = (kind, point + self.applied[side])
+                self.offset[side] = held[1] - point
+                self.offset[side, 1] = 0.0  # on the floor only
+            self.applied[side] += self.smoothing * (self.offset[side] - self.applied[side])
+            out[side] = ankle + self.applied[side]
+        return out
+
+    def moved(self, feet: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """(..., 2) whether each ankle's target differs from where it is (feet (..., 4, 3),
+        targets (..., 2, 3)): the legs :meth:`bend` changes."""
+        return np.any(np.abs(targets - feet[..., :len(LEGS), :]) > 1e-9, axis=-1)
+
+    def bend(self, glob: np.ndarray, pos: np.ndarray, targets: np.ndarray,
+             local: np.ndarray) -> np.ndarray:
+        """glob, pos : (T, J, ...) forward kinematics; targets : (T, 2, 3) from
+        :meth:`targets`; local : (T, J, 4) -> the local rotations with the legs bent."""
+        from imuloco.ops.ik import two_bone
+
+        local = normalize(local)
+        moves = self.moved(pos[:, self.feet], targets)
+        for side, chain in enumerate(self.chains):
+            moved = moves[:, side]
+            if moved.any():
+                local[moved] = two_bone(glob[moved], pos[moved], self.parents, chain,
+                                        targets[moved, side], local[moved])
+        return local
 
 
 class FootPinner:

@@ -3,7 +3,9 @@
 Signals are standardized and fed to a GRU frame by frame; its pose vectors are decoded with
 :func:`imuloco.methods.pose.decode` (root path integrated from the predicted velocity and yaw
 rate), then the feet predicted in contact are pinned (:func:`imuloco.methods.postprocess.
-pin_feet`, heels at the ankle joints and toes at the toe joints), which removes foot skating.
+pin_feet`, heels at the ankle joints and toes at the toe joints: the root moves) and held
+where they landed on the floor (:func:`imuloco.methods.postprocess.lock_feet`: the legs bend),
+which removes foot skating.
 :meth:`Learned.stream` does the same one frame at a time with the GRU's hidden state and gives
 the offline result frame for frame.
 
@@ -34,9 +36,9 @@ from imuloco.methods.base import Method, Reconstruction, Stream, calibrated_erro
 from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Ensemble, Reconstructor, TorchFK
-from imuloco.methods.postprocess import FootPinner, pin_feet
+from imuloco.methods.postprocess import FootLock, FootPinner, lock_feet, pin_feet
 from imuloco.methods.training import Example, TrainingSet
-from imuloco.ops.kinematics import joint_positions
+from imuloco.ops.kinematics import fk, joint_positions
 from imuloco.ops.rotations import from_6d, to_6d
 
 HEADING_REFLECTION = np.diag([-1.0, 1.0, 1.0])  # left is +X in the heading frame
@@ -368,7 +370,8 @@ class Learned(Method):
 
     def reconstruct_signals_full(self, signals: np.ndarray) -> Reconstruction:
         out = self.predict(signals)
-        motion = pin(pose.decode(out.vectors, self.skeleton_, self.fps_), out.contacts)
+        motion = lock(pin(pose.decode(out.vectors, self.skeleton_, self.fps_), out.contacts),
+                      out.contacts)
         err, flag, note = self.confidence(out)
         return Reconstruction(motion, err, flag, note,
                               {"sigma_m": out.sigma, "novelty": out.novelty})
@@ -604,6 +607,13 @@ def pin(motion: Motion, contacts: np.ndarray) -> Motion:
     return pin_feet(motion, contacts, PIN_PARTS, PIN_SMOOTHING)
 
 
+def lock(motion: Motion, contacts: np.ndarray) -> Motion:
+    """:func:`imuloco.methods.postprocess.lock_feet` with the predicted heel and toe contacts
+    (:data:`CONTACT_PARTS` order: left and right heel, then toe), smoothed as the root's
+    pinning is."""
+    return lock_feet(motion, contacts[:, :2], contacts[:, 2:], PIN_SMOOTHING)
+
+
 class LearnedStream(Stream):
     """One frame in, one pose out: the GRU state, the pose integrator and the foot pinning
     carried from frame to frame (bounded state), giving :meth:`Learned.reconstruct_signals`'s
@@ -622,6 +632,7 @@ class LearnedStream(Stream):
         self.integrator = PoseIntegrator(model.skeleton_, model.fps_)
         self.feet = [model.skeleton_.part(p) for p in PIN_PARTS]
         self.pinner = FootPinner(PIN_SMOOTHING)
+        self.lock = FootLock(model.skeleton_, model.fps_, PIN_SMOOTHING)
         self.contacts = np.zeros(len(PIN_PARTS))
         self.sigma = float("nan")
         self.novelty: float | None = None  # the smoothed novelty of the last frame read
@@ -648,4 +659,11 @@ class LearnedStream(Stream):
         sk = m.skeleton_
         # the feet only (a tenth of a whole-body fk's cost for one frame)
         feet = joint_positions(rot, raw_root, sk.offsets, sk.parents, self.feet)
-        return rot, self.pinner.step(raw_root, feet - raw_root, self.contacts)
+        root = self.pinner.step(raw_root, feet - raw_root, self.contacts)
+        feet = feet - raw_root + root  # PIN_PARTS are the lock's feet, in its order
+        c = self.contacts
+        targets = self.lock.targets(feet, c[:2], c[2:])
+        if not self.lock.moved(feet, targets).any():  # no leg to bend: no whole-body fk
+            return rot, root
+        glob, pos = fk(rot[None], root[None], sk.offsets, sk.parents)
+        return self.lock.bend(glob, pos, targets[None], rot[None])[0], root

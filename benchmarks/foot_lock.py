@@ -1,0 +1,115 @@
+"""How much foot skating does ``learned``'s leg IK (``lock_feet``) remove where it was worst?
+A measurement.
+
+    python benchmarks/foot_lock.py --data ../shared/data --folds walk-back,dash,walk-left,walk \
+        --models runs/foot-lock [--seed 0] [-o TABLE.md]
+
+The ``heldout-contents`` protocol of ``docs/results/generalization/README.md`` (both
+Bandai-Namco sets, 30 clips a folder, right ankle, ``phone`` noise, ``learned[threads=1]``
+with the bench's seeds), fold by fold: each fold's model is trained once (saved under
+``--models``, reused when present), and its test clips are reconstructed once; the same
+network outputs are then post-processed several ways:
+
+- ``raw``: the decoded pose, nothing pinned;
+- ``root pinned``: :func:`imuloco.methods.learned.method.pin`, the root moved so that feet in
+  contact do not slide (all ``learned`` did before ``lock_feet``);
+- ``root pinned, legs locked (learned's)``: then :func:`imuloco.methods.learned.method.lock`,
+  the planted feet held on the floor by leg IK with the root pinning's smoothing (today's
+  ``learned``); ``smoothing 1``: the same without smoothing;
+- ``legs locked only``: ``lock`` on the raw pose.
+
+Prints per fold MPJPE (cm), foot skate (cm/s) and jitter (m/s³) of each, frame-weighted as the
+bench aggregates, with the ground truth's skate and jitter.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+from tqdm.auto import tqdm
+
+from imuloco.evaluate import metrics
+from imuloco.evaluate.bench import load_data
+from imuloco.evaluate.protocols import folds
+from imuloco.io.atomic import atomic_write_text
+from imuloco.methods import get_method, pose
+from imuloco.methods.learned.method import PIN_SMOOTHING, lock, pin
+from imuloco.methods.modelfile import load_model
+from imuloco.methods.postprocess import lock_feet
+from imuloco.methods.training import TEST_SEED_OFFSET, synthesize
+
+LOCKS = {"legs locked (learned's)": {"smoothing": PIN_SMOOTHING},
+         "legs locked, smoothing 1": {"smoothing": 1.0}}
+VARIANTS = ("raw", "root pinned", *(f"root pinned, {k}" for k in LOCKS), "legs locked only")
+KEYS = ("mpjpe_cm", "foot_skate_cm_s", "jitter", "foot_skate_gt_cm_s", "jitter_gt")
+
+
+def fold_model(fold: str, train, seed: int, models: Path):
+    """The fold's ``learned[threads=1]``, trained as the bench trains it, or loaded."""
+    path = models / f"{fold}-seed{seed}.npz"
+    if path.exists():
+        return load_model(path)
+    method = get_method("learned", threads=1, seed=seed)
+    with threadpool_limits(limits=1):
+        method.fit(train, ["right_ankle"], "phone", seed, progress=True)
+    models.mkdir(parents=True, exist_ok=True)
+    method.save(path)
+    return method
+
+
+def variants(method, signals: np.ndarray):
+    """The post-processings of one test clip's network outputs."""
+    out = method.predict(signals)
+    c = out.contacts
+    raw = pose.decode(out.vectors, method.skeleton_, method.fps_)
+    pinned = pin(raw, c)
+    locked = {f"root pinned, {k}": lock_feet(pinned, c[:, :2], c[:, 2:], **kw)
+              for k, kw in LOCKS.items()}
+    return {"raw": raw, "root pinned": pinned, **locked, "legs locked only": lock(raw, c)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", type=Path, required=True, help="the shared data folder")
+    ap.add_argument("--folds", default="walk-back,dash,walk-left,walk")
+    ap.add_argument("--models", type=Path, required=True, help="where fold models are kept")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("-o", "--out", type=Path, help="also write the table here")
+    args = ap.parse_args()
+    db = load_data([args.data / "bandai-namco-2", args.data / "bandai-namco-1"], limit=30,
+                   progress=True)
+    wanted = args.folds.split(",")
+    lines = [("| left-out content | post-processing | MPJPE cm | skate cm/s | jitter m/s³ "
+             "| ground truth skate / jitter |"), "|---|---|---:|---:|---:|---|"]
+    for fold, train, test in folds(db, "heldout-contents"):
+        if fold not in wanted:
+            continue
+        method = fold_model(fold, train, args.seed, args.models)
+        test_ex = synthesize(test, ["right_ankle"], "phone", args.seed + TEST_SEED_OFFSET)
+        rows: dict[str, list[dict]] = {v: [] for v in VARIANTS}
+        for ex in tqdm(test_ex, desc=f"{fold}: post-processing", unit="clip"):
+            for name, rec in variants(method, ex.signals).items():
+                values = metrics.evaluate(ex.motion, metrics.align_heading(rec, ex.motion, 0))
+                rows[name].append({"n_frames": ex.motion.num_frames, **values})
+        for name in VARIANTS:
+            w = np.array([r["n_frames"] for r in rows[name]], float)
+            mean = {}
+            for k in KEYS:  # clips without a ground-truth contact have no skate (nan)
+                v = np.array([r[k] for r in rows[name]], float)
+                ok = np.isfinite(v)
+                mean[k] = float(np.average(v[ok], weights=w[ok]))
+            lines.append(f"| {fold} | {name} | {mean['mpjpe_cm']:.2f} | "
+                         f"{mean['foot_skate_cm_s']:.1f} | {mean['jitter']:.0f} | "
+                         f"{mean['foot_skate_gt_cm_s']:.1f} / {mean['jitter_gt']:.0f} |")
+        print("\n".join(lines[-len(VARIANTS):]), flush=True)
+    table = "\n".join(lines) + "\n"
+    print(table)
+    if args.out:
+        atomic_write_text(args.out, table)
+
+
+if __name__ == "__main__":
+    main()
