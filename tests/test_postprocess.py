@@ -174,3 +174,19 @@ def test_foot_lock_frame_by_frame_gives_the_offline_motion(sliding):
     assert np.abs(offline.rotations - drifted.rotations).max() > 0.01  # it did bend legs
     with pytest.raises(ValueError, match="smoothing"):
         FootLock(drifted.skeleton, drifted.fps, 0.0)
+
+
+def test_a_held_foot_slides_once_the_motion_leaves_it_a_foot_length_behind(sliding):
+    from imuloco.methods.postprocess import MAX_HOLD_FEET, lock_feet
+
+    _, drifted, contacts = sliding  # the hips drift 0.3 m/s: a foot held down all along
+    ones = np.ones((drifted.num_frames, 2))
+    locked = lock_feet(drifted, ones, ones)
+    sk = drifted.skeleton
+    for name in ("left", "right"):
+        a, t = sk.part(f"{name}_ankle"), sk.part(f"{name}_toe")
+        foot = np.linalg.norm(sk.offsets[t])  # the sample rig's toe hangs off the ankle
+        away = np.linalg.norm((locked.positions()[:, a] - drifted.positions()[:, a])[:, [0, 2]],
+                              axis=-1)
+        assert away.max() <= MAX_HOLD_FEET * foot + 1e-6
+        assert away.max() > 0.9 * MAX_HOLD_FEET * foot  # it was held that far

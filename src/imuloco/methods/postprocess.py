@@ -7,6 +7,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from imuloco.core.motion import Motion
+from imuloco.core.skeleton import Skeleton
 from imuloco.ops.rotations import normalize
 
 
@@ -63,6 +64,7 @@ def pin_feet(motion: Motion, contacts: np.ndarray, feet: tuple[str, ...] = ("lef
     return Motion(motion.skeleton, motion.rotations, root, motion.fps, motion.name)
 
 
+MAX_HOLD_FEET = 1.0  # FootLock: a held foot's furthest from the motion, in foot lengths
 LEGS = (("left_hip", "left_knee", "left_ankle", "left_toe"),
         ("right_hip", "right_knee", "right_ankle", "right_toe"))
 
@@ -76,11 +78,13 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
     its smoothing leaves. Causally, frame by frame (:class:`FootLock`, which a stream runs):
     when a heel comes down the ankle is held where it stands; when only the toe is down (the
     heel rising) the toe is held and the ankle follows the foot's own orientation; when the
-    foot lifts, the correction fades out with time constant ``release_s``. Only the position
-    on the floor is held: the height stays the network's (holding it too cost accuracy and
-    smoothness on unseen contents, ``benchmarks/foot_lock.py``). The foot's orientation, the
-    hips and every other joint keep their rotations; a target out of the leg's reach is
-    approached as far as the leg stretches.
+    foot lifts, the correction fades out with time constant ``release_s``; where the motion
+    takes the foot further than its own length (:data:`MAX_HOLD_FEET`) from the held point
+    (a pivot, a step the contacts missed), the held point slides along. Only the position
+    on the floor is held: the height stays the motion's (holding it too cost accuracy and
+    smoothness on unseen contents: ``docs/results/learned/experiments.md``, thirteenth
+    round). Only the hip, knee and ankle joints turn, the foot keeping its orientation; a
+    target out of the leg's reach is approached as far as the leg stretches.
 
     Parameters
     ----------
@@ -102,12 +106,23 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
                   motion.root, motion.fps, motion.name)
 
 
+def _rest_distance(skeleton: Skeleton, top: int, joint: int) -> float:
+    """Distance in the rest pose from joint ``top`` to ``joint``, one of its descendants
+    (metres): the bones' offsets summed up the chain."""
+    step = np.zeros(3)
+    while joint != top:
+        step, joint = step + skeleton.offsets[joint], int(skeleton.parents[joint])
+        if joint < 0:
+            raise ValueError(f"joint {skeleton.names[top]!r} is no ancestor of the toe")
+    return float(np.linalg.norm(step))
+
+
 class FootLock:
     """:func:`lock_feet` one frame at a time (bounded state: per foot the held point and
     the correction): :meth:`targets` for where the ankles should be, :meth:`bend` for the
     legs that put them there."""
 
-    def __init__(self, skeleton, fps: float, smoothing: float = 1.0, release_s: float = 0.1,
+    def __init__(self, skeleton: Skeleton, fps: float, smoothing: float = 1.0, release_s: float = 0.1,
                  threshold: float = 0.5) -> None:
         _check_smoothing(smoothing)
         if not release_s > 0:
@@ -116,6 +131,10 @@ class FootLock:
         # the joints :meth:`targets` reads: the left and right ankle, then toe
         self.feet = [c[2] for c in self.chains] + [skeleton.part(leg[3]) for leg in LEGS]
         self.parents = skeleton.parents
+        # a foot is held at most MAX_HOLD_FEET of its own length (ankle to toe) from where
+        # the motion puts it: further, the motion has left it, and it slides along
+        self.slip_m = [MAX_HOLD_FEET * _rest_distance(skeleton, ankle, toe)
+                       for ankle, toe in zip(self.feet[:len(LEGS)], self.feet[len(LEGS):])]
         self.smoothing, self.threshold = smoothing, threshold
         self.decay = float(np.exp(-1.0 / (release_s * fps)))
         self.held: list[tuple[str, np.ndarray] | None] = [None] * len(LEGS)
@@ -140,6 +159,10 @@ class FootLock:
                     held = self.held[side] = (kind, point + self.applied[side])
                 self.offset[side] = held[1] - point
                 self.offset[side, 1] = 0.0  # on the floor only
+                far = float(np.linalg.norm(self.offset[side]))
+                if far > self.slip_m[side]:  # the motion left the held point: let it slide
+                    self.offset[side] *= self.slip_m[side] / far
+                    self.held[side] = (kind, point + self.offset[side])
             self.applied[side] += self.smoothing * (self.offset[side] - self.applied[side])
             out[side] = ankle + self.applied[side]
         return out
