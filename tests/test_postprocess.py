@@ -74,9 +74,16 @@ def test_two_bone_ik_puts_the_ankle_on_its_target(sliding):
     walk = sliding[0]
     glob, pos = walk.fk()
     hip, knee, ankle = chain = _leg(walk)
+    parents = walk.skeleton.parents
+
+    def bent(target: np.ndarray) -> Motion:
+        rows = [parents[hip], hip, parents[knee], knee, parents[ankle], ankle]
+        local = walk.rotations.copy()
+        local[:, list(chain)] = two_bone(glob[:, rows], pos[:, list(chain)], target)
+        return Motion(walk.skeleton, local, walk.root, walk.fps)
+
     target = pos[:, ankle] + [0.03, 0.02, -0.04]
-    moved = Motion(walk.skeleton, two_bone(glob, pos, walk.skeleton.parents, chain, target,
-                                           walk.rotations), walk.root, walk.fps)
+    moved = bent(target)
     glob2, pos2 = moved.fk()
     np.testing.assert_allclose(pos2[:, ankle], target, atol=1e-6)
     np.testing.assert_allclose(pos2[:, hip], pos[:, hip], atol=1e-9)
@@ -88,8 +95,7 @@ def test_two_bone_ik_puts_the_ankle_on_its_target(sliding):
     np.testing.assert_allclose(pos2[:, other], pos[:, other], atol=1e-9)
     # a target beyond reach: the leg stretches towards it
     far = pos[:, hip] + 2.0 * (pos[:, ankle] - pos[:, hip])
-    reach = Motion(walk.skeleton, two_bone(glob, pos, walk.skeleton.parents, chain, far,
-                                           walk.rotations), walk.root, walk.fps).positions()
+    reach = bent(far).positions()
     length = (np.linalg.norm(pos[:, knee] - pos[:, hip], axis=-1)
               + np.linalg.norm(pos[:, ankle] - pos[:, knee], axis=-1))
     np.testing.assert_allclose(np.linalg.norm(reach[:, ankle] - pos[:, hip], axis=-1), length,
@@ -164,12 +170,12 @@ def test_foot_lock_frame_by_frame_gives_the_offline_motion(sliding):
     rng = np.random.default_rng(1)
     soft = np.clip(contacts + rng.normal(0, 0.3, contacts.shape), 0, 1)
     offline = lock_feet(drifted, soft[:, :2], soft[:, 2:], smoothing=0.7)
-    glob, pos = drifted.fk()
+    pos = drifted.positions()
     lock = FootLock(drifted.skeleton, drifted.fps, 0.7)
     online = np.concatenate([
-        lock.bend(glob[i:i + 1], pos[i:i + 1],
-                  lock.targets(pos[i, lock.feet], soft[i, :2], soft[i, 2:])[None],
-                  drifted.rotations[i:i + 1]) for i in range(drifted.num_frames)])
+        lock.bend(drifted.rotations[i:i + 1], drifted.root[i:i + 1],
+                  lock.targets(pos[i, lock.feet], soft[i, :2], soft[i, 2:])[None])
+        for i in range(drifted.num_frames)])
     np.testing.assert_allclose(online, offline.rotations, atol=1e-12)
     assert np.abs(offline.rotations - drifted.rotations).max() > 0.01  # it did bend legs
     with pytest.raises(ValueError, match="smoothing"):
@@ -179,7 +185,7 @@ def test_foot_lock_frame_by_frame_gives_the_offline_motion(sliding):
 def test_a_held_foot_slides_once_the_motion_leaves_it_a_foot_length_behind(sliding):
     from imuloco.methods.postprocess import MAX_HOLD_FEET, lock_feet
 
-    _, drifted, contacts = sliding  # the hips drift 0.3 m/s: a foot held down all along
+    drifted = sliding[1]  # the hips drift 0.3 m/s: a foot held down all along
     ones = np.ones((drifted.num_frames, 2))
     locked = lock_feet(drifted, ones, ones)
     sk = drifted.skeleton

@@ -8,6 +8,7 @@ from scipy.signal import lfilter
 
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
+from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import normalize
 
 
@@ -97,12 +98,11 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
     """
     if motion.num_frames < 2:
         return motion
-    glob, pos = motion.fk()
     lock = FootLock(motion.skeleton, motion.fps, smoothing, release_s, threshold)
     heel, toe = np.asarray(heel, dtype=np.float64), np.asarray(toe, dtype=np.float64)
-    feet = pos[:, lock.feet]
+    feet = lock.feet_positions(motion.rotations, motion.root)
     targets = np.stack([lock.targets(f, h, t) for f, h, t in zip(feet, heel, toe)])
-    return Motion(motion.skeleton, lock.bend(glob, pos, targets, motion.rotations),
+    return Motion(motion.skeleton, lock.bend(motion.rotations, motion.root, targets),
                   motion.root, motion.fps, motion.name)
 
 
@@ -120,7 +120,8 @@ def _rest_distance(skeleton: Skeleton, top: int, joint: int) -> float:
 class FootLock:
     """:func:`lock_feet` one frame at a time (bounded state: per foot the held point and
     the correction): :meth:`targets` for where the ankles should be, :meth:`bend` for the
-    legs that put them there."""
+    legs that put them there. Only the legs and their ancestors' kinematics are computed
+    (a stream bends a leg nearly every frame)."""
 
     def __init__(self, skeleton: Skeleton, fps: float, smoothing: float = 1.0, release_s: float = 0.1,
                  threshold: float = 0.5) -> None:
@@ -130,7 +131,21 @@ class FootLock:
         self.chains = [tuple(skeleton.part(p) for p in leg[:3]) for leg in LEGS]
         # the joints :meth:`targets` reads: the left and right ankle, then toe
         self.feet = [c[2] for c in self.chains] + [skeleton.part(leg[3]) for leg in LEGS]
-        self.parents = skeleton.parents
+        parents = skeleton.parents
+        need: set[int] = set()
+        for j in [*(j for c in self.chains for j in c), *self.feet]:
+            while j >= 0 and j not in need:
+                need.add(j)
+                j = int(parents[j])
+        self.joints = sorted(need)  # the legs and their ancestors; parents come first
+        at = {j: i for i, j in enumerate(self.joints)}
+        self.sub_parents = np.array([at[int(parents[j])] if parents[j] >= 0 else -1
+                                     for j in self.joints])
+        self.sub_offsets = skeleton.offsets[self.joints]
+        self.sub_feet = [at[j] for j in self.feet]
+        # per leg, into the joints above: the globals two_bone reads, then its positions
+        self.rows = np.array([[at[int(x)] for x in (parents[h], h, parents[k], k, parents[e], e)]
+                              for h, k, e in self.chains])
         # a foot is held at most MAX_HOLD_FEET of its own length (ankle to toe) from where
         # the motion puts it: further, the motion has left it, and it slides along
         self.slip_m = [MAX_HOLD_FEET * _rest_distance(skeleton, ankle, toe)
@@ -172,19 +187,27 @@ class FootLock:
         targets (..., 2, 3)): the legs :meth:`bend` changes."""
         return np.any(np.abs(targets - feet[..., :len(LEGS), :]) > 1e-9, axis=-1)
 
-    def bend(self, glob: np.ndarray, pos: np.ndarray, targets: np.ndarray,
-             local: np.ndarray) -> np.ndarray:
-        """glob, pos : (T, J, ...) forward kinematics; targets : (T, 2, 3) from
-        :meth:`targets`; local : (T, J, 4) -> the local rotations with the legs bent."""
+    def _legs(self, local: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Global rotations and positions of :attr:`joints` (T, K, ...)."""
+        return fk(normalize(local[:, self.joints]), root, self.sub_offsets, self.sub_parents)
+
+    def feet_positions(self, local: np.ndarray, root: np.ndarray) -> np.ndarray:
+        """(T, 4, 3) positions of the joints :attr:`feet` of a motion's frames."""
+        return self._legs(local, root)[1][:, self.sub_feet]
+
+    def bend(self, local: np.ndarray, root: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """local : (T, J, 4) rotations and root : (T, 3) of frames; targets : (T, 2, 3)
+        from :meth:`targets` -> the local rotations with the legs bent."""
         from imuloco.ops.ik import two_bone
 
+        glob, pos = self._legs(local, root)
         local = normalize(local)
-        moves = self.moved(pos[:, self.feet], targets)
-        for side, chain in enumerate(self.chains):
-            moved = moves[:, side]
-            if moved.any():
-                local[moved] = two_bone(glob[moved], pos[moved], self.parents, chain,
-                                        targets[moved, side], local[moved])
+        frame, leg = np.nonzero(self.moved(pos[:, self.sub_feet], targets))
+        if len(frame):
+            rows = self.rows[leg]
+            new = two_bone(glob[frame[:, None], rows], pos[frame[:, None], rows[:, 1::2]],
+                           targets[frame, leg])
+            local[frame[:, None], np.array(self.chains)[leg]] = new
         return local
 
 

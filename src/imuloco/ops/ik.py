@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from imuloco.ops.rotations import _cross, from_rotvec, normalize, qinv, qmul, qrot
+from imuloco.ops.rotations import _cross, normalize, qinv, qmul, qrot
 
 _EPS = 1e-9
 
@@ -38,27 +38,27 @@ def _normal_seed(u: np.ndarray) -> np.ndarray:
     return np.where(np.abs(u[..., :1]) < 0.9 * np.linalg.norm(u, axis=-1, keepdims=True), x, y)
 
 
-def two_bone(glob: np.ndarray, pos: np.ndarray, parents: np.ndarray, chain: tuple[int, int, int],
-             target: np.ndarray, local: np.ndarray) -> np.ndarray:
-    """Local rotations with the chain's end (an ankle) moved to ``target``, its global
-    orientation kept; each frame on its own.
+def two_bone(glob: np.ndarray, pos: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The local rotations of a leg whose end (an ankle) is moved to ``target``, its global
+    orientation kept; each row on its own.
 
     The knee bends in its own plane until the hip-to-end distance is the hip-to-target one
     (law of cosines, clamped to what the bones reach), then the hip turns the leg onto the
     target by the shortest rotation. Joints between hip and knee, or knee and end, follow
-    rigidly.
+    rigidly; a leg held exactly straight has no plane and keeps its knee.
 
     Parameters
     ----------
-    glob, pos : (T, J, 4) global rotations and (T, J, 3) positions (:func:`imuloco.ops.
-        kinematics.fk`).
-    parents : (J,) parent indices.
-    chain : joint indices of the hip, knee and end, each an ancestor of the next.
-    target : (T, 3) where the end should be.
-    local : (T, J, 4) local rotations; a changed copy is returned.
+    glob : (N, 6, 4) global rotations of the hip's parent, the hip, the knee's parent, the
+        knee, the end's parent and the end (:func:`imuloco.ops.kinematics.fk`).
+    pos : (N, 3, 3) positions of the hip, the knee and the end.
+    target : (N, 3) where the end should be.
+
+    Returns
+    -------
+    (N, 3, 4) new local rotations of the hip, the knee and the end.
     """
-    hip, knee, end = chain
-    h, k, a = pos[:, hip], pos[:, knee], pos[:, end]
+    h, k, a = pos[:, 0], pos[:, 1], pos[:, 2]
     t = np.asarray(target, dtype=np.float64)
     u, v = h - k, a - k
     la, lb = np.linalg.norm(u, axis=-1), np.linalg.norm(v, axis=-1)
@@ -66,23 +66,17 @@ def two_bone(glob: np.ndarray, pos: np.ndarray, parents: np.ndarray, chain: tupl
     inner = np.arccos(np.clip(np.sum(u * v, axis=-1) / np.maximum(la * lb, _EPS), -1.0, 1.0))
     wanted = np.arccos(np.clip((la ** 2 + lb ** 2 - reach ** 2) / np.maximum(2 * la * lb, _EPS),
                                -1.0, 1.0))
-    # the bend axis: the knee's plane; a leg held exactly straight has none, and keeps its
-    # knee (only the hip turns it; chosen per frame so that one frame at a time, as a
-    # stream runs, gives what a whole recording does)
     axis = _cross(u, v)
     n = np.linalg.norm(axis, axis=-1, keepdims=True)
     straight = n[:, 0] <= 1e-6 * np.maximum(la * lb, _EPS)
-    axis = axis / np.maximum(n, _EPS)
-    wanted = np.where(straight, inner, wanted)
-    bend = from_rotvec(axis * (wanted - inner)[:, None])      # about the knee, world frame
-    a2 = k + qrot(bend, v)
-    turn = arc(a2 - h, t - h)                                  # about the hip, world frame
-    out = np.array(local, dtype=np.float64, copy=True)
-    ph = parents[hip]
-    parent_h = glob[:, ph] if ph >= 0 else np.broadcast_to([0.0, 0.0, 0.0, 1.0], turn.shape)
-    out[:, hip] = qmul(qinv(parent_h), qmul(turn, glob[:, hip]))
-    # below the hip everything turned by ``turn``: the knee's new global is turn bend G_k
-    out[:, knee] = qmul(qinv(glob[:, parents[knee]]), qmul(bend, glob[:, knee]))
-    new_parent_end = qmul(turn, qmul(bend, glob[:, parents[end]]))
-    out[:, end] = qmul(qinv(new_parent_end), glob[:, end])
-    return normalize(out)
+    half = 0.5 * np.where(straight, 0.0, wanted - inner)
+    # about the knee, world frame: the axis-angle quaternion (a formula, cheaper per call
+    # than a scipy Rotation for the one frame a stream bends)
+    bend = np.concatenate([axis / np.maximum(n, _EPS) * np.sin(half)[:, None],
+                           np.cos(half)[:, None]], axis=-1)
+    turn = arc(k + qrot(bend, v) - h, t - h)                  # about the hip, world frame
+    g_ph, g_h, g_pk, g_k, g_pe, g_e = (glob[:, i] for i in range(6))
+    # below the hip everything turned by ``turn``, below the knee by ``turn bend`` too
+    return normalize(np.stack([qmul(qinv(g_ph), qmul(turn, g_h)),
+                               qmul(qinv(g_pk), qmul(bend, g_k)),
+                               qmul(qinv(qmul(turn, qmul(bend, g_pe))), g_e)], axis=1))

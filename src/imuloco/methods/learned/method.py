@@ -38,7 +38,7 @@ from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Ensemble, Reconstructor, TorchFK
 from imuloco.methods.postprocess import FootLock, FootPinner, lock_feet, pin_feet
 from imuloco.methods.training import Example, TrainingSet
-from imuloco.ops.kinematics import fk, joint_positions
+from imuloco.ops.kinematics import joint_positions
 from imuloco.ops.rotations import from_6d, to_6d
 
 HEADING_REFLECTION = np.diag([-1.0, 1.0, 1.0])  # left is +X in the heading frame
@@ -663,7 +663,6 @@ class LearnedStream(Stream):
         feet = feet - raw_root + root  # PIN_PARTS are the lock's feet, in its order
         c = self.contacts
         targets = self.lock.targets(feet, c[:2], c[2:])
-        if not self.lock.moved(feet, targets).any():  # no leg to bend: no whole-body fk
+        if not self.lock.moved(feet, targets).any():  # no leg to bend
             return rot, root
-        glob, pos = fk(rot[None], root[None], sk.offsets, sk.parents)
-        return self.lock.bend(glob, pos, targets[None], rot[None])[0], root
+        return self.lock.bend(rot[None], root[None], targets[None])[0], root
