@@ -554,3 +554,21 @@ def test_the_summary_counts_the_contacts_no_estimate_matched():
     assert s["ic_median_ms"] == 10.0
     assert s["ic_matched_pct"] == pytest.approx(60.0)
     assert "IC matched %" in table([s]) and "| 60.0 |" in table([s])
+
+
+@pytest.mark.shared
+def test_a_failing_estimator_is_logged_not_passed_off_as_no_gait(real_dir, monkeypatch,
+                                                                 caplog):
+    from imuloco.evaluate import real
+
+    def broken(rec, placement, **kw):
+        raise ValueError("the estimator broke")
+
+    monkeypatch.setattr(real, "sensor_gait", broken)
+    with caplog.at_level("WARNING", logger="imuloco.evaluate.real"):
+        rows = run_real(real_dir / "ipol-gait", None, limit=1)
+    assert rows and all(not r["measured"] and r["reason"] == "the estimator broke"
+                        for r in rows if r["estimator"] == "imuloco")
+    said = [m for m in caplog.messages if "the estimator broke" in m]
+    assert len(said) == len([r for r in rows if r["estimator"] == "imuloco"])
+    assert all(m.startswith("ipol-gait ") for m in said)

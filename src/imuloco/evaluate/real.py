@@ -375,6 +375,10 @@ def run_real(folder: str | Path, out: str | Path | None = None, limit: int | Non
                                        height_m=trial.reference.height_m,
                                        sensor_height_m=trial.reference.sensor_height_m)
                 except ValueError as e:  # e.g. a lower back without the walker's height
+                    # said aloud: a library's failure must not pass for a recording without
+                    # gait (mobgap once raised here at some sampling rates)
+                    log.warning("%s %s, %s: not measured: %s", trial.dataset, trial.name,
+                                placement, e)
                     gait = not_measured(placement, "", str(e))
                 rows.append(evaluate_gait(gait, trial, "imuloco"))
                 if baseline:
@@ -382,6 +386,8 @@ def run_real(folder: str | Path, out: str | Path | None = None, limit: int | Non
                         base = reconstruction_gait(trial, placement, model_for(placement))
                         rows.append(evaluate_gait(base, trial, "reconstruction"))
                     except ValueError as e:  # a motion the phase detector cannot read
+                        log.warning("%s %s, %s: reconstruction not measured: %s",
+                                    trial.dataset, trial.name, placement, e)
                         rows.append({"dataset": trial.dataset, "recording": trial.name,
                                      "sensor": placement, "estimator": "reconstruction",
                                      "measured": False, "reason": str(e)})
