@@ -3,10 +3,13 @@ A measurement.
 
     python benchmarks/foot_lock.py --data ../shared/data --folds walk-back,dash,walk-left,walk \
         --models runs/foot-lock [--seed 0] [-o TABLE.md]
+    python benchmarks/foot_lock.py --data ../shared/data --split heldout-styles \
+        --params "epochs=5;strap=0.5;incline=15" --models runs/foot-lock [--seed 0]
 
 The ``heldout-contents`` protocol of ``docs/results/generalization/README.md`` (both
 Bandai-Namco sets, 30 clips a folder, right ankle, ``phone`` noise, ``learned[threads=1]``
-with the bench's seeds), fold by fold: each fold's model is trained once (saved under
+with the bench's seeds; ``--split heldout-styles``: all of ``bandai-namco-2``, ``--params`` added to the
+method's), fold by fold: each fold's model is trained once (saved under
 ``--models``, reused when present), and its test clips are reconstructed once; the same
 network outputs are then post-processed several ways:
 
@@ -47,12 +50,13 @@ VARIANTS = ("raw", "root pinned", *(f"root pinned, {k}" for k in LOCKS), "legs l
 KEYS = ("mpjpe_cm", "foot_skate_cm_s", "jitter", "foot_skate_gt_cm_s", "jitter_gt")
 
 
-def fold_model(fold: str, train, seed: int, models: Path):
-    """The fold's ``learned[threads=1]``, trained as the bench trains it, or loaded."""
-    path = models / f"{fold}-seed{seed}.npz"
+def fold_model(fold: str, train, seed: int, models: Path, params: dict):
+    """The fold's ``learned[threads=1;params]``, trained as the bench trains it, or loaded."""
+    tag = "".join(f"-{k}{v}" for k, v in sorted(params.items()))
+    path = models / f"{fold}{tag}-seed{seed}.npz"
     if path.exists():
         return load_model(path)
-    method = get_method("learned", threads=1, seed=seed)
+    method = get_method("learned", threads=1, seed=seed, **params)
     with threadpool_limits(limits=1):
         method.fit(train, ["right_ankle"], "phone", seed, progress=True)
     models.mkdir(parents=True, exist_ok=True)
@@ -77,17 +81,26 @@ def main() -> None:
     ap.add_argument("--folds", default="walk-back,dash,walk-left,walk")
     ap.add_argument("--models", type=Path, required=True, help="where fold models are kept")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--split", choices=("heldout-contents", "heldout-styles"),
+                    default="heldout-contents")
+    ap.add_argument("--params", default="", help="learned's parameters, as key=value;...")
     ap.add_argument("-o", "--out", type=Path, help="also write the table here")
     args = ap.parse_args()
-    db = load_data([args.data / "bandai-namco-2", args.data / "bandai-namco-1"], limit=30,
-                   progress=True)
+    from imuloco.methods.registry import parse_method_spec
+
+    params = parse_method_spec(f"learned[{args.params}]")[1] if args.params else {}
+    if args.split == "heldout-styles":
+        db = load_data([args.data / "bandai-namco-2"], progress=True)
+    else:
+        db = load_data([args.data / "bandai-namco-2", args.data / "bandai-namco-1"], limit=30,
+                       progress=True)
     wanted = args.folds.split(",")
     lines = [("| left-out content | post-processing | MPJPE cm | skate cm/s | jitter m/s³ "
              "| ground truth skate / jitter |"), "|---|---|---:|---:|---:|---|"]
-    for fold, train, test in folds(db, "heldout-contents"):
-        if fold not in wanted:
+    for fold, train, test in folds(db, args.split):
+        if args.split == "heldout-contents" and fold not in wanted:
             continue
-        method = fold_model(fold, train, args.seed, args.models)
+        method = fold_model(fold, train, args.seed, args.models, params)
         test_ex = synthesize(test, ["right_ankle"], "phone", args.seed + TEST_SEED_OFFSET)
         rows: dict[str, list[dict]] = {v: [] for v in VARIANTS}
         for ex in tqdm(test_ex, desc=f"{fold}: post-processing", unit="clip"):
