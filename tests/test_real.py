@@ -297,6 +297,34 @@ def test_strides_over_the_whole_trial_count_its_pauses(tmp_path):
     assert gait.summary()["cadence_spm"] == pytest.approx(80)
 
 
+def test_a_published_path_row_names_the_trial_s_sensor(tmp_path):
+    """PyShoe's published path is that of the recording's one sensor, whatever its name."""
+    from dataclasses import replace
+
+    from scipy.io import savemat
+
+    from imuloco.core.recording import Recording
+    from imuloco.evaluate.real import published_path_row
+
+    t = np.arange(400) / 200.0
+    imu = np.zeros((len(t), 6))
+    imu[:, 2] = -9.81
+    path = np.stack([t, 0 * t], axis=1)
+    savemat(tmp_path / "a_LLIO.mat", {"imu_data": imu, "timestamps_all": t[None],
+                                      "strideIndex": [[0, 200, 399]], "pyshoeTrajectory": path,
+                                      "GCP": path[[0, 200, 399]]})
+    (trial,) = read_trials(tmp_path)
+    assert published_path_row(trial)["sensor"] == "right_foot"
+    rec = trial.recording
+    left = replace(trial, recording=Recording(rec.times, rec.acc, rec.gyro, ["left_foot"]))
+    row = published_path_row(left)
+    assert row["sensor"] == "left_foot" and row["path_final_m"] == pytest.approx(0, abs=1e-9)
+    both = Recording(rec.times, np.repeat(rec.acc, 2, axis=1), np.repeat(rec.gyro, 2, axis=1),
+                     ["left_foot", "right_foot"])
+    with pytest.raises(ValueError, match="pyshoe-vicon a: a published path needs a recording of one"):
+        published_path_row(replace(trial, recording=both))
+
+
 def test_path_errors_ignore_start_pose():
     """A path moved and turned on the floor has no error once its start is aligned."""
     ref = np.array([[0, 0], [1, 0], [2, 0.5], [2.5, 1.5], [2, 2.5]], float)

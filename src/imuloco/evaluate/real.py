@@ -298,7 +298,11 @@ def published_path_row(trial: RealTrial) -> dict[str, Any] | None:
     ref = trial.reference
     if ref.published_path is None or ref.stride_points is None:
         return None
-    row = {"dataset": trial.dataset, "recording": trial.name, "sensor": "right_foot",
+    if len(trial.recording.placements) != 1:
+        raise ValueError(f"{trial.dataset} {trial.name}: a published path needs a recording of "
+                         f"one sensor, got {trial.recording.placements}")
+    row = {"dataset": trial.dataset, "recording": trial.name,
+           "sensor": trial.recording.placements[0],
            "estimator": "pyshoe_published", "measured": True, "reason": ""}
     row.update(path_errors(ref.path_times, ref.published_path, ref.stride_ends,
                            ref.stride_points))
