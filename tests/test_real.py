@@ -248,6 +248,7 @@ def test_ipol_stride_and_speed_follow_the_reference_s_definition():
     means = evaluate_gait(gait, RealTrial("t", "t", None, replace(
         ref, definition=GaitDefinition.BOUT_MEANS)), "imuloco")
     assert means["stride_err_pct"] == pytest.approx(row["stride_mean_err_pct"])
+    assert "stride_mean_err_pct" not in means  # what the README's note on them relies on
     assert means["steps_ref"] == row["steps_ref"] - 2  # the trial's last strike: after the bout
     # a foot whose swings walked 5 % further is 5 % off in both
     gait.swings_m = swings * 1.05
@@ -295,6 +296,24 @@ def test_strides_over_the_whole_trial_count_its_pauses(tmp_path):
     for key in ("steps", "cadence", "stride", "speed"):
         assert row[f"{key}_err_pct"] == pytest.approx(0, abs=1e-9), key
     assert gait.summary()["cadence_spm"] == pytest.approx(80)
+
+
+def test_the_note_on_the_strides_mean_names_the_rows_it_lists():
+    """The README's sentence names the data sets and sensors of the rows with the strides'
+    mean (whatever they are) and the definition they follow, and none of the others."""
+    from imuloco.evaluate.real import MEAN_DEFINITION, _mean_note
+
+    def s(ds, sensor, est="imuloco", mean=True):
+        return {"dataset": ds, "sensor": sensor, "estimator": est} | (
+            {"stride_mean_err_pct": 5.0, "speed_mean_err_pct": 6.0} if mean else {})
+
+    assert _mean_note([s("pyshoe-vicon", "right_foot", mean=False)]) == ""
+    note = _mean_note([s("ipol-gait", "right_foot"), s("ipol-gait", "right_foot", "recon"),
+                       s("pyshoe-vicon", "right_foot", mean=False), s("ipol-gait", "left_foot"),
+                       s("walk-10m", "lower_back")])
+    assert note.startswith("ipol-gait's right_foot and left_foot; walk-10m's lower_back: ")
+    assert f"({MEAN_DEFINITION.value})" in note and "pyshoe" not in note
+    assert "walk-10m lower_back (imuloco) stride 5.0 %, speed 6.0 %." in note
 
 
 def test_a_published_path_row_names_the_trial_s_sensor(tmp_path):
