@@ -432,3 +432,14 @@ def test_held_out_clips_are_the_clips_a_fit_validates_on(sample_db):
     assert 0 < len(held) < len(sample_db)
     assert [c["name"] for c in held.labels] == [e.labels["name"] for e in val]
     assert len(held_out_clips(sample_db)) < len(held)  # the default share is smaller
+
+
+def test_held_out_clips_default_share_is_the_fits_default(sample_db, monkeypatch):
+    """Without a share, the clips are held out by the share a default fit validates on."""
+    from imuloco.methods.learned import method
+
+    assert method.Learned().validation == method.VALIDATION_SHARE
+    shares = []
+    monkeypatch.setattr(method, "held_out", lambda name, share: shares.append(share) or False)
+    method.held_out_clips(sample_db)
+    assert shares == [method.Learned().validation] * len(sample_db)

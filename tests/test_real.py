@@ -248,6 +248,7 @@ def test_ipol_stride_and_speed_follow_the_reference_s_definition():
     means = evaluate_gait(gait, RealTrial("t", "t", None, replace(
         ref, definition=GaitDefinition.BOUT_MEANS)), "imuloco")
     assert means["stride_err_pct"] == pytest.approx(row["stride_mean_err_pct"])
+    assert "stride_mean_err_pct" not in means  # what the README's note on them relies on
     assert means["steps_ref"] == row["steps_ref"] - 2  # the trial's last strike: after the bout
     # a foot whose swings walked 5 % further is 5 % off in both
     gait.swings_m = swings * 1.05
@@ -295,6 +296,52 @@ def test_strides_over_the_whole_trial_count_its_pauses(tmp_path):
     for key in ("steps", "cadence", "stride", "speed"):
         assert row[f"{key}_err_pct"] == pytest.approx(0, abs=1e-9), key
     assert gait.summary()["cadence_spm"] == pytest.approx(80)
+
+
+def test_the_note_on_the_strides_mean_names_the_rows_it_lists():
+    """The README's sentence names the data sets and sensors of the rows with the strides'
+    mean (whatever they are) and the definition they follow, and none of the others."""
+    from imuloco.evaluate.real import MEAN_DEFINITION, _mean_note
+
+    def s(ds, sensor, est="imuloco", mean=True):
+        return {"dataset": ds, "sensor": sensor, "estimator": est} | (
+            {"stride_mean_err_pct": 5.0, "speed_mean_err_pct": 6.0} if mean else {})
+
+    assert _mean_note([s("pyshoe-vicon", "right_foot", mean=False)]) == ""
+    note = _mean_note([s("ipol-gait", "right_foot"), s("ipol-gait", "right_foot", "recon"),
+                       s("pyshoe-vicon", "right_foot", mean=False), s("ipol-gait", "left_foot"),
+                       s("walk-10m", "lower_back")])
+    assert note.startswith("ipol-gait's right_foot and left_foot; walk-10m's lower_back: ")
+    assert f"({MEAN_DEFINITION.value})" in note and "pyshoe" not in note
+    assert "walk-10m lower_back (imuloco) stride 5.0 %, speed 6.0 %." in note
+
+
+def test_a_published_path_row_names_the_trial_s_sensor(tmp_path):
+    """PyShoe's published path is that of the recording's one sensor, whatever its name."""
+    from dataclasses import replace
+
+    from scipy.io import savemat
+
+    from imuloco.core.recording import Recording
+    from imuloco.evaluate.real import published_path_row
+
+    t = np.arange(400) / 200.0
+    imu = np.zeros((len(t), 6))
+    imu[:, 2] = -9.81
+    path = np.stack([t, 0 * t], axis=1)
+    savemat(tmp_path / "a_LLIO.mat", {"imu_data": imu, "timestamps_all": t[None],
+                                      "strideIndex": [[0, 200, 399]], "pyshoeTrajectory": path,
+                                      "GCP": path[[0, 200, 399]]})
+    (trial,) = read_trials(tmp_path)
+    assert published_path_row(trial)["sensor"] == "right_foot"
+    rec = trial.recording
+    left = replace(trial, recording=Recording(rec.times, rec.acc, rec.gyro, ["left_foot"]))
+    row = published_path_row(left)
+    assert row["sensor"] == "left_foot" and row["path_final_m"] == pytest.approx(0, abs=1e-9)
+    both = Recording(rec.times, np.repeat(rec.acc, 2, axis=1), np.repeat(rec.gyro, 2, axis=1),
+                     ["left_foot", "right_foot"])
+    with pytest.raises(ValueError, match="pyshoe-vicon a: a published path needs a recording of one"):
+        published_path_row(replace(trial, recording=both))
 
 
 def test_path_errors_ignore_start_pose():

@@ -298,7 +298,11 @@ def published_path_row(trial: RealTrial) -> dict[str, Any] | None:
     ref = trial.reference
     if ref.published_path is None or ref.stride_points is None:
         return None
-    row = {"dataset": trial.dataset, "recording": trial.name, "sensor": "right_foot",
+    if len(trial.recording.placements) != 1:
+        raise ValueError(f"{trial.dataset} {trial.name}: a published path needs a recording of "
+                         f"one sensor, got {trial.recording.placements}")
+    row = {"dataset": trial.dataset, "recording": trial.name,
+           "sensor": trial.recording.placements[0],
            "estimator": "pyshoe_published", "measured": True, "reason": ""}
     row.update(path_errors(ref.path_times, ref.published_path, ref.stride_ends,
                            ref.stride_points))
@@ -470,21 +474,39 @@ LATER_COLUMNS = ("stride_mean_est", "stride_mean_err_pct", "speed_mean_est",
                  "speed_mean_err_pct")
 
 
+# the definition under which :func:`evaluate_gait` also reports the strides' mean
+# (``stride_mean_err_pct``), in words
+MEAN_DEFINITION = GaitDefinition.DISTANCE_OVER_STEPS
+MEAN_DEFINITION_WORDS = ("the bout's distance over all its steps and over the bout's time from "
+                         "the first foot-off")
+
+
+def _and(words: Sequence[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return ", ".join(words[:-1]) + " and " + words[-1] if len(words) > 1 else words[0]
+
+
 def _mean_note(summary: list[dict[str, Any]]) -> str:
     """The README's sentence on the rows whose stride and speed follow the reference's
-    definition: what the walk's summary (the strides' mean) gives there."""
+    definition (:data:`MEAN_DEFINITION`): what the walk's summary (the strides' mean) gives
+    there."""
     rows = [s for s in summary if "stride_mean_err_pct" in s]
     if not rows:
         return ""
+    sensors: dict[str, list[str]] = {}
+    for s in rows:
+        sensors.setdefault(s["dataset"], [])
+        if s["sensor"] not in sensors[s["dataset"]]:
+            sensors[s["dataset"]].append(s["sensor"])
+    named = "; ".join(f"{ds}'s {_and(ss)}" for ds, ss in sensors.items())
     figs = "; ".join(f"{s['dataset']} {s['sensor']} ({s['estimator']}) stride "
                      f"{s['stride_mean_err_pct']:.1f} %, speed {s['speed_mean_err_pct']:.1f} %"
                      for s in rows)
-    return ("ipol-gait's feet: stride and speed by the reference's definition, its 10 m over "
-            "all the bout's steps and over the bout's time from the first foot-off, the "
-            "foot's distance over its swings in the bout in its place. The mean of the "
-            "complete strides and speed from the contacts' span, as a walk's summary reports "
-            f"them, against the same reference (`stride_mean_err_pct`, "
-            f"`speed_mean_err_pct`): {figs}.\n\n")
+    return (f"{named}: stride and speed by the reference's definition "
+            f"({MEAN_DEFINITION.value}), {MEAN_DEFINITION_WORDS}, the foot's distance over its "
+            "swings in the bout in its place. The mean of the complete strides and speed from "
+            "the contacts' span, as a walk's summary reports them, against the same reference "
+            f"(`stride_mean_err_pct`, `speed_mean_err_pct`): {figs}.\n\n")
 
 
 def write_results(rows: list[dict[str, Any]], out: str | Path) -> None:

@@ -41,6 +41,9 @@ from imuloco.methods.training import Example, TrainingSet
 from imuloco.ops.kinematics import joint_positions
 from imuloco.ops.rotations import from_6d, to_6d
 
+# share of clips a model holds out (by name hash) for its validation curve: ``Learned``'s
+# default ``validation`` and :func:`held_out_clips`'s default share
+VALIDATION_SHARE = 0.05
 HEADING_REFLECTION = np.diag([-1.0, 1.0, 1.0])  # left is +X in the heading frame
 CONTACT_SWAP = [CONTACT_PARTS.index(p.replace("left", "#").replace("right", "left")
                                     .replace("#", "right")) for p in CONTACT_PARTS]
@@ -138,8 +141,9 @@ class Learned(Method):
     def __init__(self, hidden: int = 192, layers: int = 2, epochs: int = 20,
                  batch_size: int = 16, window: int = 120, lr: float = 4e-3, draws: int = 2,
                  speed: float = 0.15, noise_scale: float = 2.0, mirror: bool = True,
-                 validation: float = 0.05, dropout: float = 0.0, weight_decay: float = 1e-4,
-                 position_weight: float = 10.0, accel_weight: float = 150.0, lag: int = 8,
+                 validation: float = VALIDATION_SHARE, dropout: float = 0.0,
+                 weight_decay: float = 1e-4, position_weight: float = 10.0,
+                 accel_weight: float = 150.0, lag: int = 8,
                  proportions: float = 0.1, reverse: float = 0.3, strap: float = 0.0,
                  incline: float = 0.0, bidirectional: bool = False, members: int = 1,
                  threads: int | None = None, seed: int = 0) -> None:
@@ -493,10 +497,10 @@ def held_out(name: str, share: float) -> bool:
 
 
 def held_out_clips(db: MotionDatabase, share: float | None = None) -> MotionDatabase:
-    """The clips of ``db`` that every model of ``share`` (the method's default ``validation``
-    when None) holds out for its validation curve (:func:`held_out`): the only clips of its
-    training data a shipped model never saw."""
-    share = Learned().validation if share is None else share
+    """The clips of ``db`` that every model of ``share`` (:data:`VALIDATION_SHARE`, the
+    method's default ``validation``, when None) holds out for its validation curve
+    (:func:`held_out`): the only clips of its training data a shipped model never saw."""
+    share = VALIDATION_SHARE if share is None else share
     return db.subset([i for i, c in enumerate(db.labels) if held_out(c["name"], share)])
 
 
