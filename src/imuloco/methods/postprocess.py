@@ -100,9 +100,10 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
         return motion
     lock = FootLock(motion.skeleton, motion.fps, smoothing, release_s, threshold)
     heel, toe = np.asarray(heel, dtype=np.float64), np.asarray(toe, dtype=np.float64)
-    feet = lock.feet_positions(motion.rotations, motion.root)
+    legs = lock.legs(motion.rotations, motion.root)
+    feet = legs[1][:, lock.sub_feet]
     targets = np.stack([lock.targets(f, h, t) for f, h, t in zip(feet, heel, toe)])
-    return Motion(motion.skeleton, lock.bend(motion.rotations, motion.root, targets),
+    return Motion(motion.skeleton, lock.bend(motion.rotations, motion.root, targets, legs),
                   motion.root, motion.fps, motion.name)
 
 
@@ -123,8 +124,8 @@ class FootLock:
     legs that put them there. Only the legs and their ancestors' kinematics are computed
     (a stream bends a leg nearly every frame)."""
 
-    def __init__(self, skeleton: Skeleton, fps: float, smoothing: float = 1.0, release_s: float = 0.1,
-                 threshold: float = 0.5) -> None:
+    def __init__(self, skeleton: Skeleton, fps: float, smoothing: float = 1.0,
+                 release_s: float = 0.1, threshold: float = 0.5) -> None:
         _check_smoothing(smoothing)
         if not release_s > 0:
             raise ValueError(f"foot locking: release_s must be positive, got {release_s}")
@@ -187,20 +188,19 @@ class FootLock:
         targets (..., 2, 3)): the legs :meth:`bend` changes."""
         return np.any(np.abs(targets - feet[..., :len(LEGS), :]) > 1e-9, axis=-1)
 
-    def _legs(self, local: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Global rotations and positions of :attr:`joints` (T, K, ...)."""
+    def legs(self, local: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Global rotations and positions (T, K, ...) of :attr:`joints`, the legs and their
+        ancestors (the feet among them at :attr:`sub_feet`)."""
         return fk(normalize(local[:, self.joints]), root, self.sub_offsets, self.sub_parents)
 
-    def feet_positions(self, local: np.ndarray, root: np.ndarray) -> np.ndarray:
-        """(T, 4, 3) positions of the joints :attr:`feet` of a motion's frames."""
-        return self._legs(local, root)[1][:, self.sub_feet]
-
-    def bend(self, local: np.ndarray, root: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    def bend(self, local: np.ndarray, root: np.ndarray, targets: np.ndarray,
+             legs: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """local : (T, J, 4) rotations and root : (T, 3) of frames; targets : (T, 2, 3)
-        from :meth:`targets` -> the local rotations with the legs bent."""
+        from :meth:`targets`; ``legs``: :meth:`legs` of the same frames when at hand -> the
+        local rotations with the legs bent."""
         from imuloco.ops.ik import two_bone
 
-        glob, pos = self._legs(local, root)
+        glob, pos = self.legs(local, root) if legs is None else legs
         local = normalize(local)
         frame, leg = np.nonzero(self.moved(pos[:, self.sub_feet], targets))
         if len(frame):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from imuloco.ops.rotations import _cross, normalize, qinv, qmul, qrot
+from imuloco.ops.rotations import cross, normalize, qinv, qmul, qrot
 
 _EPS = 1e-9
 
@@ -20,10 +20,10 @@ def arc(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     u = np.asarray(u, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
     w = np.linalg.norm(u, axis=-1) * np.linalg.norm(v, axis=-1) + np.sum(u * v, axis=-1)
-    q = np.concatenate([_cross(u, v), w[..., None]], axis=-1)
+    q = np.concatenate([cross(u, v), w[..., None]], axis=-1)
     n = np.linalg.norm(q, axis=-1, keepdims=True)
     # opposite directions (w = 0 and no cross product): a half turn about any normal of u
-    half = np.concatenate([_cross(u, _normal_seed(u)), np.zeros(u.shape[:-1] + (1,))], axis=-1)
+    half = np.concatenate([cross(u, _normal_seed(u)), np.zeros(u.shape[:-1] + (1,))], axis=-1)
     q = np.where(n > _EPS, q, half)
     n = np.linalg.norm(q, axis=-1, keepdims=True)
     return np.where(n > _EPS, q / np.maximum(n, _EPS), [0.0, 0.0, 0.0, 1.0])
@@ -66,7 +66,7 @@ def two_bone(glob: np.ndarray, pos: np.ndarray, target: np.ndarray) -> np.ndarra
     inner = np.arccos(np.clip(np.sum(u * v, axis=-1) / np.maximum(la * lb, _EPS), -1.0, 1.0))
     wanted = np.arccos(np.clip((la ** 2 + lb ** 2 - reach ** 2) / np.maximum(2 * la * lb, _EPS),
                                -1.0, 1.0))
-    axis = _cross(u, v)
+    axis = cross(u, v)
     n = np.linalg.norm(axis, axis=-1, keepdims=True)
     straight = n[:, 0] <= 1e-6 * np.maximum(la * lb, _EPS)
     half = 0.5 * np.where(straight, 0.0, wanted - inner)

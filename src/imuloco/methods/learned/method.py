@@ -637,6 +637,8 @@ class LearnedStream(Stream):
         self.feet = [model.skeleton_.part(p) for p in PIN_PARTS]
         self.pinner = FootPinner(PIN_SMOOTHING)
         self.lock = FootLock(model.skeleton_, model.fps_, PIN_SMOOTHING)
+        if self.feet != self.lock.feet:  # step() hands the pinned feet to the lock as they are
+            raise ValueError(f"the foot lock reads joints {self.lock.feet}, pinning {self.feet}")
         self.contacts = np.zeros(len(PIN_PARTS))
         self.sigma = float("nan")
         self.novelty: float | None = None  # the smoothed novelty of the last frame read
@@ -664,7 +666,7 @@ class LearnedStream(Stream):
         # the feet only (a tenth of a whole-body fk's cost for one frame)
         feet = joint_positions(rot, raw_root, sk.offsets, sk.parents, self.feet)
         root = self.pinner.step(raw_root, feet - raw_root, self.contacts)
-        feet = feet - raw_root + root  # PIN_PARTS are the lock's feet, in its order
+        feet = feet - raw_root + root  # the lock's feet too (checked in __init__)
         c = self.contacts
         targets = self.lock.targets(feet, c[:2], c[2:])
         if not self.lock.moved(feet, targets).any():  # no leg to bend
