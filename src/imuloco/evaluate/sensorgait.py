@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imuloco.errors import MissingExtraError, UnknownNameError
+from imuloco.ops.filters import resample_uniform
 from imuloco.sensors.calibration import body_axes
 from imuloco.sensors.foottrack import NoWalking, foot_track
 
@@ -239,20 +240,16 @@ def turned(yaw_rate: np.ndarray, rate: float, starts: np.ndarray, ends: np.ndarr
     return np.abs(angle[np.asarray(ends, int)] - angle[np.asarray(starts, int)])
 
 
-def even_rate(times: np.ndarray, x: np.ndarray) -> tuple[float, np.ndarray]:
-    """``x`` (T, C) resampled linearly onto a uniform grid from ``times[0]`` at the even
-    whole rate (Hz) nearest the mean rate, and that rate.
+def even_rate(times: np.ndarray) -> float:
+    """The even whole rate (Hz) nearest the mean rate of ``times``, that of the lower back's
+    uniform grid.
 
     mobgap spreads its per-second values over the strides from second centres of
     ``round(rate / 2)`` samples and a padding ``rate`` samples before the first: where the
     rounding goes up (99.3 Hz, or 100 Hz with float noise) a stride starting with its gait
     sequence falls before the interpolation's range and mobgap raises ValueError."""
-    from imuloco.ops.filters import resample_linear
-
     mean = (len(times) - 1) / (times[-1] - times[0])
-    rate = 2.0 * max(1, round(mean / 2))
-    grid = times[0] + np.arange(int(np.floor((times[-1] - times[0]) * rate + 1e-9)) + 1) / rate
-    return rate, resample_linear(times, x, grid)
+    return 2.0 * max(1, round(mean / 2))
 
 
 def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
@@ -303,7 +300,8 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
     if len(times) < 2 or times[-1] - times[0] < 3.0:
         return not_measured(LOWER_BACK, BACK_METHOD, "the recording is shorter than 3 s, "
                             "too short for a walking bout")
-    rate, x = even_rate(times, np.concatenate([acc, np.degrees(gyro)], axis=1))
+    rate = even_rate(times)
+    x = resample_uniform(times, np.concatenate([acc, np.degrees(gyro)], axis=1), rate)
     axes = body_axes(x[:, :3], rate)
     # mobgap's sensor frame of a Mobilise-D lower-back sensor: x up, y medio-lateral,
     # z forward; acceleration in m/s² with gravity, rotation in deg/s

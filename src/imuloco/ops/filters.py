@@ -20,3 +20,19 @@ def resample_linear(times: np.ndarray, values: np.ndarray, new_times: np.ndarray
     flat = values.reshape(len(times), -1)
     out = np.stack([np.interp(new_times, times, flat[:, k]) for k in range(flat.shape[1])], -1)
     return out.reshape((len(new_times),) + values.shape[1:])
+
+
+def resample_uniform(times: np.ndarray, values: np.ndarray, rate: float) -> np.ndarray:
+    """``values`` (T, ...) sampled at increasing ``times`` (T,) resampled linearly onto the grid
+    ``times[0] + arange(n) / rate`` (Hz), as far as ``times[-1]``: at the mean rate
+    ``(T - 1) / (times[-1] - times[0])``, T samples."""
+    n = _grid_samples(float(times[-1] - times[0]), rate)
+    return resample_linear(times, values, times[0] + np.arange(n) / rate)
+
+
+def _grid_samples(span: float, rate: float) -> int:
+    """Samples of a grid at ``rate`` over ``span`` seconds, both ends included: ``span * rate``
+    rounded down, unless a billionth (of it, or of a sample when under one) short of a whole
+    number, as the mean rate times the span falls short by a rounding error above 2**24 samples."""
+    k = span * rate
+    return int(np.floor(k + 1e-9 * max(1.0, k))) + 1

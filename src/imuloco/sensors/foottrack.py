@@ -37,15 +37,6 @@ MIN_SWING_S = 0.2  # fewer and no stride length or cadence is defined
 SWING_DPS = 3 * ZUPT_GYRO_DPS
 
 
-def uniform(times: np.ndarray, x: np.ndarray) -> tuple[float, np.ndarray]:
-    """Rate (Hz) and ``x`` (T, C) resampled onto a uniform grid at the mean rate."""
-    from imuloco.ops.filters import resample_linear
-
-    rate = (len(times) - 1) / (times[-1] - times[0])
-    t = times[0] + np.arange(len(times)) / rate
-    return rate, resample_linear(times, x, t)
-
-
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Starts and stops (exclusive) of the True runs of a 1-D mask."""
     from imuloco.phases.contacts import runs
@@ -182,9 +173,12 @@ def _track(times_b: bytes, acc_b: bytes, gyro_b: bytes) -> FootTrack:
     from gaitmap.trajectory_reconstruction import RtsKalman
     from scipy.spatial.transform import Rotation
 
+    from imuloco.ops.filters import resample_uniform
+
     if len(times) < 2 or times[-1] - times[0] < 2.0:
         raise NoWalking("the recording is shorter than 2 s, less than one stride")
-    rate, x = uniform(times, np.concatenate([acc, np.degrees(gyro)], axis=1))
+    rate = (len(times) - 1) / (times[-1] - times[0])  # the mean rate
+    x = resample_uniform(times, np.concatenate([acc, np.degrees(gyro)], axis=1), rate)
     cols = ["acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y", "gyr_z"]
     raw = pd.DataFrame(x, columns=cols)
     with warnings.catch_warnings():
