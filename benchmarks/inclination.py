@@ -8,7 +8,7 @@ turned by a prior. The two can differ by 10-15 degrees about the shin's medio-la
 (docs/results/learned/experiments.md, the diagnosis round), and virtual shank sensors walk
 14-29 degrees from their axis depending on the data set. This measures, on virtual sensors
 only, what such an error costs: the ``bandai-namco-2`` clips every shipped-style model holds
-out (:func:`imuloco.methods.learned.method.held_out_clips`) and ``--limit`` ``bandai-namco-1``
+out (:func:`imuloco.methods.training.held_out_clips`) and ``--limit`` ``bandai-namco-1``
 walks and backward walks, right ankle, ``phone`` noise, test seed 1000, with every clip's
 sensor turned about its x axis by each angle (:func:`imuloco.methods.learned.train.inclined`),
 measured as ``imuloco bench`` measures a clip (:func:`imuloco.evaluate.bench.measure`):
@@ -47,8 +47,7 @@ def main() -> None:
     from imuloco.io.atomic import atomic_write_text, check_output
     from imuloco.io.database import load_database
     from imuloco.methods import load_model
-    from imuloco.methods.learned.method import held_out_clips
-    from imuloco.methods.training import synthesize
+    from imuloco.methods.training import held_out_clips, synthesize
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=Path("../shared/data"))

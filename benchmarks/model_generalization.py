@@ -8,7 +8,7 @@ placement), one sensor at ``--placement`` (default the right ankle), ``phone`` n
 1000, measured as ``imuloco bench`` measures a test clip (:func:`imuloco.evaluate.bench.measure`):
 
 - ``lab``: the ``bandai-namco-2`` clips every such model holds out for its validation curve
-  (:func:`imuloco.methods.learned.method.held_out_clips`, the method's default share);
+  (:func:`imuloco.methods.training.held_out_clips`, the method's default share);
 - ``bandai-namco-1``: ``--limit`` clips of its styles (none in ``bandai-namco-2``) and contents
   (adds dash, walking backwards, side steps), MPJPE per content and foot skate on walking
   backwards (the ground truth's beside it);
@@ -35,8 +35,7 @@ def main() -> None:
     from imuloco.io.atomic import atomic_write_text, check_output
     from imuloco.io.database import load_database
     from imuloco.methods import load_model
-    from imuloco.methods.learned.method import held_out_clips
-    from imuloco.methods.training import synthesize
+    from imuloco.methods.training import held_out_clips, synthesize
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=Path("../shared/data"))

@@ -8,7 +8,7 @@ ankle, ``phone`` noise, test seed 1000, measured as ``imuloco bench`` measures a
 (:func:`imuloco.evaluate.bench.measure`): the rms over frames of the actual error (rms over
 joints a frame), of the predicted error (``error_m``, calibrated when the file holds a
 calibration) and of the network's own estimate (``sigma_m``), in cm, on the ``bandai-namco-2``
-clips every shipped-style model holds out (:func:`imuloco.methods.learned.method.held_out_clips`)
+clips every shipped-style model holds out (:func:`imuloco.methods.training.held_out_clips`)
 and on ``bandai-namco-1`` (per content too). Models trained on ``bandai-namco-1`` are
 in-sample there.
 """
@@ -35,8 +35,7 @@ def main() -> None:
     from imuloco.io.atomic import atomic_write_text, check_output
     from imuloco.io.database import load_database
     from imuloco.methods import load_model
-    from imuloco.methods.learned.method import held_out_clips
-    from imuloco.methods.training import synthesize
+    from imuloco.methods.training import held_out_clips, synthesize
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=Path("../shared/data"))

@@ -286,6 +286,18 @@ def test_package_imports_without_torch():
     assert res.returncode == 0, res.stderr
 
 
+def test_the_held_out_clips_are_found_without_torch():
+    """The benchmarks pick the clips a shipped model never saw without loading torch."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from imuloco.methods.training import VALIDATION_SHARE, held_out, held_out_clips\n"
+            "assert 'torch' not in sys.modules, 'torch imported'\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert res.returncode == 0, res.stderr
+
+
 def test_files_with_retired_features_load_or_are_refused(tiny_model, test_signals, tmp_path):
     from imuloco.errors import ModelFileError
 
@@ -422,8 +434,8 @@ def test_cli_ensemble(tmp_path):
 
 def test_held_out_clips_are_the_clips_a_fit_validates_on(sample_db):
     """The benchmarks' "lab" set is exactly the clips a fit leaves out of training."""
-    from imuloco.methods.learned.method import Learned, held_out_clips
-    from imuloco.methods.training import synthesize
+    from imuloco.methods.learned.method import Learned
+    from imuloco.methods.training import held_out_clips, synthesize
 
     share = 0.3
     examples = synthesize(sample_db, ["right_ankle"], "phone", seed=0)
@@ -436,10 +448,11 @@ def test_held_out_clips_are_the_clips_a_fit_validates_on(sample_db):
 
 def test_held_out_clips_default_share_is_the_fits_default(sample_db, monkeypatch):
     """Without a share, the clips are held out by the share a default fit validates on."""
-    from imuloco.methods.learned import method
+    from imuloco.methods import training
+    from imuloco.methods.learned.method import Learned
 
-    assert method.Learned().validation == method.VALIDATION_SHARE
+    assert Learned().validation == training.VALIDATION_SHARE
     shares = []
-    monkeypatch.setattr(method, "held_out", lambda name, share: shares.append(share) or False)
-    method.held_out_clips(sample_db)
-    assert shares == [method.Learned().validation] * len(sample_db)
+    monkeypatch.setattr(training, "held_out", lambda name, share: shares.append(share) or False)
+    training.held_out_clips(sample_db)
+    assert shares == [Learned().validation] * len(sample_db)

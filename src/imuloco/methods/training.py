@@ -3,7 +3,8 @@ every method reads a recording on the same model-rate frame grid.
 
 A method learns from one explicit input, a :class:`TrainingSet`: the clips with their
 signals, the skeleton and frame rate of the output, and the placements and noise the signals
-were simulated with (:meth:`TrainingSet.synthesize`).
+were simulated with (:meth:`TrainingSet.synthesize`). A model validates on the clips
+:func:`held_out` picks by name (:func:`held_out_clips`: those a shipped model never saw).
 """
 
 from __future__ import annotations
@@ -25,6 +26,9 @@ from imuloco.sensors.resample import resample
 from imuloco.sensors.simulate import simulate
 
 TEST_SEED_OFFSET = 1_000_003  # test recordings never share a seed with training ones
+# share of clips a model holds out (by name hash) for its validation curve: the ``learned``
+# method's default ``validation`` and :func:`held_out_clips`'s default share
+VALIDATION_SHARE = 0.05
 _cache: dict[tuple, tuple[Motion, np.ndarray, float]] | None = None
 _saved = [0.0]  # seconds of simulation the cache has saved so far
 
@@ -53,6 +57,20 @@ def saved_seconds() -> float:
 def clip_seed(name: str, seed: int) -> int:
     """A seed for one clip: stable across runs and machines (CRC32 of the name)."""
     return (zlib.crc32(name.encode()) + seed) % (2**32)
+
+
+def held_out(name: str, share: float) -> bool:
+    """Whether the clip ``name`` is among the ``share`` of clips a model holds out for its
+    validation curve (by CRC32 of the name, so the same clips for every run)."""
+    return zlib.crc32(name.encode()) < share * 2**32
+
+
+def held_out_clips(db: MotionDatabase, share: float | None = None) -> MotionDatabase:
+    """The clips of ``db`` that every model of ``share`` (:data:`VALIDATION_SHARE`, the
+    ``learned`` method's default ``validation``, when None) holds out for its validation curve
+    (:func:`held_out`): the only clips of its training data a shipped model never saw."""
+    share = VALIDATION_SHARE if share is None else share
+    return db.subset([i for i, c in enumerate(db.labels) if held_out(c["name"], share)])
 
 
 @dataclass(eq=False)

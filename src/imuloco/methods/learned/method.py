@@ -19,7 +19,6 @@ Several models of one recipe trained from other seeds read as one (:func:`ensemb
 from __future__ import annotations
 
 import json
-import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,7 +28,7 @@ import numpy as np
 import torch
 
 from imuloco.core.mirror import mirror, mirror_frames, mirror_pairs, mirror_rotations
-from imuloco.core.motion import Motion, MotionDatabase
+from imuloco.core.motion import Motion
 from imuloco.errors import InputError
 from imuloco.methods import pose
 from imuloco.methods.base import Method, Reconstruction, Stream, calibrated_error
@@ -37,13 +36,10 @@ from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Ensemble, Reconstructor, TorchFK
 from imuloco.methods.postprocess import FootLock, FootPinner, lock_feet, pin_feet
-from imuloco.methods.training import Example, TrainingSet
+from imuloco.methods.training import VALIDATION_SHARE, Example, TrainingSet, held_out
 from imuloco.ops.kinematics import joint_positions
 from imuloco.ops.rotations import from_6d, to_6d
 
-# share of clips a model holds out (by name hash) for its validation curve: ``Learned``'s
-# default ``validation`` and :func:`held_out_clips`'s default share
-VALIDATION_SHARE = 0.05
 HEADING_REFLECTION = np.diag([-1.0, 1.0, 1.0])  # left is +X in the heading frame
 CONTACT_SWAP = [CONTACT_PARTS.index(p.replace("left", "#").replace("right", "left")
                                     .replace("#", "right")) for p in CONTACT_PARTS]
@@ -488,20 +484,6 @@ class Learned(Method):
         self.net_.load_state_dict({k[4:]: torch.as_tensor(arrays[k]) for k in arrays
                                    if k.startswith("net.")})
         self.net_.eval()
-
-
-def held_out(name: str, share: float) -> bool:
-    """Whether the clip ``name`` is among the ``share`` of clips a model holds out for its
-    validation curve (by CRC32 of the name, so the same clips for every run)."""
-    return zlib.crc32(name.encode()) < share * 2**32
-
-
-def held_out_clips(db: MotionDatabase, share: float | None = None) -> MotionDatabase:
-    """The clips of ``db`` that every model of ``share`` (:data:`VALIDATION_SHARE`, the
-    method's default ``validation``, when None) holds out for its validation curve
-    (:func:`held_out`): the only clips of its training data a shipped model never saw."""
-    share = VALIDATION_SHARE if share is None else share
-    return db.subset([i for i, c in enumerate(db.labels) if held_out(c["name"], share)])
 
 
 # what members of one ensemble must share: they read the same signals and write the same poses
