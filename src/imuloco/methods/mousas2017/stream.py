@@ -60,7 +60,9 @@ _CROSS = (np.array([1, 2, 0, 2, 0, 1]), np.array([2, 0, 1, 1, 2, 0]))
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a x b for (..., 3) arrays; inline because np.cross is slow on small arrays (both
-    products of the formula in one multiply of 6 components)."""
+    products of the formula in one multiply of 6 components). On a pose's (21, 3): 4.6 us,
+    :func:`imuloco.ops.rotations.cross` 9.4 us, np.cross 21 us (numpy 2.0); on a clip's
+    (600, 21, 3) rotations.cross is 7 times faster (the gather copies)."""
     p = a[..., _CROSS[0]] * b[..., _CROSS[1]]
     return p[..., :3] - p[..., 3:]
 
