@@ -232,12 +232,16 @@ def test_onnx_export(tiny_model, tiny_ensemble, sample_db, test_signals, tmp_pat
         lag = int(meta["lag"])
         assert lag == model.lag == 8
         fed = np.concatenate([test_signals, np.repeat(test_signals[-1:], lag, axis=0)])
-        pose_, contacts, sigma, _, novelty = sess.run(
+        pose_, contacts, sigma, _, novelty, spread = sess.run(
             None, {"signals": fed[None].astype(np.float32), "h": h})
         ref = model.predict(test_signals)  # output frame k is input frame k - lag
         np.testing.assert_allclose(pose_[0, lag:], ref.vectors, atol=2e-3)
         np.testing.assert_allclose(contacts[0, lag:], ref.contacts, atol=1e-4)
         np.testing.assert_allclose(sigma[0, lag:], ref.sigma, rtol=1e-4)
+        if ref.spread is None:
+            assert np.isnan(spread).all()
+        else:
+            np.testing.assert_allclose(spread[0, lag:], ref.spread, rtol=2e-3, atol=1e-5)
         # the host's smoothing of the documented recursion gives the model's own novelty
         a = float(meta["novelty_alpha"])
         smooth = lfilter([a], [1, -(1 - a)], novelty[0].astype(np.float64),
@@ -332,6 +336,46 @@ def test_an_ensemble_averages_its_members(tiny_ensemble, tiny_model, test_signal
     assert model.novelty_threshold_ == pytest.approx(
         (tiny_model.novelty_threshold_ + other.novelty_threshold_) / 2)
     assert_stream_equals_offline(model, test_signals)
+    assert a.spread is None and b.spread is None
+
+
+def member_positions(model, vectors):
+    """Root-relative joint positions (T, J, 3) of pose vectors' local rotations (numpy)."""
+    sk = model.skeleton_
+    j = sk.num_joints
+    rot = from_6d(vectors[:, : 6 * j].reshape(len(vectors), j, 6))
+    return fk(rot, np.zeros((len(vectors), 3)), sk.offsets, sk.parents)[1]
+
+
+def test_an_ensembles_spread_is_its_members_disagreement(tiny_ensemble, tiny_model,
+                                                        test_signals, tmp_path):
+    model, other = tiny_ensemble
+    a, b, e = (m.predict(test_signals) for m in (tiny_model, other, model))
+    pa, pb = member_positions(model, a.vectors), member_positions(model, b.vectors)
+    # two members: each joint's variance (over K - 1) is half their squared distance
+    want = np.sqrt((np.sum((pa - pb)[:, 1:] ** 2, axis=-1) / 2).mean(axis=1))
+    np.testing.assert_allclose(e.spread, want, rtol=1e-3, atol=1e-6)
+    assert e.spread.min() > 1e-4
+    same = ensemble([tiny_model, tiny_model]).predict(test_signals)  # members that agree
+    np.testing.assert_allclose(same.spread, 0.0, atol=1e-5)
+    # a calibration may use it, and the stream computes it as offline
+    cal = {"coef": [0.1, 1.0, 0.2, 0.5], "scores": ["sigma_m", "novelty", "spread_m"],
+           "source": "t"}
+    calibrated = load_model(model.save(tmp_path / "e.npz"))
+    calibrated.set_calibration(cal)
+    full = calibrated.reconstruct_signals_full(test_signals)
+    assert set(full.scores) == {"sigma_m", "novelty", "spread_m"}
+    np.testing.assert_allclose(full.error_m, np.exp(0.1) * e.sigma * e.novelty ** 0.2
+                               * e.spread ** 0.5, rtol=1e-6)
+    stream = calibrated.stream()
+    d = stream.delay_frames
+    errs = []
+    for s in np.concatenate([test_signals, np.repeat(test_signals[-1:], d, axis=0)]):
+        stream.step(s)
+        errs.append(getattr(stream, "error_m", np.nan))
+    np.testing.assert_allclose(errs[d:], full.error_m, rtol=1e-4)
+    with pytest.raises(InputError, match="spread_m needs an ensemble"):
+        tiny_model.set_calibration(cal)
 
 
 def test_stacked_members_equal_their_modules():

@@ -150,8 +150,13 @@ def test_a_calibration_is_applied_saved_and_checked(tiny, signals, tmp_path):
     assert "calibrated on t" in full.note
     again = load_model(model.save(tmp_path / "c.npz"))
     np.testing.assert_allclose(again.reconstruct_signals_full(signals).error_m, full.error_m)
-    with pytest.raises(ImulocoError, match="scores"):
-        model.set_calibration({"coef": [0.0, 1.0], "scores": ["sigma_m"]})
+    for wrong in ({"coef": [0.0, 1.0], "scores": ["sigma_m", "novelty"]},  # coef short
+                  {"coef": [0.0, 1.0], "scores": ["height"]},
+                  {"coef": [0.0], "scores": []}):
+        with pytest.raises(ImulocoError, match="scores"):
+            model.set_calibration(wrong)
+    model.set_calibration({"coef": [0.0, 1.0], "scores": ["sigma_m"], "source": "t"})
+    np.testing.assert_allclose(model.reconstruct_signals_full(signals).error_m, s["sigma_m"])
     with pytest.raises(ImulocoError, match="no per-frame error"):
         get_method("ridge").set_calibration(cal)
 
@@ -240,6 +245,19 @@ def test_bench_writes_confidence_and_calibrate_uses_it(tmp_path):
     assert load_model(tmp_path / "c.npz").calibration_ == cal
     res = CliRunner().invoke(cli, ["calibrate", str(tmp_path)])
     assert res.exit_code != 0 and "no confidence-*.npz" in res.output
+    # an ensemble's rows add its members' spread, which one network cannot give
+    ens = tmp_path / "ens"
+    res = CliRunner().invoke(cli, ["bench", "--method", spec.replace("]", ";members=2]"),
+                                   "--split", "heldout-contents", "--out", str(ens)])
+    assert res.exit_code == 0, res.output
+    (npz,) = ens.glob("confidence-*.npz")
+    with np.load(npz, allow_pickle=False) as z:
+        assert z["score_spread_m"].min() > 0
+    res = CliRunner().invoke(cli, ["calibrate", str(ens), "--model", str(model), "-o",
+                                   str(tmp_path / "d.npz")])
+    assert res.exit_code != 0 and "spread_m needs an ensemble" in res.output
+    res = CliRunner().invoke(cli, ["calibrate", str(ens), "--check", str(out)])
+    assert res.exit_code != 0 and "no score ['spread_m']" in res.output
 
 
 def test_train_writes_the_mirrored_model(tmp_path):

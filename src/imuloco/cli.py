@@ -462,7 +462,8 @@ def ensemble(members: tuple[Path, ...], output: Path, mirrored_path: Path | None
              skip_frames: int) -> None:
     """Average learned models of one recipe trained from other seeds (``train --param
     seed=K``) into one model (a deep ensemble) and write it. Its novelty is the members' mean
-    (each against its own reference); --data gives the motion --mirrored fits its mirror on.
+    (each against its own reference), and it scores each frame by how much its members disagree
+    (spread_m, for `imuloco calibrate`); --data gives the motion --mirrored fits its mirror on.
 
     Members train independently, so they can run at once on several cores or machines.
     """
@@ -560,6 +561,10 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
     for d in check_dirs:
         other = conf.load_rows([d], method)
         scores = {n: other[f"score_{n}"] for n in conf.score_names(other)}
+        missing = sorted(set(calibration["scores"]) - set(scores))
+        if missing:
+            raise click.UsageError(f"{d}: its rows have no score {missing}, which the "
+                                   f"calibration of RESULTS maps (scores {sorted(scores)})")
         tables[f"{d}: uncalibrated"] = conf.check(other)
         tables[f"{d}: calibrated on all of RESULTS"] = conf.check(
             other, calibrated_error(calibration, scores))

@@ -9,14 +9,15 @@ de-standardization (and, for a mirrored model, the mirroring) baked in:
 - outputs ``pose`` (1, T, 6 J + 4) pose vectors (:mod:`imuloco.methods.pose`), ``contacts``
   (1, T, 4) probabilities, ``sigma`` (1, T) metres, ``h_out`` to feed back, and
   ``novelty_frame`` (1, T): each frame's novelty before its causal smoothing (NaN for a model
-  file from before novelty was measured).
+  file from before novelty was measured), and ``spread`` (1, T) metres: an ensemble's members'
+  disagreement (:class:`imuloco.methods.learned.model.MemberSpread`; NaN for one network).
 
 The host smooths the novelty as :meth:`imuloco.methods.learned.method.Learned._novelty` does,
 ``n[0] = f[0]``, ``n[k] = a f[k] + (1 - a) n[k - 1]`` with ``a`` the metadata's
 ``novelty_alpha`` (carried across calls like ``h``); a frame is unreliable where ``n`` exceeds
 ``novelty_threshold``. A model with a ``calibration`` (metadata, JSON) predicts the error
 ``exp(coef[0]) * prod_k score_k ** coef[k]`` over its ``scores`` (``novelty``: n; ``sigma_m``:
-sigma), as :func:`imuloco.methods.base.calibrated_error`.
+sigma; ``spread_m``: spread), as :func:`imuloco.methods.base.calibrated_error`.
 
 Output frame k is the pose of input frame k - ``lag`` (metadata: the model's look-ahead in
 frames; 0 for a model without). T may be 1 (online, one frame per call carrying ``h``) or a
@@ -58,6 +59,7 @@ class _Exported(nn.Module):
             self.register_buffer("n_precision", torch.as_tensor(
                 model.novelty_precision_ / (len(model.novelty_mean_) * model.novelty_scale_),
                 dtype=f))
+        self.spread = model.member_spread()
         sk = model.skeleton_
         self.j = sk.num_joints
         if self.mirror:
@@ -72,8 +74,13 @@ class _Exported(nn.Module):
     def forward(self, signals: torch.Tensor, h: torch.Tensor) -> tuple[torch.Tensor, ...]:
         x = (signals @ self.imap.T - self.x_mean) / self.x_std
         feats, h_out = self.net.encode(x, h)
-        p, logit, logvar = self.net.heads(feats)
+        if self.spread is None:
+            p, logit, logvar = self.net.heads(feats)
+        else:
+            poses, logit, logvar = self.net.member_heads(feats)
+            p = poses.mean(-2)
         sigma = torch.exp(0.5 * logvar[..., 0])
+        spread = torch.full_like(sigma, float("nan")) if self.spread is None else self.spread(poses)
         if self.novelty:
             prec = self.n_precision if self.n_precision.dim() == 3 else self.n_precision[None]
             d = (feats - self.n_mean).reshape(*feats.shape[:2], prec.shape[0], 1, prec.shape[1])
@@ -93,7 +100,7 @@ class _Exported(nn.Module):
             sign[3] = -1.0
             pose = torch.cat([six, pose[..., 6 * j:] * sign], dim=-1)
             contacts = contacts[..., CONTACT_SWAP]
-        return pose, contacts, sigma, h_out, novelty
+        return pose, contacts, sigma, h_out, novelty, spread
 
 
 def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Path:
@@ -116,10 +123,11 @@ def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Pa
             torch.onnx.export(module, (x, h), str(tmp), dynamo=False, opset_version=17,
                               input_names=["signals", "h"],
                               output_names=["pose", "contacts", "sigma", "h_out",
-                                            "novelty_frame"],
+                                            "novelty_frame", "spread"],
                               dynamic_axes={"signals": {1: "frames"}, "pose": {1: "frames"},
                                             "contacts": {1: "frames"}, "sigma": {1: "frames"},
-                                            "novelty_frame": {1: "frames"}})
+                                            "novelty_frame": {1: "frames"},
+                                            "spread": {1: "frames"}})
         proto = onnx.load(str(tmp))
         sk = model.skeleton_
         meta = {"method": model.name, "placements": json.dumps(model.placements_),

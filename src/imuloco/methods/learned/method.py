@@ -13,7 +13,8 @@ A model for the other leg (:meth:`Learned.mirrored`) reuses the weights: the oth
 signals are mapped onto this leg's sensor axes and the predicted pose is mirrored back.
 
 Several models of one recipe trained from other seeds read as one (:func:`ensemble`, or
-``members`` > 1): their outputs are averaged (:class:`.model.Ensemble`).
+``members`` > 1): their outputs are averaged (:class:`.model.Ensemble`), and how much they
+disagree on a frame is one more score for its predicted error (``spread_m``).
 """
 
 from __future__ import annotations
@@ -34,7 +35,13 @@ from imuloco.methods import pose
 from imuloco.methods.base import Method, Reconstruction, Stream, calibrated_error
 from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
-from imuloco.methods.learned.model import CONTACT_PARTS, Ensemble, Reconstructor, TorchFK
+from imuloco.methods.learned.model import (
+    CONTACT_PARTS,
+    Ensemble,
+    MemberSpread,
+    Reconstructor,
+    TorchFK,
+)
 from imuloco.methods.postprocess import FootLock, FootPinner, lock_feet, pin_feet
 from imuloco.methods.training import VALIDATION_SHARE, Example, TrainingSet, held_out
 from imuloco.ops.kinematics import joint_positions
@@ -55,12 +62,20 @@ class Prediction:
     sigma : ndarray, shape (T,), the network's predicted rms joint position error, metres.
     novelty : ndarray, shape (T,), how unfamiliar the frame's features are (about 1 on the
         motions the model was trained on; :meth:`Learned._fit_novelty`).
+    spread : ndarray, shape (T,), an ensemble's members' disagreement, metres
+        (:class:`.model.MemberSpread`); None for one network.
     """
 
     vectors: np.ndarray
     contacts: np.ndarray
     sigma: np.ndarray
     novelty: np.ndarray
+    spread: np.ndarray | None = None
+
+    def scores(self) -> dict[str, np.ndarray]:
+        """The uncalibrated per-frame scores a calibration maps, by name (:data:`SCORES`)."""
+        out = {"sigma_m": self.sigma, "novelty": self.novelty}
+        return out if self.spread is None else {**out, "spread_m": self.spread}
 
 
 class Learned(Method):
@@ -115,8 +130,9 @@ class Learned(Method):
     members : networks trained from seeds ``seed``, ``seed + 1``, ... (each with its own
         augmented draws, as separate ``train`` runs would be) and averaged (:func:`ensemble`).
         On the real shin walk four 5-epoch strap models' average walked normally where one of
-        them did not (docs/results/learned/experiments.md, ninth round). Costs ``members``
-        times the training and the reconstruction.
+        them did not (docs/results/learned/experiments.md, ninth round); their disagreement
+        (``spread_m``) tells where the mean errs (fourteenth round). Costs ``members`` times
+        the training and the reconstruction.
     threads : torch CPU threads while fitting (None: torch's default). Use 1 on a machine
         shared with other jobs: torch's thread pool stalls when its cores are taken (a batch
         took 10x longer with 2 threads than with 1 on a loaded 2-core machine).
@@ -310,11 +326,19 @@ class Learned(Method):
 
     def set_calibration(self, calibration: dict[str, Any]) -> None:
         self.check_fitted()
-        if sorted(calibration.get("scores", [])) != sorted(SCORES) or len(
-                calibration.get("coef", [])) != len(SCORES) + 1:
-            raise InputError(f"learned: a calibration must map the scores {list(SCORES)} "
-                             f"(coef a, then one exponent each), got {calibration}")
+        names = list(calibration.get("scores", []))
+        known = self.score_names
+        if (not names or len(set(names)) != len(names) or set(names) - set(known)
+                or len(calibration.get("coef", [])) != len(names) + 1):
+            raise InputError(f"learned: a calibration must map some of this model's scores "
+                             f"{list(known)} (coef a, then one exponent each), got {calibration}"
+                             + ("" if "spread_m" in known else "; spread_m needs an ensemble"))
         self.calibration_ = dict(calibration)
+
+    @property
+    def score_names(self) -> tuple[str, ...]:
+        """The per-frame scores this model gives (:data:`SCORES`; ``spread_m``: ensembles)."""
+        return SCORES if isinstance(self.net_, Ensemble) else SCORES[:2]
 
     def confidence(self, out: Prediction) -> tuple[np.ndarray, np.ndarray | None, str]:
         """Predicted rms joint position error (T,) in metres, unreliable flags (T,) and a
@@ -326,7 +350,7 @@ class Learned(Method):
         cal = self.calibration_
         if cal is None:
             return out.sigma, flag, "error_m: the network's own estimate, not calibrated; " + why
-        err = calibrated_error(cal, {"sigma_m": out.sigma, "novelty": out.novelty})
+        err = calibrated_error(cal, out.scores())
         return err, flag, f"error_m calibrated on {cal['source']}; " + why
 
     def _arrays(self, x: np.ndarray, y: np.ndarray, c: np.ndarray, pos: np.ndarray,
@@ -342,14 +366,32 @@ class Learned(Method):
         s = np.nan_to_num(np.asarray(signals, dtype=np.float64)) @ self.input_map_.T
         return torch.as_tensor((s - self.x_mean_) / self.x_std_, dtype=torch.float32)
 
+    def member_spread(self) -> MemberSpread | None:
+        """The measure of this ensemble's members' disagreement (:class:`.model.MemberSpread`,
+        on the model's standardization, which every member reads); None for one network."""
+        if not isinstance(self.net_, Ensemble):
+            return None
+        sk = self.skeleton_
+        return MemberSpread(self.y_mean_, self.y_std_, sk.offsets, sk.parents)
+
+    def _heads(self, feats: torch.Tensor, spread: MemberSpread | None
+               ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """The heads' pose, contact logits and logvar of features (B, T, W), and the members'
+        spread (B, T) where ``spread`` (:meth:`member_spread`) is given."""
+        if spread is None:
+            return (*self.net_.heads(feats), None)
+        poses, logit, logvar = self.net_.member_heads(feats)
+        return poses.mean(-2), logit, logvar, spread(poses)
+
     def _outputs(self, p: torch.Tensor, logit: torch.Tensor, logvar: torch.Tensor,
-                 novelty: np.ndarray) -> Prediction:
+                 novelty: np.ndarray, spread: torch.Tensor | None = None) -> Prediction:
         vectors = p.numpy().astype(np.float64) * self.y_std_ + self.y_mean_
         contacts = torch.sigmoid(logit).numpy().astype(np.float64)
         if self.output_mirror_:
             vectors, contacts = self._mirror_vectors(vectors), contacts[..., CONTACT_SWAP]
         sigma = np.exp(0.5 * logvar.numpy()[..., 0].astype(np.float64))
-        return Prediction(vectors, contacts, sigma, novelty)
+        return Prediction(vectors, contacts, sigma, novelty,
+                          None if spread is None else spread.numpy().astype(np.float64))
 
     def predict(self, signals: np.ndarray) -> Prediction:
         """Network outputs for signals (T, 6 S) at the model rate, run from a zero state."""
@@ -361,9 +403,10 @@ class Learned(Method):
         signals = _hold_last(signals, k)  # as a stream would be fed to get every frame
         with torch.no_grad():
             feats, _ = self.net_.encode(self._inputs(signals)[None])
-            p, logit, logvar = self.net_.heads(feats)
+            p, logit, logvar, spread = self._heads(feats, self.member_spread())
         novelty = self._novelty(feats[0].numpy().astype(np.float64))
-        return self._outputs(p[0, k:], logit[0, k:], logvar[0, k:], novelty[k:])
+        return self._outputs(p[0, k:], logit[0, k:], logvar[0, k:], novelty[k:],
+                             None if spread is None else spread[0, k:])
 
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
         return self.reconstruct_signals_full(signals).motion
@@ -373,8 +416,7 @@ class Learned(Method):
         motion = lock(pin(pose.decode(out.vectors, self.skeleton_, self.fps_), out.contacts),
                       out.contacts)
         err, flag, note = self.confidence(out)
-        return Reconstruction(motion, err, flag, note,
-                              {"sigma_m": out.sigma, "novelty": out.novelty})
+        return Reconstruction(motion, err, flag, note, out.scores())
 
     def stream(self) -> LearnedStream:
         if self.bidirectional:
@@ -577,7 +619,8 @@ def _hold_last(s: np.ndarray, n: int) -> np.ndarray:
     return np.concatenate([s, np.repeat(s[-1:], n, axis=0)])
 
 
-SCORES = ("novelty", "sigma_m")  # the uncalibrated per-frame scores a calibration maps
+# the uncalibrated per-frame scores a calibration maps; the last, an ensemble's only
+SCORES = ("novelty", "sigma_m", "spread_m")
 NOVELTY_TAU_S = 1.0  # time constant (s) of the causal smoothing of the novelty
 FLAG_QUANTILE = 0.99  # frames above this quantile of held-out training-motion novelty: flagged
 PIN_PARTS = CONTACT_PARTS  # heel contact pins the ankle joint, toe contact the toe joint
@@ -621,6 +664,7 @@ class LearnedStream(Stream):
         self.lock = FootLock(model.skeleton_, model.fps_, PIN_SMOOTHING)
         if self.feet != self.lock.feet:  # step() hands the pinned feet to the lock as they are
             raise ValueError(f"the foot lock reads joints {self.lock.feet}, pinning {self.feet}")
+        self.measure_spread = model.member_spread()
         self.contacts = np.zeros(len(PIN_PARTS))
         self.sigma = float("nan")
         self.novelty: float | None = None  # the smoothed novelty of the last frame read
@@ -630,7 +674,7 @@ class LearnedStream(Stream):
         with torch.inference_mode():
             x = m._inputs(np.asarray(sample)[None])
             feats, self.h = m.net_.encode(x[None], self.h)
-            p, logit, logvar = m.net_.heads(feats)
+            p, logit, logvar, spread = m._heads(feats, self.measure_spread)
         nov = m._novelty(feats[0].numpy().astype(np.float64), self.novelty)
         self.novelty = float(nov[-1])
         self.seen += 1
@@ -638,7 +682,7 @@ class LearnedStream(Stream):
             return self.rest[0].copy(), self.rest[1].copy()
         # the novelty of the frame read, not of the (delayed) frame returned: it lags the
         # offline result's by the look-ahead, within the smoothing's time constant
-        out = m._outputs(p[0], logit[0], logvar[0], nov)
+        out = m._outputs(p[0], logit[0], logvar[0], nov, None if spread is None else spread[0])
         self.contacts, self.sigma = out.contacts[0], float(out.sigma[0])
         err, flag, _ = m.confidence(out)
         self.error_m = float(err[0])

@@ -13,7 +13,8 @@ pose reads the whole recording, both ways. Heads, per frame:
   a Gaussian negative log-likelihood; its square root is the per-frame confidence in metres.
 
 ``Ensemble`` averages several ``Reconstructor`` s trained from other seeds behind the same
-interface (a deep ensemble).
+interface (a deep ensemble); :meth:`Ensemble.member_heads` also gives each member's pose, whose
+disagreement :class:`MemberSpread` measures in metres.
 """
 
 from __future__ import annotations
@@ -133,15 +134,20 @@ class Ensemble(_Network):
         return torch.cat([y for y, _ in out], dim=-1), torch.cat([hn for _, hn in out], dim=0)
 
     def heads(self, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        poses, logit, logvar = self.member_heads(y)
+        return poses.mean(-2), logit, logvar
+
+    def member_heads(self, y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """:meth:`heads` with every member's pose (B, T, K, D) in place of their mean."""
         k = len(self.members)
         if self._by_member():
             pose, logit, logvar = (torch.stack(v, dim=-2) for v in zip(
                 *(m.heads(part) for m, part in zip(self.members, y.chunk(k, dim=-1)))))
-            pose, logvar = pose.mean(-2), logvar[..., 0]
+            logvar = logvar[..., 0]
         else:
             out = self._weights().heads(y)
             pose, logit, logvar = out.split([out.shape[-1] - 5 * k, 4 * k, k], dim=-1)
-            logit = logit.unflatten(-1, (k, 4))
+            pose, logit = pose.unflatten(-1, (k, -1)), logit.unflatten(-1, (k, 4))
         prob = torch.sigmoid(logit).mean(-2).clamp(1e-6, 1 - 1e-6)
         return (pose, torch.log(prob) - torch.log1p(-prob),
                 torch.logsumexp(logvar, dim=-1, keepdim=True) - math.log(k))
@@ -189,9 +195,8 @@ class StackedWeights:
     the members' modules to float precision):
     ``r = sigmoid(W_ir x + b_ir + W_hr h + b_hr)``, ``z`` likewise, ``n = tanh(W_in x + b_in
     + r (W_hn h + b_hn))``, ``h' = n + z (h - n)``. The heads of all members are one linear
-    layer on the features side by side: the mean pose folded into it (its weights the members'
-    side by side over K, its bias their mean), the contact and logvar rows block-diagonal.
-    """
+    layer on the features side by side, its weights block-diagonal (each member's pose,
+    contact and logvar rows read that member's features only)."""
 
     def __init__(self, members: Sequence[Reconstructor]) -> None:
         k, first = len(members), members[0]
@@ -210,12 +215,10 @@ class StackedWeights:
             self.w_hh = [stacked(f"weight_hh_l{i}") for i in range(self.layers)]
             self.b_ih = [bias(f"bias_ih_l{i}") for i in range(self.layers)]
             self.b_hh = [bias(f"bias_hh_l{i}") for i in range(self.layers)]
-            pose = torch.cat([m.pose.weight for m in members], dim=1) / k
-            self.head_w = torch.cat([pose, torch.block_diag(*(m.contact.weight for m in members)),
-                                     torch.block_diag(*(m.logvar.weight for m in members))])
-            self.head_b = torch.cat([torch.stack([m.pose.bias for m in members]).mean(0),
-                                     *(m.contact.bias for m in members),
-                                     *(m.logvar.bias for m in members)])
+            self.head_w = torch.cat([torch.block_diag(*(getattr(m, head).weight for m in members))
+                                     for head in ("pose", "contact", "logvar")])
+            self.head_b = torch.cat([getattr(m, head).bias for head in ("pose", "contact", "logvar")
+                                     for m in members])
 
     def encode(self, x: torch.Tensor, h: torch.Tensor | None = None
                ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -243,8 +246,8 @@ class StackedWeights:
         return feats, torch.stack(last, dim=1).view(k * self.layers, b, n)
 
     def heads(self, y: torch.Tensor) -> torch.Tensor:
-        """Features (B, T, K width) -> the mean standardized pose (B, T, D), then the members'
-        contact logits (4 each) and logvars (1 each): (B, T, D + 5 K)."""
+        """Features (B, T, K width) -> the members' standardized poses (D each), contact logits
+        (4 each) and logvars (1 each), side by side: (B, T, K (D + 5))."""
         return nn.functional.linear(y, self.head_w, self.head_b)
 
 
@@ -277,9 +280,40 @@ class TorchFK(nn.Module):
     def forward(self, rot: torch.Tensor) -> torch.Tensor:
         """rot : (..., J, 3, 3) local rotations -> positions (..., J, 3), root at the origin."""
         grot = [rot[..., 0, :, :]]
-        pos = [torch.zeros_like(rot[..., 0, :, 0])]
+        # the root at the origin; not zeros_like, whose shape an ONNX trace fixes to the example's
+        pos = [rot[..., 0, :, 0] * 0.0]
         for j in range(1, len(self.parents)):
             p = self.parents[j]
             grot.append(grot[p] @ rot[..., j, :, :])
             pos.append(pos[p] + (grot[p] @ self.offsets[j].unsqueeze(-1)).squeeze(-1))
         return torch.stack(pos, dim=-2)
+
+
+class MemberSpread(nn.Module):
+    """How much an ensemble's members disagree on a frame's pose, metres: the rms over joints
+    (but the root) of the standard deviation of the members' joint positions (root at the
+    origin, heading frame: the forward kinematics of their pose vectors' local rotations),
+    divided by K - 1 so that it estimates the same for any member count. Where the members,
+    trained from other seeds, part ways, none of them knows the motion (Lakshminarayanan et
+    al. 2017).
+
+    Parameters
+    ----------
+    y_mean, y_std : ndarray, shape (D,), the standardization of the members' pose outputs.
+    offsets, parents : the output skeleton (:class:`TorchFK`).
+    """
+
+    def __init__(self, y_mean: np.ndarray, y_std: np.ndarray, offsets: np.ndarray,
+                 parents: np.ndarray) -> None:
+        super().__init__()
+        self.register_buffer("y_mean", torch.as_tensor(np.asarray(y_mean), dtype=torch.float32))
+        self.register_buffer("y_std", torch.as_tensor(np.asarray(y_std), dtype=torch.float32))
+        self.fk = TorchFK(offsets, parents)
+        self.j = len(self.fk.parents)
+
+    def forward(self, poses: torch.Tensor) -> torch.Tensor:
+        """Standardized member poses (..., K, D), K >= 2 -> spread (...), metres."""
+        v = poses * self.y_std + self.y_mean
+        pos = self.fk(rotation_from_6d(v[..., : 6 * self.j].unflatten(-1, (self.j, 6))))[..., 1:, :]
+        dev = ((pos - pos.mean(-3, keepdim=True)) ** 2).sum((-1, -3)) / (poses.shape[-2] - 1)
+        return dev.mean(-1).sqrt()
