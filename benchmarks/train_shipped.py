@@ -30,9 +30,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "src" / "imuloco" / "data" / "models"
 MOTION = ("bandai-namco-2", "bandai-namco-1", "cmu-iclone")
 SHIN_SEEDS = (0, 1, 2, 3)
-# the calibration the shin ensemble ships with: fitted on issue 16's out-of-fold results
-CALIBRATION_RESULTS = ROOT / "docs" / "results" / "generalization" / \
-    "learned-heldout-contents-reverse"
+# the calibration the shin ensemble ships with: fitted on the out-of-fold results of two
+# draws of 3-network ensembles (sigma, novelty and the members' spread; fourteenth round)
+CALIBRATION_RESULTS = ROOT / "docs" / "results" / "generalization" / "ensemble-spread"
 
 
 @dataclass
@@ -74,7 +74,7 @@ def trainings(shared: Path, out: Path) -> list[Step]:
 def shin_finish(shared: Path, out: Path) -> list[Step]:
     """The shin ensemble, its mirror and both calibrations, after its four runs."""
     members = [str(out / f"shin{s}.npz") for s in SHIN_SEEDS]
-    results = sorted(str(p) for p in CALIBRATION_RESULTS.iterdir() if p.is_dir())
+    results = sorted(str(p) for p in CALIBRATION_RESULTS.glob("seeds-*/heldout-contents"))
     steps = [Step("shin ensemble + mirror", ["ensemble", *members, "--data",
                   str(shared / MOTION[0]), "--limit", "20", "-o", str(out / "ensemble.npz"),
                   "--mirrored", str(out / "ensemble_left.npz"), "--force"])]
