@@ -17,8 +17,10 @@ network outputs are then post-processed several ways:
 - ``root pinned``: :func:`imuloco.methods.learned.method.pin`, the root moved so that feet in
   contact do not slide (all ``learned`` did before ``lock_feet``);
 - ``root pinned, legs locked (learned's)``: then :func:`imuloco.methods.learned.method.lock`,
-  the planted feet held on the floor by leg IK with the root pinning's smoothing (today's
-  ``learned``); ``smoothing 1``: the same without smoothing;
+  the planted feet held on the floor by leg IK with the root pinning's smoothing, a flat
+  foot's direction held too (today's ``learned``); ``flat feet turn``: the flat foot's
+  direction left to the motion (``learned`` before the fourteenth round); ``smoothing 1``:
+  the same without smoothing;
 - ``legs locked only``: ``lock`` on the raw pose.
 
 Prints per fold MPJPE (cm), foot skate (cm/s) and jitter (m/s³) of each, frame-weighted as the
@@ -45,6 +47,7 @@ from imuloco.methods.postprocess import lock_feet
 from imuloco.methods.training import TEST_SEED_OFFSET, synthesize
 
 LOCKS = {"legs locked (learned's)": {"smoothing": PIN_SMOOTHING},
+         "legs locked, flat feet turn": {"smoothing": PIN_SMOOTHING, "hold_flat": False},
          "legs locked, smoothing 1": {"smoothing": 1.0}}
 VARIANTS = ("raw", "root pinned", *(f"root pinned, {k}" for k in LOCKS), "legs locked only")
 KEYS = ("mpjpe_cm", "foot_skate_cm_s", "jitter", "foot_skate_gt_cm_s", "jitter_gt")

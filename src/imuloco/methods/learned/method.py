@@ -695,6 +695,7 @@ class LearnedStream(Stream):
         feet = feet - raw_root + root  # the lock's feet too (checked in __init__)
         c = self.contacts
         targets = self.lock.targets(feet, c[:2], c[2:])
-        if not self.lock.moved(feet, targets).any():  # no leg to bend
+        turns = self.lock.turn
+        if not self.lock.moved(feet, targets, turns).any():  # no leg to bend
             return rot, root
-        return self.lock.bend(rot[None], root[None], targets[None])[0], root
+        return self.lock.bend(rot[None], root[None], targets[None], turns=turns[None])[0], root
