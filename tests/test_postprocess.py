@@ -271,3 +271,46 @@ def test_the_turn_between_two_directions_is_the_shortest_rotation():
     u, v = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
     np.testing.assert_allclose(_between(u, v), to_rotvec(arc(u, v)), atol=1e-12)
     np.testing.assert_array_equal(_between(u, 2 * u), 0.0)
+
+
+def _pitch(m: Motion, name: str) -> np.ndarray:
+    d = _direction(m, name)
+    return np.arctan2(d[:, 1], np.linalg.norm(d[:, [0, 2]], axis=-1))
+
+
+def test_a_flat_foot_is_held_at_the_flat_pitch_with_the_heading_it_lands_with(sliding):
+    from imuloco.methods.postprocess import flat_foot_pitch, lock_feet
+
+    walk, _, contacts = sliding
+    heel, toe = contacts[:, :2], contacts[:, 2:]
+    pitch = flat_foot_pitch([walk])
+    flat_l = (heel[:, 0] > 0.5) & (toe[:, 0] > 0.5)
+    np.testing.assert_allclose(pitch, np.median(np.r_[
+        _pitch(walk, "left")[flat_l],
+        _pitch(walk, "right")[(heel[:, 1] > 0.5) & (toe[:, 1] > 0.5)]]))
+    wobbly = _turned_feet(walk, 0.15 * np.sin(2 * np.pi * 2.0 * walk.times))
+    target = pitch - 0.2  # a pitch no frame has: the hold sets it
+    held = lock_feet(wobbly, heel, toe, flat_pitch=target)
+    landing = lock_feet(wobbly, heel, toe)
+    for side, name in enumerate(("left", "right")):
+        flat = (heel[:, side] > 0.5) & (toe[:, side] > 0.5)
+        np.testing.assert_allclose(_pitch(held, name)[flat], target, atol=1e-9)
+        # the heading is the one the foot landed with, as without a flat pitch
+        h = _direction(held, name)[flat][:, [0, 2]]
+        g = _direction(landing, name)[flat][:, [0, 2]]
+        cos = np.sum(h * g, -1) / np.linalg.norm(h, axis=-1) / np.linalg.norm(g, axis=-1)
+        np.testing.assert_allclose(cos, 1.0, atol=1e-9)
+        tip = walk.skeleton.part(f"{name}_toe")
+        both = flat[:-1] & flat[1:]
+        assert np.median(_steps(held, tip)[both]) < 1e-9
+    with pytest.raises(ValueError, match="flat"):
+        flat_foot_pitch([walk.slice(0, 1)])
+
+
+def test_the_quaternion_of_a_rotation_vector():
+    from imuloco.methods.postprocess import _quaternion
+    from imuloco.ops.rotations import from_rotvec
+
+    r = np.random.default_rng(3).normal(size=(50, 3))
+    r[0] = 0.0
+    np.testing.assert_allclose(_quaternion(r), from_rotvec(r), atol=1e-12)

@@ -3,6 +3,8 @@ Laplacian smoothing."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 from scipy.signal import lfilter
 
@@ -73,8 +75,8 @@ LEGS = (("left_hip", "left_knee", "left_ankle", "left_toe"),
 
 
 def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: float = 1.0,
-              release_s: float = 0.1, threshold: float = 0.5, hold_flat: bool = True
-              ) -> Motion:
+              release_s: float = 0.1, threshold: float = 0.5, hold_flat: bool = True,
+              flat_pitch: float | None = None) -> Motion:
     """Keep each planted foot where it landed on the floor by bending its leg (two-bone IK,
     :func:`imuloco.ops.ik.two_bone`), after :func:`pin_feet` has moved the root.
 
@@ -90,7 +92,9 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
     round). A foot flat on the floor (heel and toe both down, ``hold_flat``) cannot tilt or
     turn without one of them sliding, so its direction (ankle to toe) is held as well, with
     the same smoothing, fade-out and bound (:data:`MAX_HOLD_FEET` radians: the toe a foot
-    length along its arc). Only the hip, knee and ankle joints turn, the foot keeping its
+    length along its arc): the heading it lands with, at ``flat_pitch`` where that is known
+    (:func:`flat_foot_pitch` of the motions a model learned from; the pitch it lands with is
+    that of a foot still rolling onto the floor). Only the hip, knee and ankle joints turn, the foot keeping its
     orientation (or the held one); a target out of the leg's reach is approached as far as
     the leg stretches.
 
@@ -104,10 +108,13 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
     threshold : a probability above it is a contact.
     hold_flat : hold a flat foot's direction too (False: the foot's orientation is always the
         motion's).
+    flat_pitch : radians, the pitch of a foot flat on the floor (:func:`flat_foot_pitch`);
+        None: a flat foot keeps the pitch it lands with.
     """
     if motion.num_frames < 2:
         return motion
-    lock = FootLock(motion.skeleton, motion.fps, smoothing, release_s, threshold, hold_flat)
+    lock = FootLock(motion.skeleton, motion.fps, smoothing, release_s, threshold, hold_flat,
+                    flat_pitch)
     heel, toe = np.asarray(heel, dtype=np.float64), np.asarray(toe, dtype=np.float64)
     legs = lock.legs(motion.rotations, motion.root)
     feet = legs[1][:, lock.sub_feet]
@@ -131,6 +138,51 @@ def _rest_distance(skeleton: Skeleton, top: int, joint: int) -> float:
     return float(np.linalg.norm(step))
 
 
+def pitched(d: np.ndarray, pitch: float) -> np.ndarray:
+    """Directions ``d`` (..., 3) turned up or down to ``pitch`` radians against the horizontal
+    (Y up), their heading and length kept; a vertical one, without a heading, is kept."""
+    flat = np.linalg.norm(d[..., [0, 2]], axis=-1, keepdims=True)
+    length = np.linalg.norm(d, axis=-1, keepdims=True)
+    scale = length * np.cos(pitch) / np.maximum(flat, 1e-12)
+    out = np.concatenate([d[..., :1] * scale, length * np.sin(pitch), d[..., 2:] * scale],
+                         axis=-1)
+    return np.where(flat > 1e-9 * np.maximum(length, 1e-12), out, d)
+
+
+def flat_foot_pitch(motions: Iterable[Motion]) -> float:
+    """The pitch of a foot flat on the floor in ``motions``, radians: the median over both feet
+    and every frame whose heel and toe are both in contact
+    (:func:`imuloco.phases.foot_contacts`) of the ankle-to-toe direction's angle against the
+    horizontal (negative: the toe joint below the ankle joint). A property of the rig and its
+    capture (-39.6 degrees on Bandai-Namco's), where a landing foot still rolls onto the
+    floor. Raises ValueError when no frame has a flat foot."""
+    from imuloco.phases.contacts import foot_contacts
+
+    pitches = []
+    for m in motions:
+        if m.num_frames < 2:
+            continue
+        c = foot_contacts(m)
+        pos = m.positions()
+        for side in ("left", "right"):
+            flat = c[f"{side}_heel"] & c[f"{side}_toe"]
+            d = (pos[flat, m.skeleton.part(f"{side}_toe")]
+                 - pos[flat, m.skeleton.part(f"{side}_ankle")])
+            pitches.append(np.arctan2(d[:, 1], np.linalg.norm(d[:, [0, 2]], axis=-1)))
+    pitches = np.concatenate(pitches) if pitches else np.zeros(0)
+    if not pitches.size:
+        raise ValueError("flat_foot_pitch: no frame of the motions has a foot flat on the floor")
+    return float(np.median(pitches))
+
+
+def _quaternion(r: np.ndarray) -> np.ndarray:
+    """Rotation vectors (..., 3) -> quaternions (..., 4): the formula, as :func:`_between`
+    (:func:`imuloco.ops.rotations.from_rotvec` goes through a scipy Rotation)."""
+    angle = np.linalg.norm(r, axis=-1, keepdims=True)
+    # sin(a / 2) / a without a division by zero: np.sinc(x) is sin(pi x) / (pi x)
+    return np.concatenate([r * 0.5 * np.sinc(angle / (2 * np.pi)), np.cos(angle / 2)], axis=-1)
+
+
 def _between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotation vectors (..., 3) of the shortest rotations taking the directions ``u`` to
     ``v`` (..., 3): about their cross product by the angle between them; zero where they are
@@ -151,8 +203,8 @@ class FootLock:
     frame)."""
 
     def __init__(self, skeleton: Skeleton, fps: float, smoothing: float = 1.0,
-                 release_s: float = 0.1, threshold: float = 0.5, hold_flat: bool = True
-                 ) -> None:
+                 release_s: float = 0.1, threshold: float = 0.5, hold_flat: bool = True,
+                 flat_pitch: float | None = None) -> None:
         _check_smoothing(smoothing)
         if not release_s > 0:
             raise ValueError(f"foot locking: release_s must be positive, got {release_s}")
@@ -179,6 +231,7 @@ class FootLock:
         self.slip_m = [MAX_HOLD_FEET * _rest_distance(skeleton, ankle, toe)
                        for ankle, toe in zip(self.feet[:len(LEGS)], self.feet[len(LEGS):])]
         self.smoothing, self.threshold, self.hold_flat = smoothing, threshold, hold_flat
+        self.flat_pitch = flat_pitch
         self.decay = float(np.exp(-1.0 / (release_s * fps)))
         self.held: list[tuple[str, np.ndarray] | None] = [None] * len(LEGS)
         self.offset = np.zeros((len(LEGS), 3))
@@ -194,7 +247,7 @@ class FootLock:
         """Update the feet's turns (:attr:`turn`) for one frame: feet (4, 3) as in
         :meth:`targets`, flat (2,) which feet lie flat -> (2, 3) the toes as the turns put
         them."""
-        from imuloco.ops.rotations import from_rotvec, qrot
+        from imuloco.ops.rotations import qrot
 
         ankles, tips = feet[:len(LEGS)], feet[len(LEGS):]
         if not (flat.any() or self.turned.any()):  # nothing held, nothing fading
@@ -203,7 +256,9 @@ class FootLock:
         foot = tips - ankles
         lands = flat & np.isnan(self.direction[:, 0])  # from the direction as it stands
         if lands.any():
-            self.direction[lands] = qrot(from_rotvec(self.turned[lands]), foot[lands])
+            landed = qrot(_quaternion(self.turned[lands]), foot[lands])
+            self.direction[lands] = (landed if self.flat_pitch is None else
+                                     pitched(landed, self.flat_pitch))
         self.direction[~flat] = np.nan
         self.tilt[~flat] *= self.decay
         if flat.any():
@@ -213,11 +268,13 @@ class FootLock:
             far = angle[:, 0] > MAX_HOLD_FEET
             if far.any():
                 tilt[far] *= MAX_HOLD_FEET / angle[far]
-                self.direction[np.flatnonzero(flat)[far]] = qrot(from_rotvec(tilt[far]),
+                self.direction[np.flatnonzero(flat)[far]] = qrot(_quaternion(tilt[far]),
                                                                  foot[flat][far])
             self.tilt[flat] = tilt
         self.turned += self.smoothing * (self.tilt - self.turned)
-        self.turn = from_rotvec(self.turned)
+        # faded out (under a nanoradian): nothing to turn, and nothing to compute from now on
+        self.turned[~flat & (np.abs(self.turned).max(axis=-1) < 1e-9)] = 0.0
+        self.turn = _quaternion(self.turned)
         return ankles + qrot(self.turn, foot)
 
     def targets(self, feet: np.ndarray, heel: np.ndarray, toe: np.ndarray) -> np.ndarray:
