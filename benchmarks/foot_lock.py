@@ -17,8 +17,13 @@ network outputs are then post-processed several ways:
 - ``root pinned``: :func:`imuloco.methods.learned.method.pin`, the root moved so that feet in
   contact do not slide (all ``learned`` did before ``lock_feet``);
 - ``root pinned, legs locked (learned's)``: then :func:`imuloco.methods.learned.method.lock`,
-  the planted feet held on the floor by leg IK with the root pinning's smoothing (today's
-  ``learned``); ``smoothing 1``: the same without smoothing;
+  the planted feet held on the floor by leg IK with the root pinning's smoothing, a flat
+  foot's direction held too, at the heading it lands with and the model's flat pitch
+  (today's ``learned``; a model file from before ``flat_pitch_`` gets the
+  :func:`imuloco.methods.postprocess.flat_foot_pitch` of the fold's training clips, as
+  ``fit`` computes it); ``flat feet at their landing pitch``: the direction it lands with;
+  ``flat feet turn``: the flat foot's direction left to the motion (``learned`` of the
+  thirteenth round); ``smoothing 1``: today's without smoothing;
 - ``legs locked only``: ``lock`` on the raw pose.
 
 Prints per fold MPJPE (cm), foot skate (cm/s) and jitter (m/s³) of each, frame-weighted as the
@@ -41,11 +46,14 @@ from imuloco.io.atomic import atomic_write_text
 from imuloco.methods import get_method, pose
 from imuloco.methods.learned.method import PIN_SMOOTHING, lock, pin
 from imuloco.methods.modelfile import load_model
-from imuloco.methods.postprocess import lock_feet
+from imuloco.methods.postprocess import flat_foot_pitch, lock_feet
 from imuloco.methods.training import TEST_SEED_OFFSET, synthesize
 
-LOCKS = {"legs locked (learned's)": {"smoothing": PIN_SMOOTHING},
-         "legs locked, smoothing 1": {"smoothing": 1.0}}
+# "flat" stands for the model's flat_pitch_
+LOCKS = {"legs locked (learned's)": {"smoothing": PIN_SMOOTHING, "flat_pitch": "flat"},
+         "legs locked, flat feet at their landing pitch": {"smoothing": PIN_SMOOTHING},
+         "legs locked, flat feet turn": {"smoothing": PIN_SMOOTHING, "hold_flat": False},
+         "legs locked, smoothing 1": {"smoothing": 1.0, "flat_pitch": "flat"}}
 VARIANTS = ("raw", "root pinned", *(f"root pinned, {k}" for k in LOCKS), "legs locked only")
 KEYS = ("mpjpe_cm", "foot_skate_cm_s", "jitter", "foot_skate_gt_cm_s", "jitter_gt")
 
@@ -55,7 +63,10 @@ def fold_model(fold: str, train, seed: int, models: Path, params: dict):
     tag = "".join(f"-{k}{v}" for k, v in sorted(params.items()))
     path = models / f"{fold}{tag}-seed{seed}.npz"
     if path.exists():
-        return load_model(path)
+        method = load_model(path)
+        if method.flat_pitch_ is None:  # a file from before it: what fit computes
+            method.flat_pitch_ = flat_foot_pitch(train.clips)
+        return method
     method = get_method("learned", threads=1, seed=seed, **params)
     with threadpool_limits(limits=1):
         method.fit(train, ["right_ankle"], "phone", seed, progress=True)
@@ -70,9 +81,11 @@ def variants(method, signals: np.ndarray):
     c = out.contacts
     raw = pose.decode(out.vectors, method.skeleton_, method.fps_)
     pinned = pin(raw, c)
-    locked = {f"root pinned, {k}": lock_feet(pinned, c[:, :2], c[:, 2:], **kw)
-              for k, kw in LOCKS.items()}
-    return {"raw": raw, "root pinned": pinned, **locked, "legs locked only": lock(raw, c)}
+    flat = method.flat_pitch_
+    locked = {f"root pinned, {k}": lock_feet(pinned, c[:, :2], c[:, 2:], **{
+        a: flat if v == "flat" else v for a, v in kw.items()}) for k, kw in LOCKS.items()}
+    return {"raw": raw, "root pinned": pinned, **locked,
+            "legs locked only": lock(raw, c, flat)}
 
 
 def main() -> None:

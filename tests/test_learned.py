@@ -500,3 +500,20 @@ def test_held_out_clips_default_share_is_the_fits_default(sample_db, monkeypatch
     monkeypatch.setattr(training, "held_out", lambda name, share: shares.append(share) or False)
     training.held_out_clips(sample_db)
     assert shares == [Learned().validation] * len(sample_db)
+
+
+def test_a_model_keeps_the_pitch_of_a_flat_foot_it_learned(sample_db, tiny_model, tmp_path):
+    from imuloco.methods.postprocess import flat_foot_pitch
+
+    db = sample_db.subset([0, 4, 12])  # tiny_model's motions
+    assert tiny_model.flat_pitch_ == flat_foot_pitch(db.clips)
+    assert load_model(tiny_model.save(tmp_path / "m.npz")).flat_pitch_ == tiny_model.flat_pitch_
+    # a file from before it: the lock holds a flat foot at the pitch it lands with
+    path = tiny_model.save(tmp_path / "old.npz")
+    with np.load(path, allow_pickle=False) as z:
+        data = {k: z[k] for k in z.files}
+    header = json.loads(bytes(data["__header__"]).decode())
+    del header["values"]["flat_pitch"]
+    data["__header__"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+    np.savez(path, **data)
+    assert load_model(path).flat_pitch_ is None

@@ -172,10 +172,13 @@ def test_foot_lock_frame_by_frame_gives_the_offline_motion(sliding):
     offline = lock_feet(drifted, soft[:, :2], soft[:, 2:], smoothing=0.7)
     pos = drifted.positions()
     lock = FootLock(drifted.skeleton, drifted.fps, 0.7)
-    online = np.concatenate([
-        lock.bend(drifted.rotations[i:i + 1], drifted.root[i:i + 1],
-                  lock.targets(pos[i, lock.feet], soft[i, :2], soft[i, 2:])[None])
-        for i in range(drifted.num_frames)])
+
+    def step(i: int) -> np.ndarray:
+        targets = lock.targets(pos[i, lock.feet], soft[i, :2], soft[i, 2:])
+        return lock.bend(drifted.rotations[i:i + 1], drifted.root[i:i + 1], targets[None],
+                         turns=lock.turn[None])
+
+    online = np.concatenate([step(i) for i in range(drifted.num_frames)])
     np.testing.assert_allclose(online, offline.rotations, atol=1e-12)
     assert np.abs(offline.rotations - drifted.rotations).max() > 0.01  # it did bend legs
     with pytest.raises(ValueError, match="smoothing"):
@@ -196,3 +199,118 @@ def test_a_held_foot_slides_once_the_motion_leaves_it_a_foot_length_behind(slidi
                               axis=-1)
         assert away.max() <= MAX_HOLD_FEET * foot + 1e-6
         assert away.max() > 0.9 * MAX_HOLD_FEET * foot  # it was held that far
+
+
+def _turned_feet(walk: Motion, angle: np.ndarray) -> Motion:
+    """``walk`` with both ankles turned by ``angle`` (T,) radians about their parents' y axes
+    (the feet swing about the ankles, their toes sweeping the floor)."""
+    from imuloco.ops.rotations import about_y, qmul
+
+    local = walk.rotations.copy()
+    for name in ("left", "right"):
+        a = walk.skeleton.part(f"{name}_ankle")
+        local[:, a] = qmul(about_y(angle), local[:, a])
+    return Motion(walk.skeleton, local, walk.root, walk.fps, walk.name)
+
+
+def _direction(m: Motion, name: str) -> np.ndarray:
+    """Unit ankle-to-toe directions (T, 3) of one foot."""
+    pos = m.positions()
+    d = pos[:, m.skeleton.part(f"{name}_toe")] - pos[:, m.skeleton.part(f"{name}_ankle")]
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def test_a_flat_foot_neither_tilts_nor_turns(sliding):
+    from imuloco.methods.postprocess import lock_feet
+
+    walk, _, contacts = sliding
+    heel, toe = contacts[:, :2], contacts[:, 2:]
+    wobbly = _turned_feet(walk, 0.15 * np.sin(2 * np.pi * 2.0 * walk.times))
+    held = lock_feet(wobbly, heel, toe)
+    free = lock_feet(wobbly, heel, toe, hold_flat=False)
+    for side, name in enumerate(("left", "right")):
+        flat = (heel[:, side] > 0.5) & (toe[:, side] > 0.5)
+        both = flat[:-1] & flat[1:]
+        assert both.sum() > 20
+        tip = walk.skeleton.part(f"{name}_toe")
+        # without the hold the toe sweeps about the held ankle; with it, it stays too
+        assert _steps(free, tip)[both].mean() > 3e-3
+        assert np.median(_steps(held, tip)[both]) < 1e-9
+        assert _steps(held, tip)[both].mean() < 0.1 * _steps(free, tip)[both].mean()
+        # the direction held is the one the foot landed with (flat frames after the first)
+        d = _direction(held, name)
+        steady = np.flatnonzero(both) + 1
+        np.testing.assert_allclose(np.sum(d[steady] * d[steady - 1], -1), 1.0, atol=1e-9)
+        # off the floor the foot is the motion's again once the hold has faded (0.1 s a 1/e)
+        lifted = ~np.convolve(flat, np.ones(20), "full")[:len(flat)].astype(bool)  # 0.67 s
+        assert lifted.sum() > 10
+        np.testing.assert_allclose(_direction(held, name)[lifted],
+                                   _direction(wobbly, name)[lifted], atol=1e-3)
+
+
+def test_a_flat_foot_turns_along_once_the_motion_turns_it_a_radian(sliding):
+    from imuloco.methods.postprocess import MAX_HOLD_FEET, lock_feet
+
+    walk = sliding[0]
+    ones = np.ones((walk.num_frames, 2))  # both feet flat all along
+    turning = _turned_feet(walk, 2.0 * walk.times / walk.times[-1])  # two radians in all
+    locked = lock_feet(turning, ones, ones)
+    for name in ("left", "right"):
+        cos = np.sum(_direction(locked, name) * _direction(turning, name), -1)
+        angle = np.arccos(np.clip(cos, -1.0, 1.0))
+        assert angle.max() <= MAX_HOLD_FEET + 1e-6
+        assert angle.max() > 0.5 * MAX_HOLD_FEET  # it was held that far
+
+
+def test_the_turn_between_two_directions_is_the_shortest_rotation():
+    from imuloco.methods.postprocess import _between
+    from imuloco.ops.ik import arc
+    from imuloco.ops.rotations import to_rotvec
+
+    rng = np.random.default_rng(2)
+    u, v = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    np.testing.assert_allclose(_between(u, v), to_rotvec(arc(u, v)), atol=1e-12)
+    np.testing.assert_array_equal(_between(u, 2 * u), 0.0)
+
+
+def _pitch(m: Motion, name: str) -> np.ndarray:
+    d = _direction(m, name)
+    return np.arctan2(d[:, 1], np.linalg.norm(d[:, [0, 2]], axis=-1))
+
+
+def test_a_flat_foot_is_held_at_the_flat_pitch_with_the_heading_it_lands_with(sliding):
+    from imuloco.methods.postprocess import flat_foot_pitch, lock_feet
+
+    walk, _, contacts = sliding
+    heel, toe = contacts[:, :2], contacts[:, 2:]
+    pitch = flat_foot_pitch([walk])
+    flat_l = (heel[:, 0] > 0.5) & (toe[:, 0] > 0.5)
+    np.testing.assert_allclose(pitch, np.median(np.r_[
+        _pitch(walk, "left")[flat_l],
+        _pitch(walk, "right")[(heel[:, 1] > 0.5) & (toe[:, 1] > 0.5)]]))
+    wobbly = _turned_feet(walk, 0.15 * np.sin(2 * np.pi * 2.0 * walk.times))
+    target = pitch - 0.2  # a pitch no frame has: the hold sets it
+    held = lock_feet(wobbly, heel, toe, flat_pitch=target)
+    landing = lock_feet(wobbly, heel, toe)
+    for side, name in enumerate(("left", "right")):
+        flat = (heel[:, side] > 0.5) & (toe[:, side] > 0.5)
+        np.testing.assert_allclose(_pitch(held, name)[flat], target, atol=1e-9)
+        # the heading is the one the foot landed with, as without a flat pitch
+        h = _direction(held, name)[flat][:, [0, 2]]
+        g = _direction(landing, name)[flat][:, [0, 2]]
+        cos = np.sum(h * g, -1) / np.linalg.norm(h, axis=-1) / np.linalg.norm(g, axis=-1)
+        np.testing.assert_allclose(cos, 1.0, atol=1e-9)
+        tip = walk.skeleton.part(f"{name}_toe")
+        both = flat[:-1] & flat[1:]
+        assert np.median(_steps(held, tip)[both]) < 1e-9
+    with pytest.raises(ValueError, match="flat"):
+        flat_foot_pitch([walk.slice(0, 1)])
+
+
+def test_the_quaternion_of_a_rotation_vector():
+    from imuloco.methods.postprocess import _quaternion
+    from imuloco.ops.rotations import from_rotvec
+
+    r = np.random.default_rng(3).normal(size=(50, 3))
+    r[0] = 0.0
+    np.testing.assert_allclose(_quaternion(r), from_rotvec(r), atol=1e-12)

@@ -3,13 +3,15 @@ Laplacian smoothing."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 from scipy.signal import lfilter
 
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.ops.kinematics import fk
-from imuloco.ops.rotations import normalize
+from imuloco.ops.rotations import cross, normalize
 
 
 def _check_smoothing(smoothing: float) -> None:
@@ -65,13 +67,16 @@ def pin_feet(motion: Motion, contacts: np.ndarray, feet: tuple[str, ...] = ("lef
     return Motion(motion.skeleton, motion.rotations, root, motion.fps, motion.name)
 
 
-MAX_HOLD_FEET = 1.0  # FootLock: a held foot's furthest from the motion, in foot lengths
+# FootLock: a held foot's furthest from the motion, in foot lengths (and a flat foot's
+# furthest turn, in radians: its toe as far along the arc about the ankle)
+MAX_HOLD_FEET = 1.0
 LEGS = (("left_hip", "left_knee", "left_ankle", "left_toe"),
         ("right_hip", "right_knee", "right_ankle", "right_toe"))
 
 
 def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: float = 1.0,
-              release_s: float = 0.1, threshold: float = 0.5) -> Motion:
+              release_s: float = 0.1, threshold: float = 0.5, hold_flat: bool = True,
+              flat_pitch: float | None = None) -> Motion:
     """Keep each planted foot where it landed on the floor by bending its leg (two-bone IK,
     :func:`imuloco.ops.ik.two_bone`), after :func:`pin_feet` has moved the root.
 
@@ -84,8 +89,14 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
     (a pivot, a step the contacts missed), the held point slides along. Only the position
     on the floor is held: the height stays the motion's (holding it too cost accuracy and
     smoothness on unseen contents: ``docs/results/learned/experiments.md``, thirteenth
-    round). Only the hip, knee and ankle joints turn, the foot keeping its orientation; a
-    target out of the leg's reach is approached as far as the leg stretches.
+    round). A foot flat on the floor (heel and toe both down, ``hold_flat``) cannot tilt or
+    turn without one of them sliding, so its direction (ankle to toe) is held as well, with
+    the same smoothing, fade-out and bound (:data:`MAX_HOLD_FEET` radians: the toe a foot
+    length along its arc): the heading it lands with, at ``flat_pitch`` where that is known
+    (:func:`flat_foot_pitch` of the motions a model learned from; the pitch it lands with is
+    that of a foot still rolling onto the floor). Only the hip, knee and ankle joints turn, the foot keeping its
+    orientation (or the held one); a target out of the leg's reach is approached as far as
+    the leg stretches.
 
     Parameters
     ----------
@@ -95,16 +106,25 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
         with this weight per frame, as :func:`pin_feet`'s.
     release_s : time constant of the fade-out after a foot lifts, seconds.
     threshold : a probability above it is a contact.
+    hold_flat : hold a flat foot's direction too (False: the foot's orientation is always the
+        motion's).
+    flat_pitch : radians, the pitch of a foot flat on the floor (:func:`flat_foot_pitch`);
+        None: a flat foot keeps the pitch it lands with.
     """
     if motion.num_frames < 2:
         return motion
-    lock = FootLock(motion.skeleton, motion.fps, smoothing, release_s, threshold)
+    lock = FootLock(motion.skeleton, motion.fps, smoothing, release_s, threshold, hold_flat,
+                    flat_pitch)
     heel, toe = np.asarray(heel, dtype=np.float64), np.asarray(toe, dtype=np.float64)
     legs = lock.legs(motion.rotations, motion.root)
     feet = legs[1][:, lock.sub_feet]
-    targets = np.stack([lock.targets(f, h, t) for f, h, t in zip(feet, heel, toe)])
-    return Motion(motion.skeleton, lock.bend(motion.rotations, motion.root, targets, legs),
-                  motion.root, motion.fps, motion.name)
+    targets, turns = np.empty((motion.num_frames, len(LEGS), 3)), np.empty((motion.num_frames,
+                                                                           len(LEGS), 4))
+    for t, (f, h, o) in enumerate(zip(feet, heel, toe)):
+        targets[t] = lock.targets(f, h, o)
+        turns[t] = lock.turn
+    rot = lock.bend(motion.rotations, motion.root, targets, legs, turns)
+    return Motion(motion.skeleton, rot, motion.root, motion.fps, motion.name)
 
 
 def _rest_distance(skeleton: Skeleton, top: int, joint: int) -> float:
@@ -118,14 +138,73 @@ def _rest_distance(skeleton: Skeleton, top: int, joint: int) -> float:
     return float(np.linalg.norm(step))
 
 
+def pitched(d: np.ndarray, pitch: float) -> np.ndarray:
+    """Directions ``d`` (..., 3) turned up or down to ``pitch`` radians against the horizontal
+    (Y up), their heading and length kept; a vertical one, without a heading, is kept."""
+    flat = np.linalg.norm(d[..., [0, 2]], axis=-1, keepdims=True)
+    length = np.linalg.norm(d, axis=-1, keepdims=True)
+    scale = length * np.cos(pitch) / np.maximum(flat, 1e-12)
+    out = np.concatenate([d[..., :1] * scale, length * np.sin(pitch), d[..., 2:] * scale],
+                         axis=-1)
+    return np.where(flat > 1e-9 * np.maximum(length, 1e-12), out, d)
+
+
+def flat_foot_pitch(motions: Iterable[Motion]) -> float:
+    """The pitch of a foot flat on the floor in ``motions``, radians: the median over both feet
+    and every frame whose heel and toe are both in contact
+    (:func:`imuloco.phases.foot_contacts`) of the ankle-to-toe direction's angle against the
+    horizontal (negative: the toe joint below the ankle joint). A property of the rig and its
+    capture (-39.6 degrees on Bandai-Namco's), where a landing foot still rolls onto the
+    floor. Raises ValueError when no frame has a flat foot."""
+    from imuloco.phases.contacts import foot_contacts
+
+    pitches = []
+    for m in motions:
+        if m.num_frames < 2:
+            continue
+        c = foot_contacts(m)
+        pos = m.positions()
+        for side in ("left", "right"):
+            flat = c[f"{side}_heel"] & c[f"{side}_toe"]
+            d = (pos[flat, m.skeleton.part(f"{side}_toe")]
+                 - pos[flat, m.skeleton.part(f"{side}_ankle")])
+            pitches.append(np.arctan2(d[:, 1], np.linalg.norm(d[:, [0, 2]], axis=-1)))
+    pitches = np.concatenate(pitches) if pitches else np.zeros(0)
+    if not pitches.size:
+        raise ValueError("flat_foot_pitch: no frame of the motions has a foot flat on the floor")
+    return float(np.median(pitches))
+
+
+def _quaternion(r: np.ndarray) -> np.ndarray:
+    """Rotation vectors (..., 3) -> quaternions (..., 4): the formula, as :func:`_between`
+    (:func:`imuloco.ops.rotations.from_rotvec` goes through a scipy Rotation)."""
+    angle = np.linalg.norm(r, axis=-1, keepdims=True)
+    # sin(a / 2) / a without a division by zero: np.sinc(x) is sin(pi x) / (pi x)
+    return np.concatenate([r * 0.5 * np.sinc(angle / (2 * np.pi)), np.cos(angle / 2)], axis=-1)
+
+
+def _between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotation vectors (..., 3) of the shortest rotations taking the directions ``u`` to
+    ``v`` (..., 3): about their cross product by the angle between them; zero where they are
+    parallel or opposite (a foot turned half round in a frame is not held). The formula, not
+    :func:`imuloco.ops.ik.arc` and a conversion: a stream runs it every frame (two feet: 50
+    against 223 us, both measured on a loaded machine)."""
+    axis = cross(u, v)
+    sine = np.linalg.norm(axis, axis=-1, keepdims=True)  # |u| |v| sin, and below |u| |v| cos
+    angle = np.arctan2(sine, np.sum(u * v, axis=-1, keepdims=True))
+    return np.where(sine > 1e-12, axis * (angle / np.maximum(sine, 1e-12)), 0.0)
+
+
 class FootLock:
     """:func:`lock_feet` one frame at a time (bounded state: per foot the held point and
-    the correction): :meth:`targets` for where the ankles should be, :meth:`bend` for the
-    legs that put them there. Only the legs and their ancestors' kinematics are computed
-    (a stream bends a leg nearly every frame)."""
+    direction and the corrections): :meth:`targets` for where the ankles should be (and
+    :attr:`turn`, how the feet turn), :meth:`bend` for the legs that put them there. Only the
+    legs and their ancestors' kinematics are computed (a stream bends a leg nearly every
+    frame)."""
 
     def __init__(self, skeleton: Skeleton, fps: float, smoothing: float = 1.0,
-                 release_s: float = 0.1, threshold: float = 0.5) -> None:
+                 release_s: float = 0.1, threshold: float = 0.5, hold_flat: bool = True,
+                 flat_pitch: float | None = None) -> None:
         _check_smoothing(smoothing)
         if not release_s > 0:
             raise ValueError(f"foot locking: release_s must be positive, got {release_s}")
@@ -151,18 +230,63 @@ class FootLock:
         # the motion puts it: further, the motion has left it, and it slides along
         self.slip_m = [MAX_HOLD_FEET * _rest_distance(skeleton, ankle, toe)
                        for ankle, toe in zip(self.feet[:len(LEGS)], self.feet[len(LEGS):])]
-        self.smoothing, self.threshold = smoothing, threshold
+        self.smoothing, self.threshold, self.hold_flat = smoothing, threshold, hold_flat
+        self.flat_pitch = flat_pitch
         self.decay = float(np.exp(-1.0 / (release_s * fps)))
         self.held: list[tuple[str, np.ndarray] | None] = [None] * len(LEGS)
         self.offset = np.zeros((len(LEGS), 3))
         self.applied = np.zeros((len(LEGS), 3))
+        # a flat foot's held direction (ankle to toe), NaN when not flat; the turns it wants
+        # and the turns applied (rotation vectors, world frame); :attr:`turn` as quaternions
+        self.direction = np.full((len(LEGS), 3), np.nan)
+        self.tilt = np.zeros((len(LEGS), 3))
+        self.turned = np.zeros((len(LEGS), 3))
+        self.turn = np.tile([0.0, 0.0, 0.0, 1.0], (len(LEGS), 1))
+
+    def _turn(self, feet: np.ndarray, flat: np.ndarray) -> np.ndarray:
+        """Update the feet's turns (:attr:`turn`) for one frame: feet (4, 3) as in
+        :meth:`targets`, flat (2,) which feet lie flat -> (2, 3) the toes as the turns put
+        them."""
+        from imuloco.ops.rotations import qrot
+
+        ankles, tips = feet[:len(LEGS)], feet[len(LEGS):]
+        if not (flat.any() or self.turned.any()):  # nothing held, nothing fading
+            self.direction[:] = np.nan
+            return tips
+        foot = tips - ankles
+        lands = flat & np.isnan(self.direction[:, 0])  # from the direction as it stands
+        if lands.any():
+            landed = qrot(_quaternion(self.turned[lands]), foot[lands])
+            self.direction[lands] = (landed if self.flat_pitch is None else
+                                     pitched(landed, self.flat_pitch))
+        self.direction[~flat] = np.nan
+        self.tilt[~flat] *= self.decay
+        if flat.any():
+            tilt = _between(foot[flat], self.direction[flat])
+            angle = np.linalg.norm(tilt, axis=-1, keepdims=True)
+            # the motion turned the foot further than a foot length at the toe: it turns along
+            far = angle[:, 0] > MAX_HOLD_FEET
+            if far.any():
+                tilt[far] *= MAX_HOLD_FEET / angle[far]
+                self.direction[np.flatnonzero(flat)[far]] = qrot(_quaternion(tilt[far]),
+                                                                 foot[flat][far])
+            self.tilt[flat] = tilt
+        self.turned += self.smoothing * (self.tilt - self.turned)
+        # faded out (under a nanoradian): nothing to turn, and nothing to compute from now on
+        self.turned[~flat & (np.abs(self.turned).max(axis=-1) < 1e-9)] = 0.0
+        self.turn = _quaternion(self.turned)
+        return ankles + qrot(self.turn, foot)
 
     def targets(self, feet: np.ndarray, heel: np.ndarray, toe: np.ndarray) -> np.ndarray:
         """feet : (4, 3) one frame's positions of the joints :attr:`feet`; heel, toe : (2,)
-        contact probabilities -> (2, 3) where each ankle should be."""
+        contact probabilities -> (2, 3) where each ankle should be; :attr:`turn` (2, 4) then
+        holds how each foot turns about its ankle (world frame)."""
         out = np.empty((len(LEGS), 3))
+        heel, toe = np.asarray(heel), np.asarray(toe)
+        flat = (heel > self.threshold) & (toe > self.threshold) & self.hold_flat
+        tips = self._turn(feet, flat)
         for side in range(len(LEGS)):
-            ankle, tip = feet[side], feet[len(LEGS) + side]
+            ankle, tip = feet[side], tips[side]
             kind = ("heel" if heel[side] > self.threshold else
                     "toe" if toe[side] > self.threshold else None)
             held = self.held[side]
@@ -183,10 +307,15 @@ class FootLock:
             out[side] = ankle + self.applied[side]
         return out
 
-    def moved(self, feet: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    def moved(self, feet: np.ndarray, targets: np.ndarray, turns: np.ndarray | None = None
+              ) -> np.ndarray:
         """(..., 2) whether each ankle's target differs from where it is (feet (..., 4, 3),
-        targets (..., 2, 3)): the legs :meth:`bend` changes."""
-        return np.any(np.abs(targets - feet[..., :len(LEGS), :]) > 1e-9, axis=-1)
+        targets (..., 2, 3)) or its foot turns (turns (..., 2, 4), :attr:`turn`): the legs
+        :meth:`bend` changes."""
+        out = np.any(np.abs(targets - feet[..., :len(LEGS), :]) > 1e-9, axis=-1)
+        if turns is not None:
+            out |= np.any(np.abs(turns[..., :3]) > 1e-12, axis=-1)
+        return out
 
     def legs(self, local: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Global rotations and positions (T, K, ...) of :attr:`joints`, the legs and their
@@ -194,19 +323,24 @@ class FootLock:
         return fk(normalize(local[:, self.joints]), root, self.sub_offsets, self.sub_parents)
 
     def bend(self, local: np.ndarray, root: np.ndarray, targets: np.ndarray,
-             legs: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+             legs: tuple[np.ndarray, np.ndarray] | None = None,
+             turns: np.ndarray | None = None) -> np.ndarray:
         """local : (T, J, 4) rotations and root : (T, 3) of frames; targets : (T, 2, 3)
-        from :meth:`targets`; ``legs``: :meth:`legs` of the same frames when at hand -> the
-        local rotations with the legs bent."""
+        from :meth:`targets` and turns (T, 2, 4) its :attr:`turn` (None: the feet keep their
+        orientation); ``legs``: :meth:`legs` of the same frames when at hand -> the local
+        rotations with the legs bent."""
         from imuloco.ops.ik import two_bone
+        from imuloco.ops.rotations import qmul
 
         glob, pos = self.legs(local, root) if legs is None else legs
         local = normalize(local)
-        frame, leg = np.nonzero(self.moved(pos[:, self.sub_feet], targets))
+        frame, leg = np.nonzero(self.moved(pos[:, self.sub_feet], targets, turns))
         if len(frame):
             rows = self.rows[leg]
-            new = two_bone(glob[frame[:, None], rows], pos[frame[:, None], rows[:, 1::2]],
-                           targets[frame, leg])
+            chain = glob[frame[:, None], rows]
+            if turns is not None:  # the foot's new orientation: turned about the ankle
+                chain[:, 5] = qmul(turns[frame, leg], chain[:, 5])
+            new = two_bone(chain, pos[frame[:, None], rows[:, 1::2]], targets[frame, leg])
             local[frame[:, None], np.array(self.chains)[leg]] = new
         return local
 

@@ -42,7 +42,7 @@ from imuloco.methods.learned.model import (
     Reconstructor,
     TorchFK,
 )
-from imuloco.methods.postprocess import FootLock, FootPinner, lock_feet, pin_feet
+from imuloco.methods.postprocess import FootLock, FootPinner, flat_foot_pitch, lock_feet, pin_feet
 from imuloco.methods.training import VALIDATION_SHARE, Example, TrainingSet, held_out
 from imuloco.ops.kinematics import joint_positions
 from imuloco.ops.rotations import from_6d, to_6d
@@ -232,6 +232,7 @@ class Learned(Method):
         self.net_.eval()
         self._fit_novelty(train_set, val_set, data.fps)
         self.calibration_ = None
+        self.flat_pitch_ = flat_foot_pitch(e.motion for e in data.examples)
 
     def _validation_split(self, examples: list[Example]) -> tuple[list[Example], list[Example]]:
         """Training and validation clips: ``validation`` of them by CRC32 of the name."""
@@ -414,7 +415,7 @@ class Learned(Method):
     def reconstruct_signals_full(self, signals: np.ndarray) -> Reconstruction:
         out = self.predict(signals)
         motion = lock(pin(pose.decode(out.vectors, self.skeleton_, self.fps_), out.contacts),
-                      out.contacts)
+                      out.contacts, self.flat_pitch_)
         err, flag, note = self.confidence(out)
         return Reconstruction(motion, err, flag, note, out.scores())
 
@@ -496,6 +497,8 @@ class Learned(Method):
         values = {"output_mirror": bool(self.output_mirror_), "history": self.history_,
                   "channels": int(self.x_mean_.shape[0]), "pose_dim": int(self.y_mean_.shape[0]),
                   "calibration": self.calibration_}
+        if self.flat_pitch_ is not None:
+            values.update(flat_pitch=self.flat_pitch_)
         if self.novelty_mean_ is not None:
             arrays.update(novelty_mean=self.novelty_mean_,
                           novelty_precision=self.novelty_precision_)
@@ -512,6 +515,8 @@ class Learned(Method):
         if "protocol" in values:  # files from before the base class saved the protocol
             self.protocol_ = values["protocol"]
         self.calibration_ = values.get("calibration")
+        # None: a file from before (the lock holds a flat foot at the pitch it lands with)
+        self.flat_pitch_ = values.get("flat_pitch")
         self.novelty_mean_ = arrays.get("novelty_mean")  # None: a file from before novelty
         if self.novelty_mean_ is not None:
             self.novelty_precision_ = arrays["novelty_precision"]
@@ -576,6 +581,7 @@ def ensemble(models: Sequence[Learned]) -> Learned:
     ).eval()
     new.history_ = [{"member": k, **row} for k, m in enumerate(models) for row in m.history_]
     new.calibration_ = None
+    new.flat_pitch_ = first.flat_pitch_  # the members learned from the same motions
     _mean_novelty(new, models)
     protocols = [{**getattr(m, "protocol_", {}), "model_seed": int(m.seed)} for m in models]
     new.protocol_ = {**protocols[0], "members": protocols,
@@ -636,11 +642,14 @@ def pin(motion: Motion, contacts: np.ndarray) -> Motion:
     return pin_feet(motion, contacts, PIN_PARTS, PIN_SMOOTHING)
 
 
-def lock(motion: Motion, contacts: np.ndarray) -> Motion:
+def lock(motion: Motion, contacts: np.ndarray, flat_pitch: float | None = None) -> Motion:
     """:func:`imuloco.methods.postprocess.lock_feet` with the predicted heel and toe contacts
     (:data:`CONTACT_PARTS` order: left and right heel, then toe), smoothed as the root's
-    pinning is."""
-    return lock_feet(motion, contacts[:, :2], contacts[:, 2:], PIN_SMOOTHING)
+    pinning is; a flat foot held at ``flat_pitch`` (a model's ``flat_pitch_``, the
+    :func:`imuloco.methods.postprocess.flat_foot_pitch` of the motions it learned from; None
+    in files from before it: the pitch the foot lands with)."""
+    return lock_feet(motion, contacts[:, :2], contacts[:, 2:], PIN_SMOOTHING,
+                     flat_pitch=flat_pitch)
 
 
 class LearnedStream(Stream):
@@ -661,7 +670,8 @@ class LearnedStream(Stream):
         self.integrator = PoseIntegrator(model.skeleton_, model.fps_)
         self.feet = [model.skeleton_.part(p) for p in PIN_PARTS]
         self.pinner = FootPinner(PIN_SMOOTHING)
-        self.lock = FootLock(model.skeleton_, model.fps_, PIN_SMOOTHING)
+        self.lock = FootLock(model.skeleton_, model.fps_, PIN_SMOOTHING,
+                             flat_pitch=model.flat_pitch_)
         if self.feet != self.lock.feet:  # step() hands the pinned feet to the lock as they are
             raise ValueError(f"the foot lock reads joints {self.lock.feet}, pinning {self.feet}")
         self.measure_spread = model.member_spread()
@@ -695,6 +705,7 @@ class LearnedStream(Stream):
         feet = feet - raw_root + root  # the lock's feet too (checked in __init__)
         c = self.contacts
         targets = self.lock.targets(feet, c[:2], c[2:])
-        if not self.lock.moved(feet, targets).any():  # no leg to bend
+        turns = self.lock.turn
+        if not self.lock.moved(feet, targets, turns).any():  # no leg to bend
             return rot, root
-        return self.lock.bend(rot[None], root[None], targets[None])[0], root
+        return self.lock.bend(rot[None], root[None], targets[None], turns=turns[None])[0], root
