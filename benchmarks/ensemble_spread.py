@@ -7,7 +7,7 @@ The tenth round (``docs/results/learned/experiments.md``) found no calibration o
 sigma and novelty that is honest per content: a fold's model errs on forward walking, which
 looks familiar to it, twice as much as on the turns. A third score is tried here: the
 *spread* of a deep ensemble (Lakshminarayanan et al. 2017), how far its members' joint
-positions part (:class:`imuloco.methods.learned.model.MemberSpread`), per frame.
+positions part (:func:`imuloco.methods.learned.method.member_spread`), per frame.
 
 Protocols as ``docs/results/generalization/README.md``: ``heldout-contents`` (both
 Bandai-Namco sets, 30 clips a folder) and ``cross-dataset`` (the same 60 clips -> 30

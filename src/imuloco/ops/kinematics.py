@@ -26,19 +26,26 @@ def fk(
     global_rotations : ndarray, shape (..., J, 4)
     positions : ndarray, shape (..., J, 3)
     """
-    rotations = np.asarray(rotations, dtype=np.float64)
     # Rotation matrices: one scipy conversion each way, and a matrix product per joint, cost
     # less than quaternion products (numpy call overhead dominates for a single frame).
-    local = to_matrix(rotations)
+    glob, pos = fk_matrices(to_matrix(np.asarray(rotations, dtype=np.float64)), root, offsets,
+                            parents)
+    return from_matrix(glob), pos
+
+
+def fk_matrices(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, parents: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fk` of local rotation matrices (..., J, 3, 3): global rotation matrices
+    (..., J, 3, 3) and positions (..., J, 3)."""
     glob = np.empty_like(local)
-    pos = np.empty(rotations.shape[:-1] + (3,))
+    pos = np.empty(local.shape[:-2] + (3,))
     glob[..., 0, :, :] = local[..., 0, :, :]
     pos[..., 0, :] = root
     for j in range(1, len(parents)):  # the tree order is inherently sequential; J is small
         p = parents[j]
         glob[..., j, :, :] = glob[..., p, :, :] @ local[..., j, :, :]
         pos[..., j, :] = pos[..., p, :] + glob[..., p, :, :] @ offsets[j]
-    return from_matrix(glob), pos
+    return glob, pos
 
 
 def joint_positions(rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray,

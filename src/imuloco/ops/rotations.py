@@ -198,11 +198,18 @@ def to_6d(q: np.ndarray) -> np.ndarray:
 
 def from_6d(d: np.ndarray) -> np.ndarray:
     """6-D representation (..., 6) -> q (..., 4), by Gram-Schmidt orthogonalisation."""
+    return from_matrix(matrices_from_6d(d), orthonormal=True)
+
+
+def matrices_from_6d(d: np.ndarray) -> np.ndarray:
+    """6-D representation (..., 6) -> rotation matrices (..., 3, 3), by Gram-Schmidt
+    orthogonalisation (the columns: the first half normalized, the second half made
+    orthogonal to it and normalized, their cross product)."""
     d = np.asarray(d, dtype=np.float64)
     a = d[..., :3] / np.linalg.norm(d[..., :3], axis=-1, keepdims=True)
     b = d[..., 3:] - np.sum(a * d[..., 3:], axis=-1, keepdims=True) * a
     b = b / np.linalg.norm(b, axis=-1, keepdims=True)
-    return from_matrix(np.stack([a, b, cross(a, b)], axis=-1), orthonormal=True)
+    return np.stack([a, b, cross(a, b)], axis=-1)
 
 
 def about_y(theta: np.ndarray) -> np.ndarray:

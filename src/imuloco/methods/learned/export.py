@@ -10,7 +10,7 @@ de-standardization (and, for a mirrored model, the mirroring) baked in:
   (1, T, 4) probabilities, ``sigma`` (1, T) metres, ``h_out`` to feed back, and
   ``novelty_frame`` (1, T): each frame's novelty before its causal smoothing (NaN for a model
   file from before novelty was measured), and ``spread`` (1, T) metres: an ensemble's members'
-  disagreement (:class:`imuloco.methods.learned.model.MemberSpread`; NaN for one network).
+  disagreement (:func:`imuloco.methods.learned.method.member_spread`; NaN for one network).
 
 The host smooths the novelty as :meth:`imuloco.methods.learned.method.Learned._novelty` does,
 ``n[0] = f[0]``, ``n[k] = a f[k] + (1 - a) n[k - 1]`` with ``a`` the metadata's
@@ -39,7 +39,7 @@ from torch import nn
 from imuloco.core.mirror import mirror_pairs
 from imuloco.io.atomic import atomic_path, check_output
 from imuloco.methods.learned.method import CONTACT_SWAP, Learned
-from imuloco.methods.learned.model import CONTACT_PARTS, rotation_from_6d
+from imuloco.methods.learned.model import CONTACT_PARTS, Ensemble, TorchFK, rotation_from_6d
 
 
 class _Exported(nn.Module):
@@ -59,8 +59,9 @@ class _Exported(nn.Module):
             self.register_buffer("n_precision", torch.as_tensor(
                 model.novelty_precision_ / (len(model.novelty_mean_) * model.novelty_scale_),
                 dtype=f))
-        self.spread = model.member_spread()
         sk = model.skeleton_
+        self.spread = (_MemberSpread(model.y_mean_, model.y_std_, sk.offsets, sk.parents)
+                       if isinstance(model.net_, Ensemble) else None)
         self.j = sk.num_joints
         if self.mirror:
             parents = np.asarray(sk.parents)
@@ -101,6 +102,26 @@ class _Exported(nn.Module):
             pose = torch.cat([six, pose[..., 6 * j:] * sign], dim=-1)
             contacts = contacts[..., CONTACT_SWAP]
         return pose, contacts, sigma, h_out, novelty, spread
+
+
+class _MemberSpread(nn.Module):
+    """:func:`imuloco.methods.learned.method.member_spread` in the graph, from the members'
+    standardized poses (..., K, D) (the numpy function runs offline and in the stream: its
+    per-joint loop costs a stream step far less than torch's per-operation overhead)."""
+
+    def __init__(self, y_mean: np.ndarray, y_std: np.ndarray, offsets: np.ndarray,
+                 parents: np.ndarray) -> None:
+        super().__init__()
+        self.register_buffer("y_mean", torch.as_tensor(np.asarray(y_mean), dtype=torch.float32))
+        self.register_buffer("y_std", torch.as_tensor(np.asarray(y_std), dtype=torch.float32))
+        self.fk = TorchFK(offsets, parents)
+        self.j = len(self.fk.parents)
+
+    def forward(self, poses: torch.Tensor) -> torch.Tensor:
+        v = poses * self.y_std + self.y_mean
+        pos = self.fk(rotation_from_6d(v[..., : 6 * self.j].unflatten(-1, (self.j, 6))))[..., 1:, :]
+        dev = ((pos - pos.mean(-3, keepdim=True)) ** 2).sum((-1, -3))
+        return (dev.mean(-1) / (poses.shape[-2] - 1)).sqrt()
 
 
 def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Path:

@@ -30,22 +30,17 @@ import torch
 
 from imuloco.core.mirror import mirror, mirror_frames, mirror_pairs, mirror_rotations
 from imuloco.core.motion import Motion
+from imuloco.core.skeleton import Skeleton
 from imuloco.errors import InputError
 from imuloco.methods import pose
 from imuloco.methods.base import Method, Reconstruction, Stream, calibrated_error
 from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
-from imuloco.methods.learned.model import (
-    CONTACT_PARTS,
-    Ensemble,
-    MemberSpread,
-    Reconstructor,
-    TorchFK,
-)
+from imuloco.methods.learned.model import CONTACT_PARTS, Ensemble, Reconstructor, TorchFK
 from imuloco.methods.postprocess import FootLock, FootPinner, flat_foot_pitch, lock_feet, pin_feet
 from imuloco.methods.training import VALIDATION_SHARE, Example, TrainingSet, held_out
-from imuloco.ops.kinematics import joint_positions
-from imuloco.ops.rotations import from_6d, to_6d
+from imuloco.ops.kinematics import fk_matrices, joint_positions
+from imuloco.ops.rotations import from_6d, matrices_from_6d, to_6d
 
 HEADING_REFLECTION = np.diag([-1.0, 1.0, 1.0])  # left is +X in the heading frame
 CONTACT_SWAP = [CONTACT_PARTS.index(p.replace("left", "#").replace("right", "left")
@@ -63,7 +58,7 @@ class Prediction:
     novelty : ndarray, shape (T,), how unfamiliar the frame's features are (about 1 on the
         motions the model was trained on; :meth:`Learned._fit_novelty`).
     spread : ndarray, shape (T,), an ensemble's members' disagreement, metres
-        (:class:`.model.MemberSpread`); None for one network.
+        (:func:`member_spread`); None for one network.
     """
 
     vectors: np.ndarray
@@ -367,32 +362,25 @@ class Learned(Method):
         s = np.nan_to_num(np.asarray(signals, dtype=np.float64)) @ self.input_map_.T
         return torch.as_tensor((s - self.x_mean_) / self.x_std_, dtype=torch.float32)
 
-    def member_spread(self) -> MemberSpread | None:
-        """The measure of this ensemble's members' disagreement (:class:`.model.MemberSpread`,
-        on the model's standardization, which every member reads); None for one network."""
-        if not isinstance(self.net_, Ensemble):
-            return None
-        sk = self.skeleton_
-        return MemberSpread(self.y_mean_, self.y_std_, sk.offsets, sk.parents)
-
-    def _heads(self, feats: torch.Tensor, spread: MemberSpread | None
+    def _heads(self, feats: torch.Tensor
                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
-        """The heads' pose, contact logits and logvar of features (B, T, W), and the members'
-        spread (B, T) where ``spread`` (:meth:`member_spread`) is given."""
-        if spread is None:
+        """The heads' pose, contact logits and logvar of features (B, T, W), and an ensemble's
+        members' standardized poses (B, T, K, D) (None for one network)."""
+        if not isinstance(self.net_, Ensemble):
             return (*self.net_.heads(feats), None)
         poses, logit, logvar = self.net_.member_heads(feats)
-        return poses.mean(-2), logit, logvar, spread(poses)
+        return poses.mean(-2), logit, logvar, poses
 
     def _outputs(self, p: torch.Tensor, logit: torch.Tensor, logvar: torch.Tensor,
-                 novelty: np.ndarray, spread: torch.Tensor | None = None) -> Prediction:
+                 novelty: np.ndarray, members: torch.Tensor | None = None) -> Prediction:
         vectors = p.numpy().astype(np.float64) * self.y_std_ + self.y_mean_
         contacts = torch.sigmoid(logit).numpy().astype(np.float64)
         if self.output_mirror_:
             vectors, contacts = self._mirror_vectors(vectors), contacts[..., CONTACT_SWAP]
         sigma = np.exp(0.5 * logvar.numpy()[..., 0].astype(np.float64))
-        return Prediction(vectors, contacts, sigma, novelty,
-                          None if spread is None else spread.numpy().astype(np.float64))
+        spread = None if members is None else member_spread(  # a mirror keeps distances
+            members.numpy().astype(np.float64) * self.y_std_ + self.y_mean_, self.skeleton_)
+        return Prediction(vectors, contacts, sigma, novelty, spread)
 
     def predict(self, signals: np.ndarray) -> Prediction:
         """Network outputs for signals (T, 6 S) at the model rate, run from a zero state."""
@@ -404,10 +392,10 @@ class Learned(Method):
         signals = _hold_last(signals, k)  # as a stream would be fed to get every frame
         with torch.no_grad():
             feats, _ = self.net_.encode(self._inputs(signals)[None])
-            p, logit, logvar, spread = self._heads(feats, self.member_spread())
+            p, logit, logvar, members = self._heads(feats)
         novelty = self._novelty(feats[0].numpy().astype(np.float64))
         return self._outputs(p[0, k:], logit[0, k:], logvar[0, k:], novelty[k:],
-                             None if spread is None else spread[0, k:])
+                             None if members is None else members[0, k:])
 
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
         return self.reconstruct_signals_full(signals).motion
@@ -590,6 +578,21 @@ def ensemble(models: Sequence[Learned]) -> Learned:
     return new
 
 
+def member_spread(vectors: np.ndarray, skeleton: Skeleton) -> np.ndarray:
+    """How much an ensemble's members disagree on a frame, metres: ``vectors`` (..., K, D)
+    the members' pose vectors (K >= 2) -> (...) the rms over joints (but the root) of the
+    standard deviation over the members (K - 1 in the denominator, so that any K estimates
+    the same) of their root-relative joint positions in the heading frame (the forward
+    kinematics of their local rotations). Where members trained from other seeds part ways,
+    none of them knows the motion (Lakshminarayanan et al. 2017)."""
+    j = skeleton.num_joints
+    rot = matrices_from_6d(vectors[..., : 6 * j].reshape(*vectors.shape[:-1], j, 6))
+    pos = fk_matrices(rot, np.zeros(rot.shape[:-3] + (3,)), skeleton.offsets,
+                      skeleton.parents)[1][..., 1:, :]
+    dev = np.square(pos - pos.mean(axis=-3, keepdims=True)).sum(axis=(-1, -3))
+    return np.sqrt(dev.mean(axis=-1) / (vectors.shape[-2] - 1))
+
+
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
     return np.shape(a) == np.shape(b) and bool(np.allclose(a, b))
 
@@ -674,7 +677,6 @@ class LearnedStream(Stream):
                              flat_pitch=model.flat_pitch_)
         if self.feet != self.lock.feet:  # step() hands the pinned feet to the lock as they are
             raise ValueError(f"the foot lock reads joints {self.lock.feet}, pinning {self.feet}")
-        self.measure_spread = model.member_spread()
         self.contacts = np.zeros(len(PIN_PARTS))
         self.sigma = float("nan")
         self.novelty: float | None = None  # the smoothed novelty of the last frame read
@@ -684,7 +686,7 @@ class LearnedStream(Stream):
         with torch.inference_mode():
             x = m._inputs(np.asarray(sample)[None])
             feats, self.h = m.net_.encode(x[None], self.h)
-            p, logit, logvar, spread = m._heads(feats, self.measure_spread)
+            p, logit, logvar, members = m._heads(feats)
         nov = m._novelty(feats[0].numpy().astype(np.float64), self.novelty)
         self.novelty = float(nov[-1])
         self.seen += 1
@@ -692,7 +694,7 @@ class LearnedStream(Stream):
             return self.rest[0].copy(), self.rest[1].copy()
         # the novelty of the frame read, not of the (delayed) frame returned: it lags the
         # offline result's by the look-ahead, within the smoothing's time constant
-        out = m._outputs(p[0], logit[0], logvar[0], nov, None if spread is None else spread[0])
+        out = m._outputs(p[0], logit[0], logvar[0], nov, None if members is None else members[0])
         self.contacts, self.sigma = out.contacts[0], float(out.sigma[0])
         err, flag, _ = m.confidence(out)
         self.error_m = float(err[0])

@@ -13,8 +13,7 @@ pose reads the whole recording, both ways. Heads, per frame:
   a Gaussian negative log-likelihood; its square root is the per-frame confidence in metres.
 
 ``Ensemble`` averages several ``Reconstructor`` s trained from other seeds behind the same
-interface (a deep ensemble); :meth:`Ensemble.member_heads` also gives each member's pose, whose
-disagreement :class:`MemberSpread` measures in metres.
+interface (a deep ensemble); :meth:`Ensemble.member_heads` also gives each member's pose.
 """
 
 from __future__ import annotations
@@ -288,32 +287,3 @@ class TorchFK(nn.Module):
             pos.append(pos[p] + (grot[p] @ self.offsets[j].unsqueeze(-1)).squeeze(-1))
         return torch.stack(pos, dim=-2)
 
-
-class MemberSpread(nn.Module):
-    """How much an ensemble's members disagree on a frame's pose, metres: the rms over joints
-    (but the root) of the standard deviation of the members' joint positions (root at the
-    origin, heading frame: the forward kinematics of their pose vectors' local rotations),
-    divided by K - 1 so that it estimates the same for any member count. Where the members,
-    trained from other seeds, part ways, none of them knows the motion (Lakshminarayanan et
-    al. 2017).
-
-    Parameters
-    ----------
-    y_mean, y_std : ndarray, shape (D,), the standardization of the members' pose outputs.
-    offsets, parents : the output skeleton (:class:`TorchFK`).
-    """
-
-    def __init__(self, y_mean: np.ndarray, y_std: np.ndarray, offsets: np.ndarray,
-                 parents: np.ndarray) -> None:
-        super().__init__()
-        self.register_buffer("y_mean", torch.as_tensor(np.asarray(y_mean), dtype=torch.float32))
-        self.register_buffer("y_std", torch.as_tensor(np.asarray(y_std), dtype=torch.float32))
-        self.fk = TorchFK(offsets, parents)
-        self.j = len(self.fk.parents)
-
-    def forward(self, poses: torch.Tensor) -> torch.Tensor:
-        """Standardized member poses (..., K, D), K >= 2 -> spread (...), metres."""
-        v = poses * self.y_std + self.y_mean
-        pos = self.fk(rotation_from_6d(v[..., : 6 * self.j].unflatten(-1, (self.j, 6))))[..., 1:, :]
-        dev = ((pos - pos.mean(-3, keepdim=True)) ** 2).sum((-1, -3)) / (poses.shape[-2] - 1)
-        return dev.mean(-1).sqrt()
