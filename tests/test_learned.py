@@ -517,3 +517,12 @@ def test_a_model_keeps_the_pitch_of_a_flat_foot_it_learned(sample_db, tiny_model
     data["__header__"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
     np.savez(path, **data)
     assert load_model(path).flat_pitch_ is None
+    # a file that says something else is refused by name, with the file
+    from imuloco.errors import ModelFileError
+
+    for wrong in ("flat", 4.0, [0.1]):
+        header["values"]["flat_pitch"] = wrong
+        data["__header__"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+        np.savez(path, **data)
+        with pytest.raises(ModelFileError, match=r"old\.npz.*flat_pitch"):
+            load_model(path)

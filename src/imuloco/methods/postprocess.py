@@ -11,7 +11,7 @@ from scipy.signal import lfilter
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.ops.kinematics import fk
-from imuloco.ops.rotations import cross, normalize
+from imuloco.ops.rotations import cross, normalize, qmul, qrot
 
 
 def _check_smoothing(smoothing: float) -> None:
@@ -149,13 +149,14 @@ def pitched(d: np.ndarray, pitch: float) -> np.ndarray:
     return np.where(flat > 1e-9 * np.maximum(length, 1e-12), out, d)
 
 
-def flat_foot_pitch(motions: Iterable[Motion]) -> float:
+def flat_foot_pitch(motions: Iterable[Motion]) -> float | None:
     """The pitch of a foot flat on the floor in ``motions``, radians: the median over both feet
     and every frame whose heel and toe are both in contact
     (:func:`imuloco.phases.foot_contacts`) of the ankle-to-toe direction's angle against the
     horizontal (negative: the toe joint below the ankle joint). A property of the rig and its
     capture (-39.6 degrees on Bandai-Namco's), where a landing foot still rolls onto the
-    floor. Raises ValueError when no frame has a flat foot."""
+    floor. None when no frame has a flat foot (a training set of sprints, say: a model then
+    holds a flat foot at the pitch it lands with)."""
     from imuloco.phases.contacts import foot_contacts
 
     pitches = []
@@ -170,9 +171,7 @@ def flat_foot_pitch(motions: Iterable[Motion]) -> float:
                  - pos[flat, m.skeleton.part(f"{side}_ankle")])
             pitches.append(np.arctan2(d[:, 1], np.linalg.norm(d[:, [0, 2]], axis=-1)))
     pitches = np.concatenate(pitches) if pitches else np.zeros(0)
-    if not pitches.size:
-        raise ValueError("flat_foot_pitch: no frame of the motions has a foot flat on the floor")
-    return float(np.median(pitches))
+    return float(np.median(pitches)) if pitches.size else None
 
 
 def _quaternion(r: np.ndarray) -> np.ndarray:
@@ -247,8 +246,6 @@ class FootLock:
         """Update the feet's turns (:attr:`turn`) for one frame: feet (4, 3) as in
         :meth:`targets`, flat (2,) which feet lie flat -> (2, 3) the toes as the turns put
         them."""
-        from imuloco.ops.rotations import qrot
-
         ankles, tips = feet[:len(LEGS)], feet[len(LEGS):]
         if not (flat.any() or self.turned.any()):  # nothing held, nothing fading
             self.direction[:] = np.nan
@@ -330,7 +327,6 @@ class FootLock:
         orientation); ``legs``: :meth:`legs` of the same frames when at hand -> the local
         rotations with the legs bent."""
         from imuloco.ops.ik import two_bone
-        from imuloco.ops.rotations import qmul
 
         glob, pos = self.legs(local, root) if legs is None else legs
         local = normalize(local)

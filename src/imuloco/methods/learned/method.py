@@ -504,7 +504,12 @@ class Learned(Method):
             self.protocol_ = values["protocol"]
         self.calibration_ = values.get("calibration")
         # None: a file from before (the lock holds a flat foot at the pitch it lands with)
-        self.flat_pitch_ = values.get("flat_pitch")
+        pitch = values.get("flat_pitch")
+        if pitch is not None and not (isinstance(pitch, (int, float))
+                                      and abs(pitch) <= np.pi / 2):
+            raise ValueError(f"flat_pitch: expected an angle in radians within +-pi/2, "
+                             f"got {pitch!r}")
+        self.flat_pitch_ = None if pitch is None else float(pitch)
         self.novelty_mean_ = arrays.get("novelty_mean")  # None: a file from before novelty
         if self.novelty_mean_ is not None:
             self.novelty_precision_ = arrays["novelty_precision"]
