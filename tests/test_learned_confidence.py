@@ -258,6 +258,19 @@ def test_bench_writes_confidence_and_calibrate_uses_it(tmp_path):
     assert res.exit_code != 0 and "spread_m needs an ensemble" in res.output
     res = CliRunner().invoke(cli, ["calibrate", str(ens), "--check", str(out)])
     assert res.exit_code != 0 and "no score ['spread_m']" in res.output
+    # cross-dataset rows also carry the error against the truth on the training skeleton
+    cross = tmp_path / "cross"
+    cross.mkdir()
+    with np.load(next(out.glob("confidence-*.npz")), allow_pickle=False) as z:
+        rows = {k: z[k] for k in z.files}
+    np.savez(cross / "confidence-learned.npz", **rows, actual_retargeted_m=rows["actual_m"] / 2)
+    res = CliRunner().invoke(cli, ["calibrate", str(out), "--check", str(cross)])
+    assert res.exit_code == 0, res.output
+    title = "against the truth retargeted onto the training skeleton"
+    halves = [line for line in res.output.split(title)[1].splitlines() if "| all |" in line]
+    whole = [line for line in res.output.split(title)[0].splitlines() if "| all |" in line]
+    half_cm, whole_cm = (float(lines[-1].split("|")[3]) for lines in (halves, whole))
+    assert half_cm == pytest.approx(whole_cm / 2, abs=0.01)
 
 
 def test_train_writes_the_mirrored_model(tmp_path):

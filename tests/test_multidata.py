@@ -127,6 +127,38 @@ def test_evaluate_parts_also_scores_against_the_retargeted_truth(sample):
     assert perfect["upper_retargeted_cm"] < 1e-6 and perfect["lower_retargeted_cm"] < 1e-6
 
 
+def test_cross_dataset_confidence_rows_also_hold_the_error_against_the_retargeted_truth(sample):
+    """A reconstruction equal to the truth on the training rig: its confidence rows' actual
+    error on the other rig's parts is the proportions' floor, against the retargeted truth
+    zero."""
+    from imuloco.evaluate.bench import measure
+    from imuloco.evaluate.confidence import check
+    from imuloco.methods.base import Reconstruction
+    from imuloco.methods.training import Example
+
+    c = sample.clips[0]
+    o = other_rig(c, 1.3)
+    arms = [i for i, n in enumerate(o.skeleton.names) if "Arm" in n or "Hand" in n]
+    offsets = o.skeleton.offsets.copy()
+    offsets[arms] *= 1.3  # a body with longer arms, moving alike
+    longer = Motion(Skeleton(o.skeleton.names, o.skeleton.parents, offsets), o.rotations,
+                    o.root, o.fps)
+
+    class Perfect:
+        name = "perfect"
+
+        def reconstruct_signals_full(self, signals):
+            n = len(signals)
+            return Reconstruction(c, np.full(n, 0.05), np.zeros(n, bool), "",
+                                  {"sigma_m": np.full(n, 0.05)})
+
+    ex = Example(longer, np.zeros((c.num_frames, 6)), {"name": "a", "content": "walk"})
+    (rows,) = measure(Perfect(), [ex], truths={"a": c})["confidence"]
+    assert rows["actual_m"].mean() > 0.005 and rows["actual_retargeted_m"].max() < 1e-8
+    (t, _all) = check(rows, actual="actual_retargeted_m")
+    assert t["actual_cm"] < 1e-6 and t["predicted_cm"] == pytest.approx(5.0)
+
+
 def test_heldout_contents_has_a_fold_per_content(sample):
     out = folds(sample, "heldout-contents")
     assert [f for f, _, _ in out] == ["walk", "walk-turn-left", "walk-turn-right", "run"]

@@ -565,9 +565,13 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
         if missing:
             raise click.UsageError(f"{d}: its rows have no score {missing}, which the "
                                    f"calibration of RESULTS maps (scores {sorted(scores)})")
+        predicted = calibrated_error(calibration, scores)
         tables[f"{d}: uncalibrated"] = conf.check(other)
-        tables[f"{d}: calibrated on all of RESULTS"] = conf.check(
-            other, calibrated_error(calibration, scores))
+        tables[f"{d}: calibrated on all of RESULTS"] = conf.check(other, predicted)
+        if "actual_retargeted_m" in other:  # cross-dataset: also against the truth on the rig
+            tables[f"{d}: calibrated on all of RESULTS, against the truth retargeted onto the "
+                   "training skeleton"] = conf.check(other, predicted,
+                                                     actual="actual_retargeted_m")
     text = "".join(f"\n{title}\n\n{conf.markdown(t)}" for title, t in tables.items())
     click.echo(f"calibration: {calibration}")
     click.echo(text)

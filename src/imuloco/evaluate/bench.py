@@ -37,7 +37,9 @@ Protocol details fixed here (see also :mod:`imuloco.evaluate.protocols`):
 - Confidence: for a method that predicts its own per-frame error
   (:class:`imuloco.methods.base.Reconstruction`), ``confidence-METHOD.npz`` holds per test
   frame the actual rms joint (or body-part) position error, the predicted one, the unreliable
-  flag and the uncalibrated scores, with clip, content, fold and seed: what
+  flag and the uncalibrated scores, with clip, content, fold and seed (``cross-dataset`` adds
+  ``actual_retargeted_m``, the body-part error against the truth retargeted onto the training
+  skeleton, whose floor is zero): what
   :mod:`imuloco.evaluate.confidence` checks and calibrates. Each method runs with one BLAS/OpenMP
   thread (threadpoolctl), like a single core, so that timings compare across machines'
   core counts (torch's own thread pool is the method's business).
@@ -196,10 +198,14 @@ def measure(method, test: list[Example], progress: bool = False, name: str = "",
         rec_s += time.perf_counter() - t0
         rec = full.motion
         frames += gt.num_frames
+        retargeted = None
         if gt.skeleton.names != rec.skeleton.names:
             cross = True
-            values = metrics.evaluate_parts(gt, rec, (truths or {}).get(ex.labels["name"]))
+            truth = (truths or {}).get(ex.labels["name"])
+            values = metrics.evaluate_parts(gt, rec, truth)
             actual = np.sqrt((metrics.part_errors(gt, rec)[0][:, 1:] ** 2).mean(axis=1))
+            if truth is not None:  # the same against the truth on the training skeleton
+                retargeted = np.sqrt((metrics.part_errors(truth, rec)[0][:, 1:] ** 2).mean(1))
         else:
             rec = metrics.align_heading(rec, gt, 0)
             values = metrics.evaluate(gt, rec)
@@ -210,7 +216,10 @@ def measure(method, test: list[Example], progress: bool = False, name: str = "",
         clips.append({"name": ex.labels["name"], "motion_type": ex.labels.get("content"),
                       "n_frames": gt.num_frames, **values})
         if full.error_m is not None:
-            confidence.append(_confidence_rows(full, actual, ex.labels))
+            rows = _confidence_rows(full, actual, ex.labels)
+            if retargeted is not None:
+                rows["actual_retargeted_m"] = retargeted
+            confidence.append(rows)
     return {"clips": clips, "reconstruct_s": rec_s,
             "per_joint": None if cross else joint_sum / frames, "curves": curves,
             "confidence": confidence}

@@ -104,17 +104,19 @@ def _subset(rows: Rows, mask: np.ndarray) -> Rows:
     return {k: v[mask] for k, v in rows.items()}
 
 
-def check(rows: Rows, predicted: np.ndarray | None = None, by: str = "content"
-          ) -> list[dict[str, Any]]:
+def check(rows: Rows, predicted: np.ndarray | None = None, by: str = "content",
+          actual: str = "actual_m") -> list[dict[str, Any]]:
     """Per value of ``by`` and ``"all"``: frames, actual and predicted rms error (cm), their
     ratio and whether it is within :data:`TOLERANCE`, the share of frames flagged unreliable,
     and the actual rms error (cm) of flagged and of unflagged frames. ``predicted`` defaults to
-    the rows' own ``error_m``."""
+    the rows' own ``error_m``; ``actual`` names the actual error's column
+    (``actual_retargeted_m``: ``cross-dataset``'s against the truth on the training skeleton)."""
     pred = rows["error_m"] if predicted is None else predicted
+    column = rows[actual]
     out = []
     for g in [*np.unique(rows[by]), "all"]:
         m = np.ones(len(pred), bool) if g == "all" else rows[by] == g
-        flag, err = rows["unreliable"][m], rows["actual_m"][m]
+        flag, err = rows["unreliable"][m], column[m]
         actual = float(np.sqrt(np.mean(err ** 2)))
         predicted_rms = float(np.sqrt(np.mean(pred[m] ** 2)))
 
