@@ -107,6 +107,17 @@ def test_evaluate_parts_compares_skeletons_that_differ(sample):
     assert all(values[k] is None for k in RETARGETED_KEYS)  # no retargeted truth given
 
 
+def longer_armed(c: Motion) -> Motion:
+    """``c`` on another rig 1.3 times larger, with arms a further 1.3 times longer, moving
+    alike: a body of other proportions."""
+    o = other_rig(c, 1.3)
+    arms = [i for i, n in enumerate(o.skeleton.names) if "Arm" in n or "Hand" in n]
+    offsets = o.skeleton.offsets.copy()
+    offsets[arms] *= 1.3
+    return Motion(Skeleton(o.skeleton.names, o.skeleton.parents, offsets), o.rotations,
+                  o.root, o.fps)
+
+
 def test_evaluate_parts_also_scores_against_the_retargeted_truth(sample):
     c = sample.clips[0]
     other = other_rig(c, 1.3)
@@ -115,12 +126,7 @@ def test_evaluate_parts_also_scores_against_the_retargeted_truth(sample):
     assert values["mpjpe_retargeted_cm"] > 1.0
     # the same error, measured on the 1.3 times larger body's scale or on the truth's own
     assert values["mpjpe_cm"] == pytest.approx(1.3 * values["mpjpe_retargeted_cm"], rel=1e-6)
-    o = other_rig(c, 1.3)
-    arms = [i for i, n in enumerate(o.skeleton.names) if "Arm" in n or "Hand" in n]
-    offsets = o.skeleton.offsets.copy()
-    offsets[arms] *= 1.3  # a body with longer arms, moving alike
-    longer = Motion(Skeleton(o.skeleton.names, o.skeleton.parents, offsets), o.rotations,
-                    o.root, o.fps)
+    longer = longer_armed(c)
     perfect = evaluate_parts(longer, c, retargeted=c)
     assert perfect["mpjpe_cm"] > 0.5  # the other body's proportions: a floor above zero
     assert perfect["mpjpe_retargeted_cm"] < 1e-6
@@ -137,12 +143,7 @@ def test_cross_dataset_confidence_rows_also_hold_the_error_against_the_retargete
     from imuloco.methods.training import Example
 
     c = sample.clips[0]
-    o = other_rig(c, 1.3)
-    arms = [i for i, n in enumerate(o.skeleton.names) if "Arm" in n or "Hand" in n]
-    offsets = o.skeleton.offsets.copy()
-    offsets[arms] *= 1.3  # a body with longer arms, moving alike
-    longer = Motion(Skeleton(o.skeleton.names, o.skeleton.parents, offsets), o.rotations,
-                    o.root, o.fps)
+    longer = longer_armed(c)
 
     class Perfect:
         name = "perfect"
