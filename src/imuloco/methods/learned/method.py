@@ -338,7 +338,8 @@ class Learned(Method):
 
     def confidence(self, out: Prediction) -> tuple[np.ndarray, np.ndarray | None, str]:
         """Predicted rms joint position error (T,) in metres, unreliable flags (T,) and a
-        note, from a prediction's network sigma and novelty (see :attr:`calibration_`)."""
+        note, from a prediction's scores (:meth:`Prediction.scores`; see
+        :attr:`calibration_`); the flags from the novelty alone."""
         flag = None if self.novelty_mean_ is None else out.novelty > self.novelty_threshold_
         why = ("no frames flagged (a model file from before novelty was measured)"
                if flag is None else "frames flagged where the features are farther from the "
