@@ -236,10 +236,11 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
         # a one-foot estimator against that foot's contacts, others against all contacts
         ref_ic = (ref.initial_contacts[side] if side and per_contact == 2 else
                   np.sort(np.concatenate(list(ref.initial_contacts.values()))))
+        # the bouts' span: for ipol-gait the whole trial, U-turn included (it ends on a foot
+        # strike; strikes annotated after it, up to 13 s later and some past the recording's
+        # end, are outside the trial)
         start = min(b.start for b in ref.bouts)
         end = max(b.end for b in ref.bouts)
-        if ref.definition is GaitDefinition.DISTANCE_OVER_STEPS:  # the whole trial, U-turn
-            start, end = float(ref_ic.min()), float(ref_ic.max())
         sel = (gait.initial_contacts >= start - IC_TOLERANCE_S) & (
             gait.initial_contacts <= end + IC_TOLERANCE_S)
         in_ref = ref_ic[(ref_ic >= start) & (ref_ic <= end)]

@@ -73,8 +73,8 @@ class GaitDefinition(Enum):
     mobilise-d-lab's INDIP, which measures every stride of its walking bouts."""
     DISTANCE_OVER_STEPS = "distance-over-steps"
     """The bout's fixed distance over all its steps and its time from the first foot-off, cadence
-    from its contacts' span, steps over the whole trial (turn included): ipol-gait, which
-    measures no distance but the course's 10 m."""
+    from its contacts' span, steps over the whole trial (turn included, the strikes annotated
+    after its end left out): ipol-gait, which measures no distance but the course's 10 m."""
     STRIDES_OVER_TRIAL = "strides-over-trial"
     """Strides from foot flat to foot flat counted over the whole trial, pauses included, with its
     distance and time, steps between the first and last foot flat: pyshoe-vicon, whose Vicon
