@@ -1,10 +1,10 @@
 """A shin model file's predicted error against its actual error (issue 16's confidence).
 
     python benchmarks/predicted_error.py --models shipped,A.npz,... [--data ../shared/data]
-        [-o TABLE.md]
+        [--placement right_ankle] [-o TABLE.md]
 
-For each model file (``shipped``: the shipped right-ankle model), one phone at the right
-ankle, ``phone`` noise, test seed 1000, measured as ``imuloco bench`` measures a clip
+For each model file (``shipped``: the placement's shipped model), one sensor at
+``--placement`` (the right ankle), ``phone`` noise, test seed 1000, measured as ``imuloco bench`` measures a clip
 (:func:`imuloco.evaluate.bench.measure`): the rms over frames of the actual error (rms over
 joints a frame), of the predicted error (``error_m``, calibrated when the file holds a
 calibration) and of the network's own estimate (``sigma_m``), in cm, on the ``bandai-namco-2``
@@ -40,22 +40,25 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=Path("../shared/data"))
     ap.add_argument("--models", required=True)
+    ap.add_argument("--placement", default="right_ankle")
     ap.add_argument("-o", "--output", type=Path, default=None)
     args = ap.parse_args()
     if args.output is not None:
         check_output(args.output)
     lab = held_out_clips(load_database(args.data / "bandai-namco-2", progress=False))
     other = load_database(args.data / "bandai-namco-1", progress=False)
-    sets = {"lab": synthesize(lab, ["right_ankle"], "phone", SEED),
-            "bandai-namco-1": synthesize(other, ["right_ankle"], "phone", SEED)}
+    sets = {"lab": synthesize(lab, [args.placement], "phone", SEED),
+            "bandai-namco-1": synthesize(other, [args.placement], "phone", SEED)}
     contents = sorted({c["content"] for c in other.labels})
     cols = ["lab", "bandai-namco-1", *contents]
-    lines = [(f"Actual / predicted / network's own estimate, rms over frames, cm (right ankle, "
+    lines = [(f"Actual / predicted / network's own estimate, rms over frames, cm "
+              f"({args.placement.replace('_', ' ')}, "
              f"phone noise, seed {SEED}; lab: {len(lab)} held-out bandai-namco-2 clips; "
              f"bandai-namco-1: {len(other)} clips)."), "",
              "| model | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
     for name in args.models.split(","):
-        model = load_model(shipped_model("learned", "right_ankle") if name == "shipped" else name)
+        model = load_model(shipped_model("learned", args.placement) if name == "shipped"
+                           else name)
         rows = {k: measure(model, ex)["confidence"] for k, ex in sets.items()}
         cells = [(rows[c], None) for c in ("lab", "bandai-namco-1")]
         cells += [(rows["bandai-namco-1"], c) for c in contents]
