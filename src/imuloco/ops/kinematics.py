@@ -36,16 +36,22 @@ def fk(
 def fk_matrices(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, parents: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`fk` of local rotation matrices (..., J, 3, 3): global rotation matrices
-    (..., J, 3, 3) and positions (..., J, 3)."""
+    (..., J, 3, 3) and positions (..., J, 3). The tree is walked a level at a time (all joints
+    of a depth in one product, :func:`_chains`): a few numpy calls per level rather than per
+    joint, what a stream's step of several poses is made of."""
+    order, levels, picks = _chains(np.asarray(parents, dtype=np.int64).tobytes(),
+                                   tuple(range(len(parents))))
+    local = local[..., order, :, :]
+    offsets = np.asarray(offsets, dtype=np.float64)[order][..., None]  # (J, 3, 1)
     glob = np.empty_like(local)
     pos = np.empty(local.shape[:-2] + (3,))
     glob[..., 0, :, :] = local[..., 0, :, :]
     pos[..., 0, :] = root
-    for j in range(1, len(parents)):  # the tree order is inherently sequential; J is small
-        p = parents[j]
-        glob[..., j, :, :] = glob[..., p, :, :] @ local[..., j, :, :]
-        pos[..., j, :] = pos[..., p, :] + glob[..., p, :, :] @ offsets[j]
-    return glob, pos
+    for here, up in levels:  # the tree order is inherently sequential, a level at a time
+        above = glob[..., up, :, :]
+        glob[..., here, :, :] = above @ local[..., here, :, :]
+        pos[..., here, :] = pos[..., up, :] + (above @ offsets[here])[..., 0]
+    return glob[..., picks, :, :], pos[..., picks, :]
 
 
 def joint_positions(rotations: np.ndarray, root: np.ndarray, offsets: np.ndarray,
