@@ -8,8 +8,8 @@ A measurement.
 
 The ``heldout-contents`` protocol of ``docs/results/generalization/README.md`` (both
 Bandai-Namco sets, 30 clips a folder, right ankle, ``phone`` noise, ``learned[threads=1]``
-with the bench's seeds; ``--split heldout-styles``: all of ``bandai-namco-2``, ``--params`` added to the
-method's), fold by fold: each fold's model is trained once (saved under
+with the bench's seeds; ``--split heldout-styles``: all of ``bandai-namco-2``, ``--params``
+added to the method's), fold by fold: each fold's model is trained once (saved under
 ``--models``, reused when present), and its test clips are reconstructed once; the same
 network outputs are then post-processed several ways:
 

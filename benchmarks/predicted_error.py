@@ -1,16 +1,16 @@
-"""A shin model file's predicted error against its actual error (issue 16's confidence).
+"""A model file's predicted error against its actual error (issue 16's confidence).
 
     python benchmarks/predicted_error.py --models shipped,A.npz,... [--data ../shared/data]
         [--placement right_ankle] [-o TABLE.md]
 
 For each model file (``shipped``: the placement's shipped model), one sensor at
-``--placement`` (the right ankle), ``phone`` noise, test seed 1000, measured as ``imuloco bench`` measures a clip
-(:func:`imuloco.evaluate.bench.measure`): the rms over frames of the actual error (rms over
-joints a frame), of the predicted error (``error_m``, calibrated when the file holds a
-calibration) and of the network's own estimate (``sigma_m``), in cm, on the ``bandai-namco-2``
-clips every shipped-style model holds out (:func:`imuloco.methods.training.held_out_clips`)
-and on ``bandai-namco-1`` (per content too). Models trained on ``bandai-namco-1`` are
-in-sample there.
+``--placement`` (the right ankle), ``phone`` noise, test seed 1000, measured as ``imuloco
+bench`` measures a clip (:func:`imuloco.evaluate.bench.measure`): the rms over frames of the
+actual error (rms over joints a frame), of the predicted error (``error_m``, calibrated when
+the file holds a calibration) and of the network's own estimate (``sigma_m``), in cm, on the
+``bandai-namco-2`` clips every shipped-style model holds out
+(:func:`imuloco.methods.training.held_out_clips`) and on ``bandai-namco-1`` (per content
+too). Models trained on ``bandai-namco-1`` are in-sample there.
 """
 
 from __future__ import annotations
