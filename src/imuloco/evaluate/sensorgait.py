@@ -5,10 +5,10 @@
   foot_track` (gaitmap's ``RtsKalman``). A stride's length is the horizontal distance between
   the foot's rest positions (Rampp et al. 2015). Initial and terminal contacts come from
   gaitmap's ``HerzerEventDetection`` (Rampp's gyroscope events refined with the forward
-  acceleration; its IC search on the gyroscope low-passed at 6 Hz) on strides segmented at
-  the swings' starts. gaitmap's Barth DTW segmentation and Rampp event detection live in
-  ``gaitmap_mad`` (AGPL-3.0), which this MIT package does not depend on; the swings need no
-  template.
+  acceleration; its IC search on the gyroscope low-passed at 6 Hz, and reaching the stance
+  after the contact, where a running foot lands) on strides segmented at the swings' starts.
+  gaitmap's Barth DTW segmentation and Rampp event detection live in ``gaitmap_mad``
+  (AGPL-3.0), which this MIT package does not depend on; the swings need no template.
 - Lower back (``lower_back``, L5): Mobilise-D's published pipeline from ``mobgap`` (Iluz gait
   sequence detection, Ionescu initial contacts, Ullrich left/right, Zijlstra's inverted-pendulum
   step length with Mobilise-D's published scaling factor, stride selection and walking-bout
@@ -44,6 +44,7 @@ LOWER_BACK = "lower_back"
 L5_HEIGHT_RATIO = 0.530
 MIN_STRIDES = 2
 GYRO_CUTOFF_HZ = 6.0  # walking kinematics' low-pass cutoff (Winter 2009), see foot_gait
+HERZER_IC_SHARE = 0.7  # gaitmap's HerzerEventDetection searches the IC in a stride's first 70 %
 
 
 @dataclass
@@ -181,17 +182,25 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
     gyr = ["gyr_pa", "gyr_ml", "gyr_si"]
     smooth[gyr] = ButterworthFilter(order=2, cutoff_freq_hz=GYRO_CUTOFF_HZ).filter(
         fbf[gyr], sampling_rate_hz=track.rate).filtered_data_
+    # Herzer also ends its IC search at 70 % of the stride, where a walking foot has landed;
+    # a running one lands later (its swing from heel off is 60-70 % of the stride). The IC
+    # searches get each stride at least long enough for 70 % of it to reach the stillest
+    # moment of the stance after the contact, which the contact precedes; a walking stride
+    # is mostly long enough already.
+    reach = starts + np.ceil((rest[1:] - starts) / HERZER_IC_SHARE).astype(int)
+    seg_ic = seg.assign(end=np.minimum(np.maximum(ends, reach), len(fsf) - 1))
     found = []
-    for data, events in ((smooth, ("ic",)), (fbf, ("ic", "tc"))):
+    for data, events, strides in ((smooth, ("ic",), seg_ic), (fbf, ("ic",), seg_ic),
+                                  (fbf, ("tc",), seg)):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             found.append(HerzerEventDetection(enforce_consistency=False, detect_only=events
-                                              ).detect(data, stride_list=seg,
+                                              ).detect(data, stride_list=strides,
                                                        sampling_rate_hz=track.rate
                                                        ).annotated_original_event_list_
                          .reindex(seg.index))
     ic = found[0]["ic"].fillna(found[1]["ic"]).to_numpy(float)
-    tc = found[1]["tc"].to_numpy(float)
+    tc = found[2]["tc"].to_numpy(float)
     rows = []
     # stride k: from its initial contact to the next one; its length is the distance between
     # the foot's rest positions of the stances that follow those contacts

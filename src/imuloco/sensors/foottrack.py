@@ -3,9 +3,12 @@
 The foot swings while the gyroscope norm's 50 ms window maximum exceeds 100 deg/s for at least
 0.2 s (:func:`swings`); between two swings is one stance, and its stillest moment the foot's
 rest. A zero-velocity-update Kalman filter with Rauch-Tung-Striebel smoothing (gaitmap's
-``RtsKalman``) gives the foot's 3-D path, with gaitmap's default ZUPTs (the gyroscope's norm
-under 34 deg/s over 50 ms) or-ed with one at each stance's stillest moment: some walkers' feet
-never get under 34 deg/s (their stance minimum is 40-60 deg/s).
+``RtsKalman``) gives the foot's 3-D path, with ``RtsKalman``'s default ZUPTs (the gyroscope's
+norm under 34 deg/s over 50 ms) or-ed with one at each stance's stillest moment: some walkers'
+feet never get under 34 deg/s (their stance minimum is 40-60 deg/s). Steps too slow for the
+swing threshold (a first step from standing, a last one to a stop) are then read off the path
+(:func:`slow_swings`): a movement between two rests that carries the foot farther than the
+shortest stride.
 
 :func:`foot_track` also finds how the sensor sits on the shoe, in any orientation: gravity at
 rest gives up (gaitmap's ``align_dataset_to_gravity``), and the strides' displacement seen from
@@ -35,6 +38,12 @@ MIN_SWING_S = 0.2  # fewer and no stride length or cadence is defined
 # MIN_SWING_S (gaps within a swing bridged, see _bridged): three times the ZUPT detector's
 # still threshold, far under the foot's mid-swing angular velocity of several hundred deg/s.
 SWING_DPS = 3 * ZUPT_GYRO_DPS
+# A step from standing or to a stop can be too slow for SWING_DPS (peaks of 110-130 deg/s for
+# about 0.1 s on ipol-gait's first and closing steps): it counts as a swing when the foot leaves
+# the ZUPT detector's rest for MIN_SWING_S between two rests and its ZUPT path moves it farther
+# on the floor than the shortest stride (0.15 m; Kluge et al. 2021, Mobilise-D's stride
+# definition, also mobgap's ``StrideSelection``).
+MIN_STRIDE_M = 0.15
 
 
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -73,6 +82,30 @@ def _bridged(starts: np.ndarray, stops: np.ndarray, max_gap: int, min_length: in
     return kept[:, 0], kept[:, 1]
 
 
+def _energy(gyro_dps: np.ndarray, rate: float) -> np.ndarray:
+    """The gyroscope norm's ZUPT-window maximum (deg/s), the ZUPT detector's measure."""
+    from scipy.ndimage import maximum_filter1d
+
+    return maximum_filter1d(np.linalg.norm(gyro_dps, axis=1), max(1, round(ZUPT_WINDOW_S * rate)))
+
+
+def _moments(energy: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    """The stillest sample before the first swing, between two swings and after the last."""
+    bounds = np.concatenate([[0], starts, [len(energy)]])
+    lows = np.concatenate([[0], stops, [len(energy)]])
+    return np.array([lo + int(np.argmin(energy[lo:hi])) for lo, hi in
+                     zip(lows[:-1], bounds[1:])], int)
+
+
+def _swing_runs(energy: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """Starts and exclusive stops (samples) of the swings over SWING_DPS."""
+    above = energy > SWING_DPS
+    above[[0, -1]] = False  # a stance (however short) before the first and after the last
+    window = max(1, round(ZUPT_WINDOW_S * rate))
+    return _bridged(*_runs(above), window, round(MIN_SWING_S * rate),
+                    round(SHORTEST_SWING_S * rate))
+
+
 def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
     """The foot's swings and the stillest moment of each stance around them.
 
@@ -82,23 +115,49 @@ def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
     the minimum of the gyroscope norm's 50 ms window maximum (the ZUPT detector's measure)
     before the first swing, between two swings and after the last one.
     """
-    from scipy.ndimage import maximum_filter1d
+    energy = _energy(gyro_dps, rate)
+    starts, stops = _swing_runs(energy, rate)
+    return starts, _moments(energy, starts, stops)
 
+
+def slow_swings(gyro_dps: np.ndarray, rate: float, path: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`swings` with the steps too slow for them added (see MIN_STRIDE_M).
+
+    path : ndarray (T, 3), the foot's ZUPT path on the same grid, metres, z up.
+
+    A slow step is a run of at least MIN_SWING_S over the ZUPT threshold (gaps of one window
+    bridged) that holds no faster swing and lies between two rests, across which the path
+    moves more than MIN_STRIDE_M on the floor (from the stillest moment of the rest before to
+    that of the rest after).
+    """
+    energy = _energy(gyro_dps, rate)
+    starts, stops = _swing_runs(energy, rate)
+    moving = energy > ZUPT_GYRO_DPS
+    for a, b in zip(starts, stops):
+        moving[a:b] = True
     window = max(1, round(ZUPT_WINDOW_S * rate))
-    energy = maximum_filter1d(np.linalg.norm(gyro_dps, axis=1), window)
-    above = energy > SWING_DPS
-    above[[0, -1]] = False  # a stance (however short) before the first and after the last
-    starts, stops = _bridged(*_runs(above), window, round(MIN_SWING_S * rate),
-                             round(SHORTEST_SWING_S * rate))
-    bounds = np.concatenate([[0], starts, [len(energy)]])
-    lows = np.concatenate([[0], stops, [len(energy)]])
-    moments = np.array([lo + int(np.argmin(energy[lo:hi])) for lo, hi in
-                        zip(lows[:-1], bounds[1:])], int)
-    return starts, moments
+    m_starts, m_stops = _bridged(*_runs(moving), window, 1, len(energy))
+    new_starts, new_stops = [], []
+    for i, (a, b) in enumerate(zip(m_starts.tolist(), m_stops.tolist())):
+        if (b - a < round(MIN_SWING_S * rate) or a == 0 or b == len(energy)
+                or np.any((starts >= a) & (starts < b))):
+            continue
+        lo = int(m_stops[i - 1]) if i else 0
+        hi = int(m_starts[i + 1]) if i + 1 < len(m_starts) else len(energy)
+        rest_before = lo + int(np.argmin(energy[lo:a]))
+        rest_after = b + int(np.argmin(energy[b:hi]))
+        if np.linalg.norm(path[rest_after, :2] - path[rest_before, :2]) > MIN_STRIDE_M:
+            new_starts.append(a)
+            new_stops.append(b)
+    starts = np.concatenate([starts, np.asarray(new_starts, int)])
+    stops = np.concatenate([stops, np.asarray(new_stops, int)])
+    order = np.argsort(starts)
+    return starts[order], _moments(energy, starts[order], stops[order])
 
 
 def _zupt_detector(mv: np.ndarray):
-    """gaitmap's default ZUPT detector or-ed with one ZUPT at each stance's stillest moment
+    """``RtsKalman``'s default ZUPT detector or-ed with one ZUPT at each stance's stillest moment
     ``mv`` (samples), and the stride list of ``min_vel`` events the latter reads."""
     import pandas as pd
     from gaitmap.zupt_detection import (
@@ -109,7 +168,9 @@ def _zupt_detector(mv: np.ndarray):
 
     strides = pd.DataFrame({"s_id": np.arange(max(len(mv) - 1, 0)), "start": mv[:-1],
                             "end": mv[1:], "min_vel": mv[:-1]}).set_index("s_id")
-    combo = ComboZuptDetector([("norm", NormZuptDetector()), ("stance", StrideEventZuptDetector(
+    norm = NormZuptDetector(window_length_s=ZUPT_WINDOW_S, metric="maximum",
+                            inactive_signal_threshold=ZUPT_GYRO_DPS)  # RtsKalman's default
+    combo = ComboZuptDetector([("norm", norm), ("stance", StrideEventZuptDetector(
         half_region_size_s=ZUPT_WINDOW_S / 2))], operation="or")
     return combo, strides
 
@@ -129,7 +190,7 @@ class FootTrack:
         forward (the walking direction), y left, z up (gaitmap's foot sensor frame).
     rotation : ndarray (4,), quaternion x, y, z, w from the sensor's axes to the level frame.
     starts : ndarray (K,), samples where the swings start; ``rest`` (K + 1,) the stances'
-        stillest moments (:func:`swings`).
+        stillest moments (:func:`slow_swings`).
     path, orientation : ndarray (T, 3) metres (z up, x and y on the floor, heading of the
         first sample) and (T, 4), the foot's ZUPT trajectory.
     """
@@ -204,6 +265,9 @@ def _track(times_b: bytes, acc_b: bytes, gyro_b: bytes) -> FootTrack:
                                                         stride_event_list=moments)
     pos = kalman.position_.to_numpy()[1:]  # gaitmap prepends the initial state
     ori = kalman.orientation_.to_numpy()[1:]
+    # the slow steps are read off the path; the filter needs no second pass, since they lie
+    # between rests under the ZUPT threshold, where the norm detector already holds the foot
+    starts, rest = slow_swings(data[cols[3:]].to_numpy(), rate, pos)
     # the sensor's forward axis: stride displacements seen from the sensor at rest, gravity
     # already along its z (a fixed mounting yaw, the median over strides)
     disp = np.diff(pos[rest], axis=0)
