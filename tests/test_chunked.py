@@ -102,3 +102,24 @@ def test_cli_reconstruct_in_pieces(sample_db, long_rec, tmp_path):
     assert geodesic(c.rotations, b.rotations).max() < 1e-6
     report = json.loads((tmp_path / "t.json").read_text())
     assert report["height_m"] == 2.1
+
+
+def test_cli_pieces_with_a_one_frame_tail(sample_db, long_rec, tmp_path):
+    """30 s in pieces of 10 s is 901 frames at 30 fps: the last frame joins the third piece;
+    it was a piece of its own, which had no gait and crashed the command."""
+    from imuloco.cli import cli
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.methods import get_method
+    from imuloco.methods.training import frame_times
+
+    keep = long_rec.times - long_rec.times[0] <= 30.005
+    rec = Recording(long_rec.times[keep], long_rec.acc[keep], long_rec.gyro[keep],
+                    long_rec.placements)
+    assert len(frame_times(rec, 30.0)) == 901
+    model = get_method("ridge").fit(sample_db.subset([0, 1, 2]), ["right_ankle"], "phone", 0)
+    log = write_generic_csv(rec, tmp_path / "thirty.csv")
+    r = CliRunner().invoke(cli, ["reconstruct", str(log), "--no-calibrate", "--model",
+                                 str(model.save(tmp_path / "ridge.npz")), "--piece-seconds",
+                                 "10", "-o", str(tmp_path / "p.bvh")])
+    assert r.exit_code == 0, r.output
+    assert "in 3 piece(s)" in r.output and read_bvh(tmp_path / "p.bvh").num_frames == 901

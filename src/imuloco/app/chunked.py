@@ -61,7 +61,8 @@ def reconstruct_pieces(rec: Recording, method, pin: bool = False,
                        piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS
                        ) -> Iterator[Motion]:
     """The reconstruction of ``rec`` (calibrated, at any rate) at the method's frame rate, as
-    consecutive Motions of ``piece_s`` seconds (see the module docstring).
+    consecutive Motions of ``piece_s`` seconds (see the module docstring); a tail shorter than
+    a second joins the last piece.
 
     ``pin``: pin each piece's feet during their detected contacts
     (:func:`imuloco.methods.postprocess.pin_detected_contacts`), as the pipeline does for
@@ -85,9 +86,11 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
     signals = model_frames(rec, fps, method.gaps_missing)
     frames = len(signals)
     step, warm = max(1, round(piece_s * fps)), max(1, round(warmup_s * fps))
-    last = None
-    for start in range(0, frames, step):
+    last, start = None, 0
+    while start < frames:
         stop = min(frames, start + step)
+        if frames - stop < fps:  # a tail under 1 s joins this piece (one frame has no gait)
+            stop = frames
         # the warm-up before and as much signal after: the last frames see their look-ahead
         begin, end = max(0, start - warm), min(frames, stop + warm)
         full = method.reconstruct_signals_full(signals[begin:end])
@@ -101,6 +104,7 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
         err, flags = (None if a is None else np.asarray(a)[start - begin:stop - begin]
                       for a in (full.error_m, full.unreliable))
         yield Reconstruction(piece, err, flags, full.note)
+        start = stop
 
 
 def combine(reports: list[dict[str, float]], frames: list[int]) -> dict[str, float]:
