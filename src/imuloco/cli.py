@@ -121,7 +121,9 @@ model_options = _options(
 # reading phone logs (reconstruct, batch, live --replay): imuloco.sensors.reallog
 log_options = _options(
     click.option("--placement", default="right_ankle", show_default=True,
-                 help="Where the phone was worn (placement preset)."),
+                 help="Where the phone was worn (placement preset): right_ankle or "
+                      "left_ankle for a shin, right_foot or left_foot for a shoe IMU, "
+                      "lower_back at L5 (these three need the [gait] extra)."),
     click.option("--format", "fmt", default="auto", show_default=True, type=_LogFormat(),
                  help="Sensor log format."),
 )
@@ -310,8 +312,11 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
         click.echo(write_fuzz(fuzz, out, chosen, seed=seed, progress=True))
         return
     if real_dir is not None:
+        from imuloco.app.pipeline import GAIT_EXTRA, require_extras
         from imuloco.evaluate.real import run_real, summarize, table
 
+        for p in GAIT_EXTRA:  # feet and lower backs
+            require_extras(p)
         rows = run_real(real_dir, out, limit, baseline, progress=True)
         click.echo(table(summarize(rows)))
         click.echo(f"wrote {out / 'real.json'}, real.csv and README.md")

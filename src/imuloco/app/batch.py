@@ -305,8 +305,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     """
     from tqdm.auto import tqdm
 
-    from imuloco.app.pipeline import choose_method
+    from imuloco.app.pipeline import choose_method, require_extras
 
+    require_extras(placement)  # on this machine, before starting any worker
     paths = [Path(p) for p in recordings]
     if not paths:
         raise ValueError("no recordings given")

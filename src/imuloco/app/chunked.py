@@ -144,7 +144,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
 
     from tqdm.auto import tqdm
 
-    from imuloco.app.pipeline import calibrated, choose_method
+    from imuloco.app.pipeline import calibrated, choose_method, require_extras
     from imuloco.evaluate.gait import (
         gait_parameters,
         height_scale,
@@ -158,6 +158,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     from imuloco.sensors.reallog import read_log
 
     t0 = time.perf_counter()
+    require_extras(placement)  # before reading a long log
     rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform)
     if method is None or isinstance(method, str):
         fitted, note = choose_method(method, model, placement, progress=progress)
