@@ -195,18 +195,42 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
     if fmt == "sensorlogger":
         return fmt, read_sensor_logger(path if export else path.parent, platform)
     if fmt == "realworld":
-        if gyro_path is None:
-            name = path.name
-            for a, b in (("acc_", "gyroscope_"), ("acc_", "Gyroscope_"), ("acc_", "gyr_")):
-                cand = path.with_name(b + name[len(a):]) if name.lower().startswith(a) else None
-                if cand is not None and cand.exists():
-                    gyro_path = cand
-                    break
-            else:
-                raise FormatError(path, None, "RealWorld logs come as an acc_*.csv and a "
-                                              "gyroscope_*.csv file: pass gyro_path=")
-        return fmt, read_realworld(path, gyro_path)
+        return fmt, read_realworld(*_realworld_pair(path, gyro_path))
     raise UnknownNameError(f"unknown log format {fmt!r}; expected one of {list(FORMAT_NAMES)}")
+
+
+RW_ACC, RW_GYRO = ("acc_",), ("gyroscope_", "gyr_")  # RealWorld file names, any case
+
+
+def _rw_kind(path: Path) -> tuple[str | None, str]:
+    """``("acc" | "gyro" | None, the name after its prefix)`` of a RealWorld file."""
+    low = path.name.lower()
+    for kind, prefixes in (("acc", RW_ACC), ("gyro", RW_GYRO)):
+        for p in prefixes:
+            if low.startswith(p):
+                return kind, path.name[len(p):]
+    return None, path.name
+
+
+def _realworld_pair(path: Path, gyro_path: Path | None) -> tuple[Path, Path]:
+    """The (accelerometer, gyroscope) files of a RealWorld log: one of ``acc_X.csv`` and
+    ``gyroscope_X.csv`` finds the other beside it; a pair whose names say it was given
+    gyroscope first is turned round."""
+    kind, rest = _rw_kind(path)
+    if gyro_path is not None:
+        return (gyro_path, path) if (kind, _rw_kind(gyro_path)[0]) == ("gyro", "acc") else (
+            path, gyro_path)
+    if kind is None:
+        raise FormatError(path, None, "a RealWorld log comes as two files, acc_NAME.csv and "
+                                      "gyroscope_NAME.csv: give both")
+    wanted = RW_GYRO if kind == "acc" else RW_ACC
+    names = [p + rest for p in wanted]
+    found = sorted(f for f in path.parent.iterdir()
+                   if f.name.lower() in {n.lower() for n in names} and f.is_file())
+    if not found:
+        raise FormatError(path, None, f"a RealWorld log comes as two files: no "
+                                      f"{' or '.join(names)} beside it (give both files)")
+    return (path, found[0]) if kind == "acc" else (found[0], path)
 
 
 def _sensors(streams: list[Stream], placement: str) -> dict[str, dict[str, Stream]]:
