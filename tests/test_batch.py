@@ -163,6 +163,15 @@ def test_rerun_skips_complete_outputs_and_force_redoes(logs, fitted, client, tmp
     # another model's outputs are never replaced without --force
     with pytest.raises(OutputExistsError, match="--force"):
         run_batch(paths, tmp_path, method="mean", scheduler=client)
+    # nor another height's: they were skipped as complete, their lengths in the other
+    # proportions
+    with pytest.raises(OutputExistsError, match="height"):
+        run_batch(paths, tmp_path, fitted=fitted, scheduler=client, height_m=1.9)
+    tall = run_batch(paths, tmp_path, fitted=fitted, scheduler=client, height_m=1.9,
+                     force=True)
+    assert tall["done"] == 3
+    again = run_batch(paths, tmp_path, fitted=fitted, scheduler=client, height_m=1.9)
+    assert (again["done"], again["skipped"]) == (0, 3)
 
 
 def test_a_failed_write_leaves_no_partial_file(logs, fitted, client, tmp_path, monkeypatch):

@@ -16,8 +16,9 @@ and stride length, ...), ``walkers.parquet`` (the same rows with height, placeme
 - The model travels as its file's bytes, scattered once to the workers and loaded once per
   worker process (cached by SHA-256): never a pickled method object.
 - Every file is written atomically (:func:`imuloco.io.atomic.atomic_write`), the JSON last: a
-  recording is complete when its JSON names the same recording and model. A re-run skips
-  complete recordings (``force`` redoes them) and refuses to replace another job's outputs.
+  recording is complete when its JSON names the same recording, model, unit, height and
+  placement. A re-run skips complete recordings (``force`` redoes them) and refuses to
+  replace another job's outputs.
 - A recording that fails becomes a row with status ``error`` and its error; the others go on.
   A task whose worker dies is rescheduled by Dask (up to ``distributed.scheduler.allowed-
   failures`` times), one that raises outside the reconstruction is retried ``retries`` times.
@@ -174,11 +175,12 @@ def error_row(name: str, recording: str, error: BaseException, seconds: float) -
             "error": f"{type(error).__name__}: {error}", "seconds": round(seconds, 3)}
 
 
-def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: str = "cm"
+def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: str = "cm",
+                     height_m: float | None = None, placement: str | None = None
                      ) -> dict | None | bool:
-    """``NAME.json`` when it completes this recording with this model and BVH unit; ``None``
-    when there is no JSON (to do); ``False`` when outputs of another recording, model, unit or
-    program are there."""
+    """``NAME.json`` when it completes this recording with this model, BVH unit, height and
+    placement (``None``: any placement); ``None`` when there is no JSON (to do); ``False`` when
+    outputs of another recording, model, unit, height, placement or program are there."""
     path = out / f"{name}.json"
     if not path.exists():
         return None
@@ -186,7 +188,9 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
         report = json.loads(path.read_text())
         batch = report["batch"]
         same = (batch["recording"] == recording and batch["model_sha256"] == sha256
-                and batch.get("unit", "cm") == unit and (out / f"{name}.bvh").is_file())
+                and batch.get("unit", "cm") == unit and batch.get("height_m") == height_m
+                and placement in (None, batch.get("placement", placement))
+                and (out / f"{name}.bvh").is_file())
     except (OSError, ValueError, KeyError, TypeError):
         return False
     return report if same else False
@@ -329,12 +333,13 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     sha = hashlib.sha256(blob).hexdigest()
     model_seconds = time.perf_counter() - t0
 
-    reports = {n: _complete_report(out, n, r, sha, unit) for n, r in zip(names, recs)}
+    reports = {n: _complete_report(out, n, r, sha, unit, height_m, placement)
+               for n, r in zip(names, recs)}
     foreign = [str(out / f"{n}.json") for n, rep in reports.items() if rep is False]
     if foreign and not force:
         raise OutputExistsError(f"{', '.join(foreign[:3])}{' ...' if len(foreign) > 3 else ''}"
-                                " hold(s) another recording's, model's or unit's outputs; pass "
-                                "--force "
+                                " hold(s) another recording's, model's, unit's, height's or "
+                                "placement's outputs; pass --force "
                                 "(force=True) to replace them or choose another --out")
     rows: dict[str, dict] = {}
     strides: dict[str, Any] = {}  # pyarrow Tables
