@@ -108,6 +108,25 @@ def test_reconstruct_summary_rounds_numbers_to_what_they_mean(tmp_path, log_file
     assert list(cadences[0]) == ["–" if v is None else f"{v:.1f}" for v in values]
 
 
+def test_reconstruct_says_a_lower_back_sensors_gait_and_its_note(tmp_path, sample_db, walk):
+    """A lower-back sensor's gait is Mobilise-D's on its own signal, whose stride lengths need
+    the walker's height: without --height the command says whose stature it took (it was
+    only in the JSON report)."""
+    pytest.importorskip("mobgap")
+    from imuloco.methods import get_method
+
+    rec = simulate(walk, ["lower_back"], 100.0, "phone", seed=2)
+    log = write_generic_csv(rec, tmp_path / "back.csv")
+    model = get_method("mean").fit(sample_db.subset([0, 1]), ["lower_back"], "phone", 0)
+    args = ["reconstruct", str(log), "--placement", "lower_back", "--model",
+            str(model.save(tmp_path / "mean.npz"))]
+    for extra, note in (([], True), (["--height", "1.8"], False)):
+        res = CliRunner().invoke(cli, [*args, *extra, "-o", str(tmp_path / "b.bvh"), "--force"])
+        assert res.exit_code == 0, res.output
+        assert "gait: the lower_back sensor's signal: mobgap" in res.output, res.output
+        assert ("gait note: no --height given: the skeleton's stature" in res.output) == note
+
+
 def test_log_format_choices_come_from_sensorlog():
     for command in ("reconstruct", "batch", "live"):
         res = CliRunner().invoke(cli, [command, "--help"])

@@ -689,6 +689,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
                    f"{pieces['pieces']['count']} piece(s)" + _confidence_text(c) + "; wrote "
                    + ", ".join(str(p) for p in (output, report_path) if p))
+        _echo_gait_source(pieces["gait_source"], pieces["gait_note"])
         return
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
@@ -713,7 +714,17 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} detected strikes; "
                f"speed {_num(g['speed_mps'], 2)} m/s"
                + _confidence_text(report["confidence"]))
+    _echo_gait_source(report.gait_source, report.gait_note)
     click.echo("wrote " + ", ".join(str(p) for p in written))
+
+
+def _echo_gait_source(source: str, note: str | None) -> None:
+    """Say where the gait came from when it is not the reconstructed motion (a foot or
+    lower-back sensor's own signal), and the report's note on it (e.g. no --height)."""
+    if not source.startswith("the reconstructed motion"):
+        click.echo(f"gait: {source}")
+    if note:
+        click.echo(f"gait note: {note}")
 
 
 def _confidence_text(c: dict) -> str:
