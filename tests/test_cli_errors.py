@@ -136,3 +136,11 @@ def test_bench_real_without_the_gait_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "gaitmap", None)
     code, out = run("bench", "--real", tmp_path, "--out", tmp_path / "r")
     assert code == 1 and "pip install 'imuloco[gait]'" in out, out
+
+
+def test_a_model_of_another_placement_names_the_one_to_give(log, tmp_path, sample_db):
+    from imuloco.methods import get_method
+    model = get_method("mean").fit(sample_db.subset([0]), ["left_ankle"], "phone", 0)
+    code, out = run("reconstruct", log, "--model", model.save(tmp_path / "left.npz"),
+                    "-o", tmp_path / "x.bvh")
+    assert code == 1 and "not 'right_ankle'" in out and "--placement left_ankle" in out, out

@@ -115,7 +115,7 @@ def choose_model(method: str | None = None, model: str | Path | None = None,
         fitted = load_model(model)
         if placement not in fitted.placements_:
             raise InputError(f"{model}: the model was trained for {fitted.placements_}, not "
-                             f"{placement!r}")
+                             f"{placement!r} (--placement {fitted.placements_[0]} reads it)")
         return ModelChoice(fitted, "file", f"model file {model} (method {fitted.name!r})",
                            Path(model))
     name = DEFAULT_METHOD if method is None else method
