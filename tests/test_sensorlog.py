@@ -537,16 +537,18 @@ def _write_realworld(rec: Recording, folder: Path, acc_name: str, gyro_name: str
         (folder / name).write_text("\n".join(["id,attr_time,attr_x,attr_y,attr_z", *rows]) + "\n")
 
 
-def test_realworld_pair_from_either_file(walk_rec, tmp_path):
-    """Either file of a RealWorld pair finds the other, and a pair given gyroscope first is
-    read the right way round (it was read with the axes' roles swapped: the gyroscope taken
-    for an accelerometer in g, without a word)."""
+def test_realworld_pair_in_either_order(walk_rec, tmp_path):
+    """A RealWorld pair given gyroscope first is read the right way round (it was read with
+    the signals' roles swapped: the gyroscope taken for an accelerometer in g, without a
+    word); a file without its partner names the one to give."""
     _write_realworld(walk_rec, tmp_path, "acc_walk.csv", "Gyroscope_walk.csv")
     acc, gyro = tmp_path / "acc_walk.csv", tmp_path / "Gyroscope_walk.csv"
     ref, report = read_log(acc, rate=None)
     assert report.acc_unit == "m/s^2"
     np.testing.assert_allclose(ref.acc, walk_rec.acc, rtol=1e-5, atol=1e-5)
-    for files in (gyro, (gyro, acc), (acc, gyro)):
+    with pytest.raises(FormatError, match="give the acc_ file .* \\(acc_walk.csv\\)"):
+        read_log(gyro)
+    for files in ((gyro, acc), (acc, gyro)):
         rec, report = read_log(files, rate=None)
         assert (report.acc_unit, report.gyro_unit) == ("m/s^2", "rad/s")
         np.testing.assert_array_equal(rec.acc, ref.acc)

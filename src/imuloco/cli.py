@@ -661,8 +661,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
-    accelerometer file and a gyroscope file (either file of a RealWorld acc_*.csv, gyroscope_*.csv
-    pair finds the other).
+    accelerometer file and a gyroscope file, in either order (a RealWorld acc_*.csv finds its
+    gyroscope_*.csv).
     """
     from imuloco.app.pipeline import reconstruct_file, render_outputs
     from imuloco.io.atomic import atomic_write, check_outputs

@@ -213,24 +213,25 @@ def _rw_kind(path: Path) -> tuple[str | None, str]:
 
 
 def _realworld_pair(path: Path, gyro_path: Path | None) -> tuple[Path, Path]:
-    """The (accelerometer, gyroscope) files of a RealWorld log: one of ``acc_X.csv`` and
-    ``gyroscope_X.csv`` finds the other beside it; a pair whose names say it was given
-    gyroscope first is turned round."""
+    """The (accelerometer, gyroscope) files of a RealWorld log: ``acc_X.csv`` finds
+    ``gyroscope_X.csv`` beside it; a pair whose names say it was given gyroscope first is
+    turned round. A gyroscope file alone is refused, naming its accelerometer file (which
+    finds it: a folder's files given one by one, as ``batch --glob`` does, are one walker)."""
     kind, rest = _rw_kind(path)
     if gyro_path is not None:
         return (gyro_path, path) if (kind, _rw_kind(gyro_path)[0]) == ("gyro", "acc") else (
             path, gyro_path)
-    if kind is None:
+    if kind != "acc":
         raise FormatError(path, None, "a RealWorld log comes as two files, acc_NAME.csv and "
-                                      "gyroscope_NAME.csv: give both")
-    wanted = RW_GYRO if kind == "acc" else RW_ACC
-    names = [p + rest for p in wanted]
+                                      "gyroscope_NAME.csv: give the acc_ file (it finds the "
+                                      "other) or both" + (f" (acc_{rest})" if kind else ""))
+    names = [p + rest for p in RW_GYRO]
     found = sorted(f for f in path.parent.iterdir()
                    if f.name.lower() in {n.lower() for n in names} and f.is_file())
     if not found:
         raise FormatError(path, None, f"a RealWorld log comes as two files: no "
                                       f"{' or '.join(names)} beside it (give both files)")
-    return (path, found[0]) if kind == "acc" else (found[0], path)
+    return path, found[0]
 
 
 def _sensors(streams: list[Stream], placement: str) -> dict[str, dict[str, Stream]]:
