@@ -76,6 +76,15 @@ def test_names_are_distinct_and_globs_expand(logs, tmp_path):
     assert found[0] == paths[0] and len(found) == 4  # paths[0] once, then the other three
 
 
+def test_a_realworld_pair_is_one_walker(tmp_path):
+    """``--glob '*.csv'`` on RealWorld logs matches both files of each pair: the acc_ file
+    reads the pair, its gyroscope file is not a walker of its own (it was a failed row)."""
+    for name in ("acc_a.csv", "gyroscope_a.csv", "Gyroscope_b.csv", "other.csv"):
+        (tmp_path / name).write_text("")
+    found = find_recordings([], [str(tmp_path / "*.csv")])
+    assert [p.name for p in found] == ["Gyroscope_b.csv", "acc_a.csv", "other.csv"]
+
+
 def test_strides_follow_the_strikes(sample_db):
     from imuloco.phases import gait_phases
 

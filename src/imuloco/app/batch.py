@@ -68,18 +68,26 @@ LOCAL_CLUSTER = {"dashboard_address": None, "scheduler_kwargs": {"dashboard_addr
 def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = ()
                     ) -> list[Path]:
     """The recordings named and matched by glob ``patterns`` (``**`` recurses), sorted within
-    each pattern, duplicates dropped, in the order given."""
+    each pattern, duplicates dropped, in the order given. A RealWorld gyroscope file whose
+    ``acc_`` file is among them is dropped too: that file reads the pair, one walker."""
+    from imuloco.sensors.reallog import realworld_accelerometer
+
     found: list[Path] = [Path(p) for p in paths]
     for pattern in patterns:
         matches = sorted(globmod.glob(str(pattern), recursive=True))
         if not matches:
             log.warning("no recording matches %r", pattern)
         found += [Path(m) for m in matches]
+
+    def key(p: Path) -> str:
+        return os.path.normpath(p.absolute())  # not resolve(): two links are two walkers
+
+    keys = {key(p) for p in found}
     seen, out = set(), []
     for p in found:
-        key = os.path.normpath(p.absolute())  # not resolve(): two links are two walkers
-        if key not in seen:
-            seen.add(key)
+        acc = realworld_accelerometer(p)
+        if key(p) not in seen and (acc is None or key(acc) not in keys):
+            seen.add(key(p))
             out.append(p)
     return out
 

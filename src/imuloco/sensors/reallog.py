@@ -212,6 +212,14 @@ def _rw_kind(path: Path) -> tuple[str | None, str]:
     return None, path.name
 
 
+def realworld_accelerometer(path: str | Path) -> Path | None:
+    """For a RealWorld gyroscope file (``gyroscope_X.csv``, ``gyr_X.csv``), the
+    ``acc_X.csv`` beside it that reads the pair; None for any other file."""
+    path = Path(path)
+    kind, rest = _rw_kind(path)
+    return path.with_name(RW_ACC[0] + rest) if kind == "gyro" else None
+
+
 def _realworld_pair(path: Path, gyro_path: Path | None) -> tuple[Path, Path]:
     """The (accelerometer, gyroscope) files of a RealWorld log: ``acc_X.csv`` finds
     ``gyroscope_X.csv`` beside it; a pair whose names say it was given gyroscope first is
