@@ -127,6 +127,26 @@ def test_reconstruct_says_a_lower_back_sensors_gait_and_its_note(tmp_path, sampl
         assert ("gait note: no --height given: the skeleton's stature" in res.output) == note
 
 
+def test_reconstruct_counts_a_shoe_sensors_steps_as_steps(tmp_path, sample_db, walk):
+    """One shoe sensor finds its own foot's strikes and counts two steps each: the summary
+    said "N detected strikes" of twice the strikes it found."""
+    pytest.importorskip("gaitmap")
+    from imuloco.methods import get_method
+
+    log = write_generic_csv(simulate(walk, ["right_foot"], 100.0, "phone", seed=2),
+                            tmp_path / "shoe.csv")
+    model = get_method("mean").fit(sample_db.subset([0, 1]), ["right_foot"], "phone", 0)
+    res = CliRunner().invoke(cli, ["reconstruct", str(log), "--placement", "right_foot",
+                                   "--model", str(model.save(tmp_path / "mean.npz")),
+                                   "-o", str(tmp_path / "s.bvh"), "--report",
+                                   str(tmp_path / "s.json")])
+    assert res.exit_code == 0, res.output
+    report = json.loads((tmp_path / "s.json").read_text())
+    steps = int(report["gait"]["steps"])
+    assert steps > 4 and len([s for s in report["strides"] if s["foot"] == "right"]) < steps
+    assert f"from {steps} steps;" in res.output and "detected strikes" not in res.output
+
+
 def test_log_format_choices_come_from_sensorlog():
     for command in ("reconstruct", "batch", "live"):
         res = CliRunner().invoke(cli, [command, "--help"])

@@ -711,7 +711,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
                f"cadence {_num(g['cadence_rhythm_spm'], 1)} steps/min from the legs' rhythm "
                f"(raw signal: {_num(report.signal_cadence_spm, 1)}), "
-               f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} detected strikes; "
+               f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} steps; "
                f"speed {_num(g['speed_mps'], 2)} m/s"
                + _confidence_text(report["confidence"]))
     _echo_gait_source(report.gait_source, report.gait_note)
