@@ -185,6 +185,10 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
         raise FileNotFoundError(f"{path}: no such file or folder")
     fmt = detect_format(path) if fmt == "auto" else fmt
     export = is_export(path)
+    if gyro_path is not None and fmt in ("generic", "sensorlogger"):
+        raise FormatError(gyro_path, None, f"a second file, but a {fmt} log holds both signals "
+                                           f"in {path.name}: give one file (many walkers: "
+                                           "imuloco batch)")
     if fmt == "generic":
         return fmt, read_generic_csv(path)
     if fmt == "phyphox":
