@@ -560,8 +560,10 @@ def test_realworld_pair_in_either_order(walk_rec, tmp_path):
 
 def test_a_second_file_with_a_one_file_log_is_refused(walk_rec, tmp_path):
     """Two generic logs given as a pair read the first and dropped the second, without a
-    word (``reconstruct a.csv b.csv`` for two walkers)."""
+    word (``reconstruct a.csv b.csv`` for two walkers); three files read two."""
     a = write_generic_csv(walk_rec, tmp_path / "a.csv")
     b = write_generic_csv(walk_rec, tmp_path / "b.csv")
     with pytest.raises(FormatError, match="b.csv: a second file, but a generic log holds both"):
         read_log((a, b))
+    with pytest.raises(ValueError, match="got 3 files"):  # the third was dropped
+        read_log((a, b, a))

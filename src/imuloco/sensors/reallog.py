@@ -179,6 +179,9 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
                   platform: str | None) -> tuple[str, list[Stream]]:
     """Step 1: the format (detected when ``"auto"``) and the streams the reader found."""
     if isinstance(path, (list, tuple)):
+        if len(path) != 2:
+            raise InputError(f"expected one log or an (accelerometer, gyroscope) pair of files, "
+                             f"got {len(path)} files (many walkers: imuloco batch)")
         path, gyro_path = Path(path[0]), Path(path[1])
     path = Path(path)
     if not path.exists():
