@@ -196,3 +196,20 @@ def test_missing_extra_hint_is_quoted_for_the_shell():
 
     assert "pip install 'imuloco[live]'" in str(MissingExtraError("live mode", "websockets",
                                                                   "live"))
+
+
+def test_bench_load_takes_comma_separated_folders(tmp_path, monkeypatch):
+    """`--load A,B` as its help says (click refused the pair as one missing folder)."""
+    from imuloco.evaluate import loadspeed
+
+    seen = []
+    monkeypatch.setattr(loadspeed, "load_benchmark",
+                        lambda folders, out, against: seen.extend(folders) or [])
+    monkeypatch.setattr(loadspeed, "table", lambda records, against: "")
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir(), b.mkdir()
+    res = CliRunner().invoke(cli, ["bench", "--load", f"{a},{b}", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 0 and seen == [a, b], res.output
+    res = CliRunner().invoke(cli, ["bench", "--load", f"{a},{tmp_path / 'c'}", "--out",
+                                   str(tmp_path / "o")])
+    assert res.exit_code == 2 and "--load" in res.output and "does not exist" in res.output

@@ -237,12 +237,13 @@ def _csv(value: str | None) -> list[str]:
     return [v.strip() for v in (value or "").split(",") if v.strip()]
 
 
-def _folders(values: tuple[str, ...]) -> list[Path] | None:
-    """Folders given as a repeatable and/or comma separated option; each must exist."""
+def _folders(values: tuple[str, ...], hint: str = "--data") -> list[Path] | None:
+    """Folders given as a repeatable and/or comma separated option ``hint``; each must
+    exist."""
     folders = [Path(v) for item in values for v in _csv(item)]
     for f in folders:
         if not f.is_dir():
-            raise click.BadParameter(f"folder {f} does not exist", param_hint="--data")
+            raise click.BadParameter(f"folder {f} does not exist", param_hint=hint)
     return folders or None
 
 
@@ -286,7 +287,6 @@ def _folders(values: tuple[str, ...]) -> list[Path] | None:
               help="Instead: the batch benchmark (imuloco.evaluate.batchbench) on N simulated "
                    "walkers of 60 s; writes batch_bench.md and batch_bench.json.")
 @click.option("--load", "load_dirs", multiple=True, metavar="DIR",
-              type=click.Path(exists=True, file_okay=False, path_type=Path),
               help="Instead: time loading these motion folders (repeat or comma-separate): "
                    "numpy parse, reader, cold and warm cache; writes load.json and load.md.")
 @click.option("--against", default=None, metavar="REV",
@@ -298,7 +298,7 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
           data_items: tuple[str, ...], train_items: tuple[str, ...],
           test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
           fold_names: str | None, speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None,
-          batch_walkers: int | None, load_dirs: tuple[Path, ...], against: str | None,
+          batch_walkers: int | None, load_dirs: tuple[str, ...], against: str | None,
           real_dir: Path | None, baseline: bool, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
     if fuzz is not None:
@@ -331,7 +331,7 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
     if load_dirs:
         from imuloco.evaluate.loadspeed import load_benchmark, table
 
-        folders = [Path(p) for d in load_dirs for p in _csv(str(d))]
+        folders = _folders(load_dirs, "--load")
         click.echo(table(load_benchmark(folders, out, against), against))
         click.echo(f"wrote {out / 'load.json'} and {out / 'load.md'}")
         return
@@ -351,8 +351,9 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
     from imuloco.evaluate.report import COLUMNS, table
 
     records = run_bench(names, split_name, noise, _csv(placement), _folders(data_items), out,
-                        limit, seed, progress=True, seeds=n_seeds, train=_folders(train_items),
-                        test=_folders(test_items), up=up, skip_frames=skip_frames,
+                        limit, seed, progress=True, seeds=n_seeds,
+                        train=_folders(train_items, "--train"),
+                        test=_folders(test_items, "--test"), up=up, skip_frames=skip_frames,
                         only_folds=_csv(fold_names) or None)
     click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
     click.echo(f"wrote {out / 'results.json'} and {out / 'results.md'}")
