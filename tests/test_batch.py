@@ -76,6 +76,15 @@ def test_names_are_distinct_and_globs_expand(logs, tmp_path):
     assert found[0] == paths[0] and len(found) == 4  # paths[0] once, then the other three
 
 
+def test_a_realworld_pair_is_one_walker(tmp_path):
+    """``--glob '*.csv'`` on RealWorld logs matches both files of each pair: the acc_ file
+    reads the pair, its gyroscope file is not a walker of its own (it was a failed row)."""
+    for name in ("acc_a.csv", "gyroscope_a.csv", "Gyroscope_b.csv", "other.csv"):
+        (tmp_path / name).write_text("")
+    found = find_recordings([], [str(tmp_path / "*.csv")])
+    assert [p.name for p in found] == ["Gyroscope_b.csv", "acc_a.csv", "other.csv"]
+
+
 def test_strides_follow_the_strikes(sample_db):
     from imuloco.phases import gait_phases
 
@@ -163,6 +172,15 @@ def test_rerun_skips_complete_outputs_and_force_redoes(logs, fitted, client, tmp
     # another model's outputs are never replaced without --force
     with pytest.raises(OutputExistsError, match="--force"):
         run_batch(paths, tmp_path, method="mean", scheduler=client)
+    # nor another height's: they were skipped as complete, their lengths in the other
+    # proportions
+    with pytest.raises(OutputExistsError, match="height"):
+        run_batch(paths, tmp_path, fitted=fitted, scheduler=client, height_m=1.9)
+    tall = run_batch(paths, tmp_path, fitted=fitted, scheduler=client, height_m=1.9,
+                     force=True)
+    assert tall["done"] == 3
+    again = run_batch(paths, tmp_path, fitted=fitted, scheduler=client, height_m=1.9)
+    assert (again["done"], again["skipped"]) == (0, 3)
 
 
 def test_a_failed_write_leaves_no_partial_file(logs, fitted, client, tmp_path, monkeypatch):

@@ -102,3 +102,51 @@ def test_cli_reconstruct_in_pieces(sample_db, long_rec, tmp_path):
     assert geodesic(c.rotations, b.rotations).max() < 1e-6
     report = json.loads((tmp_path / "t.json").read_text())
     assert report["height_m"] == 2.1
+
+
+def test_cli_pieces_with_a_one_frame_tail(sample_db, long_rec, tmp_path):
+    """30 s in pieces of 10 s is 901 frames at 30 fps: the last frame joins the third piece;
+    it was a piece of its own, which had no gait and crashed the command."""
+    from imuloco.cli import cli
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.methods import get_method
+    from imuloco.methods.training import frame_times
+
+    keep = long_rec.times - long_rec.times[0] <= 30.005
+    rec = Recording(long_rec.times[keep], long_rec.acc[keep], long_rec.gyro[keep],
+                    long_rec.placements)
+    assert len(frame_times(rec, 30.0)) == 901
+    model = get_method("ridge").fit(sample_db.subset([0, 1, 2]), ["right_ankle"], "phone", 0)
+    log = write_generic_csv(rec, tmp_path / "thirty.csv")
+    r = CliRunner().invoke(cli, ["reconstruct", str(log), "--no-calibrate", "--model",
+                                 str(model.save(tmp_path / "ridge.npz")), "--piece-seconds",
+                                 "10", "-o", str(tmp_path / "p.bvh")])
+    assert r.exit_code == 0, r.output
+    assert "in 3 piece(s)" in r.output and read_bvh(tmp_path / "p.bvh").num_frames == 901
+
+
+def test_pieces_report_a_foot_sensors_own_gait(sample_db, tmp_path):
+    """A shoe sensor's gait is its own zero-velocity track's in pieces as in one piece (in
+    pieces it was the reconstructed motion's, without a word)."""
+    pytest.importorskip("gaitmap")
+    from imuloco.app.chunked import reconstruct_to_bvh
+    from imuloco.app.pipeline import reconstruct_file
+    from imuloco.evaluate.sensorgait import GAIT_KEYS
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.methods import get_method
+
+    clip = sample_db.where(content="walk").clips[0]
+    rec = simulate(clip, ["right_foot"], 100.0, "phone", 3)
+    span = rec.times[-1] - rec.times[0] + 0.01
+    rec = Recording(np.concatenate([rec.times + k * span for k in range(3)]),
+                    np.tile(rec.acc, (3, 1, 1)), np.tile(rec.gyro, (3, 1, 1)), rec.placements)
+    log = write_generic_csv(rec, tmp_path / "shoe.csv")
+    ridge = get_method("ridge").fit(sample_db.subset([0, 1, 2]), ["right_foot"], "phone", 0)
+    _, one = reconstruct_file(log, placement="right_foot", fitted=ridge, height=1.8)
+    pieces = reconstruct_to_bvh(log, tmp_path / "p.bvh", ridge, placement="right_foot",
+                                piece_s=10.0, height=1.8)
+    assert pieces["pieces"]["count"] > 1 and one.gait_source.startswith("the right_foot sensor")
+    assert one.gait["steps"] > 10
+    assert pieces["gait_source"] == one.gait_source and pieces["strides"] == one.strides
+    for key in GAIT_KEYS:
+        assert pieces["gait"][key] == one.gait[key], key

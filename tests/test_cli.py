@@ -108,6 +108,45 @@ def test_reconstruct_summary_rounds_numbers_to_what_they_mean(tmp_path, log_file
     assert list(cadences[0]) == ["–" if v is None else f"{v:.1f}" for v in values]
 
 
+def test_reconstruct_says_a_lower_back_sensors_gait_and_its_note(tmp_path, sample_db, walk):
+    """A lower-back sensor's gait is Mobilise-D's on its own signal, whose stride lengths need
+    the walker's height: without --height the command says whose stature it took (it was
+    only in the JSON report)."""
+    pytest.importorskip("mobgap")
+    from imuloco.methods import get_method
+
+    rec = simulate(walk, ["lower_back"], 100.0, "phone", seed=2)
+    log = write_generic_csv(rec, tmp_path / "back.csv")
+    model = get_method("mean").fit(sample_db.subset([0, 1]), ["lower_back"], "phone", 0)
+    args = ["reconstruct", str(log), "--placement", "lower_back", "--model",
+            str(model.save(tmp_path / "mean.npz"))]
+    for extra, note in (([], True), (["--height", "1.8"], False)):
+        res = CliRunner().invoke(cli, [*args, *extra, "-o", str(tmp_path / "b.bvh"), "--force"])
+        assert res.exit_code == 0, res.output
+        assert "gait: the lower_back sensor's signal: mobgap" in res.output, res.output
+        assert ("gait note: no --height given: the skeleton's stature" in res.output) == note
+
+
+def test_reconstruct_counts_a_shoe_sensors_steps_as_steps(tmp_path, sample_db, walk):
+    """One shoe sensor finds its own foot's strikes and counts two steps each: the summary
+    said "N detected strikes" of twice the strikes it found."""
+    pytest.importorskip("gaitmap")
+    from imuloco.methods import get_method
+
+    log = write_generic_csv(simulate(walk, ["right_foot"], 100.0, "phone", seed=2),
+                            tmp_path / "shoe.csv")
+    model = get_method("mean").fit(sample_db.subset([0, 1]), ["right_foot"], "phone", 0)
+    res = CliRunner().invoke(cli, ["reconstruct", str(log), "--placement", "right_foot",
+                                   "--model", str(model.save(tmp_path / "mean.npz")),
+                                   "-o", str(tmp_path / "s.bvh"), "--report",
+                                   str(tmp_path / "s.json")])
+    assert res.exit_code == 0, res.output
+    report = json.loads((tmp_path / "s.json").read_text())
+    steps = int(report["gait"]["steps"])
+    assert steps > 4 and len([s for s in report["strides"] if s["foot"] == "right"]) < steps
+    assert f"from {steps} steps;" in res.output and "detected strikes" not in res.output
+
+
 def test_log_format_choices_come_from_sensorlog():
     for command in ("reconstruct", "batch", "live"):
         res = CliRunner().invoke(cli, [command, "--help"])
@@ -157,3 +196,20 @@ def test_missing_extra_hint_is_quoted_for_the_shell():
 
     assert "pip install 'imuloco[live]'" in str(MissingExtraError("live mode", "websockets",
                                                                   "live"))
+
+
+def test_bench_load_takes_comma_separated_folders(tmp_path, monkeypatch):
+    """`--load A,B` as its help says (click refused the pair as one missing folder)."""
+    from imuloco.evaluate import loadspeed
+
+    seen = []
+    monkeypatch.setattr(loadspeed, "load_benchmark",
+                        lambda folders, out, against: seen.extend(folders) or [])
+    monkeypatch.setattr(loadspeed, "table", lambda records, against: "")
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir(), b.mkdir()
+    res = CliRunner().invoke(cli, ["bench", "--load", f"{a},{b}", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 0 and seen == [a, b], res.output
+    res = CliRunner().invoke(cli, ["bench", "--load", f"{a},{tmp_path / 'c'}", "--out",
+                                   str(tmp_path / "o")])
+    assert res.exit_code == 2 and "--load" in res.output and "does not exist" in res.output

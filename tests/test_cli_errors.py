@@ -111,3 +111,36 @@ def test_an_interrupted_onnx_export_leaves_the_old_file(tmp_path, monkeypatch):
     assert code == 0, out
     assert onnx.load(str(target)).graph.input[0].name == "signals"
     assert [p.name for p in tmp_path.iterdir()] == ["m.onnx"]
+
+
+@pytest.mark.parametrize("placement, module", [("right_foot", "gaitmap"),
+                                               ("lower_back", "mobgap")])
+@pytest.mark.parametrize("command", ["reconstruct", "batch"])
+def test_a_placement_without_the_gait_extra(log, tmp_path, monkeypatch, placement, module,
+                                            command):
+    """The README's first install (`[viz,deep]`) has neither gaitmap, mobgap nor pandas: a
+    shoe or lower-back sensor names the `[gait]` extra before any work (it raised
+    ModuleNotFoundError: pandas from the calibration or the gait)."""
+    import sys
+    for name in ("gaitmap", "mobgap", "pandas"):
+        monkeypatch.setitem(sys.modules, name, None)  # as if not installed
+    code, out = run(command, log, "--placement", placement, "--method", "mean",
+                    *(["-o", tmp_path / "x.bvh"] if command == "reconstruct"
+                      else ["--out", tmp_path / "study"]))
+    assert code == 1 and module in out and "pip install 'imuloco[gait]'" in out, out
+    assert not (tmp_path / "x.bvh").exists() and not (tmp_path / "study").exists()
+
+
+def test_bench_real_without_the_gait_extra(tmp_path, monkeypatch):
+    import sys
+    monkeypatch.setitem(sys.modules, "gaitmap", None)
+    code, out = run("bench", "--real", tmp_path, "--out", tmp_path / "r")
+    assert code == 1 and "pip install 'imuloco[gait]'" in out, out
+
+
+def test_a_model_of_another_placement_names_the_one_to_give(log, tmp_path, sample_db):
+    from imuloco.methods import get_method
+    model = get_method("mean").fit(sample_db.subset([0]), ["left_ankle"], "phone", 0)
+    code, out = run("reconstruct", log, "--model", model.save(tmp_path / "left.npz"),
+                    "-o", tmp_path / "x.bvh")
+    assert code == 1 and "not 'right_ankle'" in out and "--placement left_ankle" in out, out

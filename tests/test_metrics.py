@@ -220,3 +220,20 @@ def test_evaluate_files(tmp_path, walk):
     values, note = metrics.evaluate_files(tmp_path / "gt.bvh", tmp_path / "rec.bvh")
     assert "60" in note
     assert values["mpjpe_cm"] == pytest.approx(0.0, abs=1e-3)
+
+
+def test_evaluate_files_of_other_rigs_name_the_first_difference(tmp_path, walk,
+                                                                 spinning_motion):
+    """Two rigs: the error gives the joint counts and the first joint that differs, not every
+    joint name of both (a 101-joint CMU rig made it 1,700 characters)."""
+    from imuloco.errors import InputError
+    from imuloco.io.bvh import write_bvh
+
+    write_bvh(walk, tmp_path / "gt.bvh")
+    write_bvh(spinning_motion, tmp_path / "rec.bvh")
+    a, b = walk.skeleton.names, spinning_motion.skeleton.names
+    with pytest.raises(InputError) as e:
+        metrics.evaluate_files(tmp_path / "gt.bvh", tmp_path / "rec.bvh")
+    k = next(i for i, (x, y) in enumerate(zip(b, a)) if x != y)
+    assert f"{len(b)} joints against {len(a)}; joint {k} is {b[k]!r}" in str(e.value)
+    assert str(list(a)) not in str(e.value) and str(list(b)) not in str(e.value)

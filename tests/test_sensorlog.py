@@ -528,3 +528,42 @@ def test_a_long_log_reads_fast_and_names_a_late_bad_cell(walk_rec, tmp_path, mon
     with pytest.raises(FormatError, match="column 'acc_x': expected a number, got 'oops'") as e:
         sensorlog._read_table(path)
     assert e.value.line == rows + 1 and line_reads == [1]
+
+
+def _write_realworld(rec: Recording, folder: Path, acc_name: str, gyro_name: str) -> None:
+    t = np.round(1.4e12 + 1000 * rec.times).astype(np.int64)  # Unix ms
+    for name, v in ((acc_name, rec.acc[:, 0]), (gyro_name, rec.gyro[:, 0])):
+        rows = [f"{i + 1},{t[i]},{x:.7g},{y:.7g},{z:.7g}" for i, (x, y, z) in enumerate(v)]
+        (folder / name).write_text("\n".join(["id,attr_time,attr_x,attr_y,attr_z", *rows]) + "\n")
+
+
+def test_realworld_pair_in_either_order(walk_rec, tmp_path):
+    """A RealWorld pair given gyroscope first is read the right way round (it was read with
+    the signals' roles swapped: the gyroscope taken for an accelerometer in g, without a
+    word); a file without its partner names the one to give."""
+    _write_realworld(walk_rec, tmp_path, "acc_walk.csv", "Gyroscope_walk.csv")
+    acc, gyro = tmp_path / "acc_walk.csv", tmp_path / "Gyroscope_walk.csv"
+    ref, report = read_log(acc, rate=None)
+    assert report.acc_unit == "m/s^2"
+    np.testing.assert_allclose(ref.acc, walk_rec.acc, rtol=1e-5, atol=1e-5)
+    with pytest.raises(FormatError, match="give the acc_ file .* \\(acc_walk.csv\\)"):
+        read_log(gyro)
+    for files in ((gyro, acc), (acc, gyro)):
+        rec, report = read_log(files, rate=None)
+        assert (report.acc_unit, report.gyro_unit) == ("m/s^2", "rad/s")
+        np.testing.assert_array_equal(rec.acc, ref.acc)
+        np.testing.assert_array_equal(rec.gyro, ref.gyro)
+    gyro.unlink()
+    with pytest.raises(FormatError, match="no gyroscope_walk.csv or gyr_walk.csv beside it"):
+        read_log(acc)
+
+
+def test_a_second_file_with_a_one_file_log_is_refused(walk_rec, tmp_path):
+    """Two generic logs given as a pair read the first and dropped the second, without a
+    word (``reconstruct a.csv b.csv`` for two walkers); three files read two."""
+    a = write_generic_csv(walk_rec, tmp_path / "a.csv")
+    b = write_generic_csv(walk_rec, tmp_path / "b.csv")
+    with pytest.raises(FormatError, match="b.csv: a second file, but a generic log holds both"):
+        read_log((a, b))
+    with pytest.raises(ValueError, match="got 3 files"):  # the third was dropped
+        read_log((a, b, a))

@@ -121,7 +121,9 @@ model_options = _options(
 # reading phone logs (reconstruct, batch, live --replay): imuloco.sensors.reallog
 log_options = _options(
     click.option("--placement", default="right_ankle", show_default=True,
-                 help="Where the phone was worn (placement preset)."),
+                 help="Where the phone was worn (placement preset): right_ankle or "
+                      "left_ankle for a shin, right_foot or left_foot for a shoe IMU, "
+                      "lower_back at L5 (these three need the [gait] extra)."),
     click.option("--format", "fmt", default="auto", show_default=True, type=_LogFormat(),
                  help="Sensor log format."),
 )
@@ -235,12 +237,13 @@ def _csv(value: str | None) -> list[str]:
     return [v.strip() for v in (value or "").split(",") if v.strip()]
 
 
-def _folders(values: tuple[str, ...]) -> list[Path] | None:
-    """Folders given as a repeatable and/or comma separated option; each must exist."""
+def _folders(values: tuple[str, ...], hint: str = "--data") -> list[Path] | None:
+    """Folders given as a repeatable and/or comma separated option ``hint``; each must
+    exist."""
     folders = [Path(v) for item in values for v in _csv(item)]
     for f in folders:
         if not f.is_dir():
-            raise click.BadParameter(f"folder {f} does not exist", param_hint="--data")
+            raise click.BadParameter(f"folder {f} does not exist", param_hint=hint)
     return folders or None
 
 
@@ -284,7 +287,6 @@ def _folders(values: tuple[str, ...]) -> list[Path] | None:
               help="Instead: the batch benchmark (imuloco.evaluate.batchbench) on N simulated "
                    "walkers of 60 s; writes batch_bench.md and batch_bench.json.")
 @click.option("--load", "load_dirs", multiple=True, metavar="DIR",
-              type=click.Path(exists=True, file_okay=False, path_type=Path),
               help="Instead: time loading these motion folders (repeat or comma-separate): "
                    "numpy parse, reader, cold and warm cache; writes load.json and load.md.")
 @click.option("--against", default=None, metavar="REV",
@@ -296,7 +298,7 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
           data_items: tuple[str, ...], train_items: tuple[str, ...],
           test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
           fold_names: str | None, speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None,
-          batch_walkers: int | None, load_dirs: tuple[Path, ...], against: str | None,
+          batch_walkers: int | None, load_dirs: tuple[str, ...], against: str | None,
           real_dir: Path | None, baseline: bool, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
     if fuzz is not None:
@@ -310,8 +312,11 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
         click.echo(write_fuzz(fuzz, out, chosen, seed=seed, progress=True))
         return
     if real_dir is not None:
+        from imuloco.app.pipeline import GAIT_EXTRA, require_extras
         from imuloco.evaluate.real import run_real, summarize, table
 
+        for p in GAIT_EXTRA:  # feet and lower backs
+            require_extras(p)
         rows = run_real(real_dir, out, limit, baseline, progress=True)
         click.echo(table(summarize(rows)))
         click.echo(f"wrote {out / 'real.json'}, real.csv and README.md")
@@ -326,7 +331,7 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
     if load_dirs:
         from imuloco.evaluate.loadspeed import load_benchmark, table
 
-        folders = [Path(p) for d in load_dirs for p in _csv(str(d))]
+        folders = _folders(load_dirs, "--load")
         click.echo(table(load_benchmark(folders, out, against), against))
         click.echo(f"wrote {out / 'load.json'} and {out / 'load.md'}")
         return
@@ -346,8 +351,9 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
     from imuloco.evaluate.report import COLUMNS, table
 
     records = run_bench(names, split_name, noise, _csv(placement), _folders(data_items), out,
-                        limit, seed, progress=True, seeds=n_seeds, train=_folders(train_items),
-                        test=_folders(test_items), up=up, skip_frames=skip_frames,
+                        limit, seed, progress=True, seeds=n_seeds,
+                        train=_folders(train_items, "--train"),
+                        test=_folders(test_items, "--test"), up=up, skip_frames=skip_frames,
                         only_folds=_csv(fold_names) or None)
     click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
     click.echo(f"wrote {out / 'results.json'} and {out / 'results.md'}")
@@ -656,7 +662,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
-    accelerometer file and a gyroscope file (a RealWorld acc_*.csv finds its gyroscope_*.csv).
+    accelerometer file and a gyroscope file, in either order (a RealWorld acc_*.csv finds its
+    gyroscope_*.csv).
     """
     from imuloco.app.pipeline import reconstruct_file, render_outputs
     from imuloco.io.atomic import atomic_write, check_outputs
@@ -683,6 +690,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
                    f"{pieces['pieces']['count']} piece(s)" + _confidence_text(c) + "; wrote "
                    + ", ".join(str(p) for p in (output, report_path) if p))
+        _echo_gait_source(pieces["gait_source"], pieces["gait_note"])
         return
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
@@ -704,10 +712,20 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
                f"cadence {_num(g['cadence_rhythm_spm'], 1)} steps/min from the legs' rhythm "
                f"(raw signal: {_num(report.signal_cadence_spm, 1)}), "
-               f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} detected strikes; "
+               f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} steps; "
                f"speed {_num(g['speed_mps'], 2)} m/s"
                + _confidence_text(report["confidence"]))
+    _echo_gait_source(report.gait_source, report.gait_note)
     click.echo("wrote " + ", ".join(str(p) for p in written))
+
+
+def _echo_gait_source(source: str, note: str | None) -> None:
+    """Say where the gait came from when it is not the reconstructed motion (a foot or
+    lower-back sensor's own signal), and the report's note on it (e.g. no --height)."""
+    if not source.startswith("the reconstructed motion"):
+        click.echo(f"gait: {source}")
+    if note:
+        click.echo(f"gait note: {note}")
 
 
 def _confidence_text(c: dict) -> str:

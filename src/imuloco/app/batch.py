@@ -16,8 +16,9 @@ and stride length, ...), ``walkers.parquet`` (the same rows with height, placeme
 - The model travels as its file's bytes, scattered once to the workers and loaded once per
   worker process (cached by SHA-256): never a pickled method object.
 - Every file is written atomically (:func:`imuloco.io.atomic.atomic_write`), the JSON last: a
-  recording is complete when its JSON names the same recording and model. A re-run skips
-  complete recordings (``force`` redoes them) and refuses to replace another job's outputs.
+  recording is complete when its JSON names the same recording, model, unit, height and
+  placement. A re-run skips complete recordings (``force`` redoes them) and refuses to
+  replace another job's outputs.
 - A recording that fails becomes a row with status ``error`` and its error; the others go on.
   A task whose worker dies is rescheduled by Dask (up to ``distributed.scheduler.allowed-
   failures`` times), one that raises outside the reconstruction is retried ``retries`` times.
@@ -67,18 +68,26 @@ LOCAL_CLUSTER = {"dashboard_address": None, "scheduler_kwargs": {"dashboard_addr
 def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = ()
                     ) -> list[Path]:
     """The recordings named and matched by glob ``patterns`` (``**`` recurses), sorted within
-    each pattern, duplicates dropped, in the order given."""
+    each pattern, duplicates dropped, in the order given. A RealWorld gyroscope file whose
+    ``acc_`` file is among them is dropped too: that file reads the pair, one walker."""
+    from imuloco.sensors.reallog import realworld_accelerometer
+
     found: list[Path] = [Path(p) for p in paths]
     for pattern in patterns:
         matches = sorted(globmod.glob(str(pattern), recursive=True))
         if not matches:
             log.warning("no recording matches %r", pattern)
         found += [Path(m) for m in matches]
+
+    def key(p: Path) -> str:
+        return os.path.normpath(p.absolute())  # not resolve(): two links are two walkers
+
+    keys = {key(p) for p in found}
     seen, out = set(), []
     for p in found:
-        key = os.path.normpath(p.absolute())  # not resolve(): two links are two walkers
-        if key not in seen:
-            seen.add(key)
+        acc = realworld_accelerometer(p)
+        if key(p) not in seen and (acc is None or key(acc) not in keys):
+            seen.add(key(p))
             out.append(p)
     return out
 
@@ -174,11 +183,12 @@ def error_row(name: str, recording: str, error: BaseException, seconds: float) -
             "error": f"{type(error).__name__}: {error}", "seconds": round(seconds, 3)}
 
 
-def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: str = "cm"
+def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: str = "cm",
+                     height_m: float | None = None, placement: str | None = None
                      ) -> dict | None | bool:
-    """``NAME.json`` when it completes this recording with this model and BVH unit; ``None``
-    when there is no JSON (to do); ``False`` when outputs of another recording, model, unit or
-    program are there."""
+    """``NAME.json`` when it completes this recording with this model, BVH unit, height and
+    placement (``None``: any placement); ``None`` when there is no JSON (to do); ``False`` when
+    outputs of another recording, model, unit, height, placement or program are there."""
     path = out / f"{name}.json"
     if not path.exists():
         return None
@@ -186,7 +196,9 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
         report = json.loads(path.read_text())
         batch = report["batch"]
         same = (batch["recording"] == recording and batch["model_sha256"] == sha256
-                and batch.get("unit", "cm") == unit and (out / f"{name}.bvh").is_file())
+                and batch.get("unit", "cm") == unit and batch.get("height_m") == height_m
+                and placement in (None, batch.get("placement", placement))
+                and (out / f"{name}.bvh").is_file())
     except (OSError, ValueError, KeyError, TypeError):
         return False
     return report if same else False
@@ -305,8 +317,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     """
     from tqdm.auto import tqdm
 
-    from imuloco.app.pipeline import choose_method
+    from imuloco.app.pipeline import choose_method, require_extras
 
+    require_extras(placement)  # on this machine, before starting any worker
     paths = [Path(p) for p in recordings]
     if not paths:
         raise ValueError("no recordings given")
@@ -328,12 +341,13 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     sha = hashlib.sha256(blob).hexdigest()
     model_seconds = time.perf_counter() - t0
 
-    reports = {n: _complete_report(out, n, r, sha, unit) for n, r in zip(names, recs)}
+    reports = {n: _complete_report(out, n, r, sha, unit, height_m, placement)
+               for n, r in zip(names, recs)}
     foreign = [str(out / f"{n}.json") for n, rep in reports.items() if rep is False]
     if foreign and not force:
         raise OutputExistsError(f"{', '.join(foreign[:3])}{' ...' if len(foreign) > 3 else ''}"
-                                " hold(s) another recording's, model's or unit's outputs; pass "
-                                "--force "
+                                " hold(s) another recording's, model's, unit's, height's or "
+                                "placement's outputs; pass --force "
                                 "(force=True) to replace them or choose another --out")
     rows: dict[str, dict] = {}
     strides: dict[str, Any] = {}  # pyarrow Tables

@@ -10,7 +10,8 @@ and moved so that it continues the previous piece at the join (the methods integ
 heading and the root's path from their own start). For methods with a finite window (the baselines) the result equals the
 one-piece reconstruction to rounding; recurrent methods (``learned``) forget their start
 within the warm-up, so pieces differ from one piece by what their state still remembers.
-Gait parameters are computed per piece and combined (:func:`combine`); a method's per-frame
+Gait parameters are computed per piece and combined (:func:`combine`), but a foot or
+lower-back sensor's, measured on its own signal, over the whole recording; a method's per-frame
 confidence (:meth:`imuloco.methods.base.Method.reconstruct_signals_full`) is cut with its piece
 and summarised over the whole recording (a few bytes per frame).
 """
@@ -61,7 +62,8 @@ def reconstruct_pieces(rec: Recording, method, pin: bool = False,
                        piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS
                        ) -> Iterator[Motion]:
     """The reconstruction of ``rec`` (calibrated, at any rate) at the method's frame rate, as
-    consecutive Motions of ``piece_s`` seconds (see the module docstring).
+    consecutive Motions of ``piece_s`` seconds (see the module docstring); a tail shorter than
+    a second joins the last piece.
 
     ``pin``: pin each piece's feet during their detected contacts
     (:func:`imuloco.methods.postprocess.pin_detected_contacts`), as the pipeline does for
@@ -85,9 +87,11 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
     signals = model_frames(rec, fps, method.gaps_missing)
     frames = len(signals)
     step, warm = max(1, round(piece_s * fps)), max(1, round(warmup_s * fps))
-    last = None
-    for start in range(0, frames, step):
+    last, start = None, 0
+    while start < frames:
         stop = min(frames, start + step)
+        if frames - stop < fps:  # a tail under 1 s joins this piece (one frame has no gait)
+            stop = frames
         # the warm-up before and as much signal after: the last frames see their look-ahead
         begin, end = max(0, start - warm), min(frames, stop + warm)
         full = method.reconstruct_signals_full(signals[begin:end])
@@ -101,6 +105,22 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
         err, flags = (None if a is None else np.asarray(a)[start - begin:stop - begin]
                       for a in (full.error_m, full.unreliable))
         yield Reconstruction(piece, err, flags, full.note)
+        start = stop
+
+
+def _sensor_gait(piece: Motion, rec: Recording, placement: str, height: float | None
+                 ) -> dict[str, Any]:
+    """A foot or lower-back sensor's own gait over the whole recording, as one piece reports
+    it (:func:`imuloco.evaluate.sensorgait.gait_report`; ``piece``, on the reported skeleton,
+    gives the stature when ``height`` is None): ``gait`` (its keys), ``gait_source``,
+    ``gait_note`` and ``strides``; empty for other placements, whose gait is the motion's."""
+    from imuloco.evaluate.sensorgait import FOOT_PLACEMENTS, GAIT_KEYS, LOWER_BACK, gait_report
+
+    if placement not in (*FOOT_PLACEMENTS, LOWER_BACK):
+        return {}
+    report = gait_report(piece, rec, placement, height)
+    report["gait"] = {k: report["gait"][k] for k in (*GAIT_KEYS, "double_support_pct")}
+    return report
 
 
 def combine(reports: list[dict[str, float]], frames: list[int]) -> dict[str, float]:
@@ -129,9 +149,10 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
 
     Parameters as :func:`imuloco.app.pipeline.reconstruct_file` (``method`` a name, or a fitted
     method); returns the report, with gait parameters and plausibility checks combined over
-    the pieces (:func:`combine`), ``pieces`` (their count and seconds) and ``confidence``
-    (:meth:`imuloco.app.confidence.Confidence.to_json` over the whole recording, scaled with
-    ``height``). ``unit``: the BVH's length unit (:func:`imuloco.io.bvh.write_bvh`).
+    the pieces (:func:`combine`; a foot or lower-back sensor's own gait with ``gait_source``,
+    ``gait_note`` and ``strides``, as in one piece), ``pieces`` (their count and seconds) and
+    ``confidence`` (:meth:`imuloco.app.confidence.Confidence.to_json` over the whole
+    recording, scaled with ``height``). ``unit``: the BVH's length unit (:func:`imuloco.io.bvh.write_bvh`).
     ``height``: the wearer's body height in metres; every piece is scaled to it
     (:func:`imuloco.evaluate.gait.to_height`, the same factor for all) before its gait is
     measured and it is written.
@@ -140,7 +161,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
 
     from tqdm.auto import tqdm
 
-    from imuloco.app.pipeline import calibrated, choose_method
+    from imuloco.app.pipeline import calibrated, choose_method, require_extras
     from imuloco.evaluate.gait import (
         gait_parameters,
         height_scale,
@@ -148,24 +169,28 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         to_height,
         to_json,
     )
+    from imuloco.evaluate.strides import with_confidence
     from imuloco.io.bvh import write_bvh_pieces
     from imuloco.methods.training import frame_times
     from imuloco.phases import gait_phases
     from imuloco.sensors.reallog import read_log
 
     t0 = time.perf_counter()
+    require_extras(placement)  # before reading a long log
     rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform)
     if method is None or isinstance(method, str):
         fitted, note = choose_method(method, model, placement, progress=progress)
     else:
         fitted, note = method, f"given fitted method {method.name!r}"
     info: dict[str, Any] = {}
+    raw = rec  # a foot or lower-back sensor's gait reads its own signal, as in one piece
     if calibrate:
         rec, info["calibration"] = calibrated(rec.select(fitted.placements_))
     if pin is None:
         pin = not fitted.pins_feet
     frames = len(frame_times(rec, fitted.fps_))
     gait, checks, sizes, confidences = [], [], [], []
+    final: list[Motion] = []  # the last piece
     bar = tqdm(total=frames, desc="reconstruct", unit="frame", disable=not progress)
 
     def pieces() -> Iterator[Motion]:
@@ -180,10 +205,15 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
             checks.append(plausibility(piece))
             sizes.append(piece.num_frames)
             bar.update(piece.num_frames)
+            final[:] = [piece]
             yield piece
 
     write_bvh_pieces(pieces(), frames, output, unit=unit, overwrite=overwrite)
     bar.close()
+    sensor = _sensor_gait(final[0], raw, placement, height)
+    confidence = Confidence.concatenate(confidences)
+    if sensor:
+        sensor["strides"] = with_confidence(sensor["strides"], confidence.error_m, fitted.fps_)
     return {
         "recording": log_report.to_json(),
         **info, "method": fitted.name, "model": note, "placement": placement,
@@ -191,8 +221,11 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         "motion": {"frames": frames, "fps": fitted.fps_,
                    "duration_s": round((frames - 1) / fitted.fps_, 3)},
         "pieces": {"count": len(sizes), "seconds": piece_s, "warmup_seconds": warmup_s},
-        "gait": to_json(combine(gait, sizes)),
+        "gait": to_json(combine(gait, sizes)) | sensor.get("gait", {}),
+        "gait_source": sensor.get("gait_source", "the reconstructed motion, per piece"),
+        "gait_note": sensor.get("gait_note"),
+        **({"strides": sensor["strides"]} if sensor else {}),
         "plausibility": to_json(combine(checks, sizes)),
-        "confidence": Confidence.concatenate(confidences).to_json(),
+        "confidence": confidence.to_json(),
         "seconds": round(time.perf_counter() - t0, 2),
     }

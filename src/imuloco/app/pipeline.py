@@ -47,6 +47,24 @@ DEMO_CLIP = "dataset-2_walk_normal_001"
 DEMO_SEED = 7
 
 
+# Placements whose pipeline needs the [gait] extra: a shoe sensor's calibration and gait read
+# its zero-velocity track (gaitmap), a lower-back sensor's gait Mobilise-D's pipeline (mobgap).
+GAIT_EXTRA = {"right_foot": "gaitmap", "left_foot": "gaitmap", "lower_back": "mobgap"}
+
+
+def require_extras(placement: str) -> None:
+    """Raise :class:`~imuloco.errors.MissingExtraError` (``pip install 'imuloco[gait]'``)
+    before any work when ``placement``'s pipeline needs a package that is not installed
+    (:data:`GAIT_EXTRA`)."""
+    from importlib.util import find_spec
+
+    from imuloco.errors import MissingExtraError
+
+    module = GAIT_EXTRA.get(placement)
+    if module is not None and (find_spec(module) is None or find_spec("pandas") is None):
+        raise MissingExtraError(f"a {placement} sensor's calibration and gait", module, "gait")
+
+
 def shipped_model(method: str, placement: str) -> Path | None:
     """Path of the pretrained model of ``method`` for ``placement`` shipped with the package."""
     from imuloco.data import MODELS_DIR
@@ -92,11 +110,12 @@ def choose_model(method: str | None = None, model: str | Path | None = None,
     from imuloco.errors import InputError, ModelFileError
     from imuloco.methods import get_method, load_model, method_class
 
+    require_extras(placement)
     if model is not None:
         fitted = load_model(model)
         if placement not in fitted.placements_:
             raise InputError(f"{model}: the model was trained for {fitted.placements_}, not "
-                             f"{placement!r}")
+                             f"{placement!r} (--placement {fitted.placements_[0]} reads it)")
         return ModelChoice(fitted, "file", f"model file {model} (method {fitted.name!r})",
                            Path(model))
     name = DEFAULT_METHOD if method is None else method
@@ -323,6 +342,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     from imuloco.evaluate.strides import with_confidence
     from imuloco.sensors.reallog import read_log
 
+    require_extras(placement)  # before reading a long log
     steps = ["import", "model", "reconstruct", "gait"]
     bar = tqdm(total=len(steps), desc="reconstruct", unit="step", disable=not progress)
     t0 = time.perf_counter()

@@ -359,8 +359,13 @@ def evaluate_files(ground_truth: str | Path, reconstructed: str | Path,
     gt, rec = read_motion(ground_truth), read_motion(reconstructed)
     a, b = gt.skeleton, rec.skeleton
     if a.names != b.names or not np.array_equal(a.parents, b.parents):
+        n = min(len(a.names), len(b.names))
+        k = next((i for i, (x, y) in enumerate(zip(b.names, a.names)) if x != y), n)
+        first = (f"joint {k} is {b.names[k]!r} against {a.names[k]!r}" if k < n else
+                 f"the first {n} joints are the same" if a.names != b.names else
+                 "the joints' parents differ")
         raise InputError(f"{reconstructed}: its skeleton differs from {ground_truth}'s "
-                         f"(joints {b.names} vs {a.names})")
+                         f"({len(b.names)} joints against {len(a.names)}; {first})")
     worst = float(np.abs(a.offsets - b.offsets).max())
     if worst > offset_tol:
         j = int(np.abs(a.offsets - b.offsets).max(axis=1).argmax())

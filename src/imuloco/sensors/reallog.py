@@ -179,12 +179,19 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
                   platform: str | None) -> tuple[str, list[Stream]]:
     """Step 1: the format (detected when ``"auto"``) and the streams the reader found."""
     if isinstance(path, (list, tuple)):
+        if len(path) != 2:
+            raise InputError(f"expected one log or an (accelerometer, gyroscope) pair of files, "
+                             f"got {len(path)} files (many walkers: imuloco batch)")
         path, gyro_path = Path(path[0]), Path(path[1])
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or folder")
     fmt = detect_format(path) if fmt == "auto" else fmt
     export = is_export(path)
+    if gyro_path is not None and fmt in ("generic", "sensorlogger"):
+        raise FormatError(gyro_path, None, f"a second file, but a {fmt} log holds both signals "
+                                           f"in {path.name}: give one file (many walkers: "
+                                           "imuloco batch)")
     if fmt == "generic":
         return fmt, read_generic_csv(path)
     if fmt == "phyphox":
@@ -195,18 +202,51 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
     if fmt == "sensorlogger":
         return fmt, read_sensor_logger(path if export else path.parent, platform)
     if fmt == "realworld":
-        if gyro_path is None:
-            name = path.name
-            for a, b in (("acc_", "gyroscope_"), ("acc_", "Gyroscope_"), ("acc_", "gyr_")):
-                cand = path.with_name(b + name[len(a):]) if name.lower().startswith(a) else None
-                if cand is not None and cand.exists():
-                    gyro_path = cand
-                    break
-            else:
-                raise FormatError(path, None, "RealWorld logs come as an acc_*.csv and a "
-                                              "gyroscope_*.csv file: pass gyro_path=")
-        return fmt, read_realworld(path, gyro_path)
+        return fmt, read_realworld(*_realworld_pair(path, gyro_path))
     raise UnknownNameError(f"unknown log format {fmt!r}; expected one of {list(FORMAT_NAMES)}")
+
+
+RW_ACC, RW_GYRO = ("acc_",), ("gyroscope_", "gyr_")  # RealWorld file names, any case
+
+
+def _rw_kind(path: Path) -> tuple[str | None, str]:
+    """``("acc" | "gyro" | None, the name after its prefix)`` of a RealWorld file."""
+    low = path.name.lower()
+    for kind, prefixes in (("acc", RW_ACC), ("gyro", RW_GYRO)):
+        for p in prefixes:
+            if low.startswith(p):
+                return kind, path.name[len(p):]
+    return None, path.name
+
+
+def realworld_accelerometer(path: str | Path) -> Path | None:
+    """For a RealWorld gyroscope file (``gyroscope_X.csv``, ``gyr_X.csv``), the
+    ``acc_X.csv`` beside it that reads the pair; None for any other file."""
+    path = Path(path)
+    kind, rest = _rw_kind(path)
+    return path.with_name(RW_ACC[0] + rest) if kind == "gyro" else None
+
+
+def _realworld_pair(path: Path, gyro_path: Path | None) -> tuple[Path, Path]:
+    """The (accelerometer, gyroscope) files of a RealWorld log: ``acc_X.csv`` finds
+    ``gyroscope_X.csv`` beside it; a pair whose names say it was given gyroscope first is
+    turned round. A gyroscope file alone is refused, naming its accelerometer file (which
+    finds it: a folder's files given one by one, as ``batch --glob`` does, are one walker)."""
+    kind, rest = _rw_kind(path)
+    if gyro_path is not None:
+        return (gyro_path, path) if (kind, _rw_kind(gyro_path)[0]) == ("gyro", "acc") else (
+            path, gyro_path)
+    if kind != "acc":
+        raise FormatError(path, None, "a RealWorld log comes as two files, acc_NAME.csv and "
+                                      "gyroscope_NAME.csv: give the acc_ file (it finds the "
+                                      "other) or both" + (f" (acc_{rest})" if kind else ""))
+    names = [p + rest for p in RW_GYRO]
+    found = sorted(f for f in path.parent.iterdir()
+                   if f.name.lower() in {n.lower() for n in names} and f.is_file())
+    if not found:
+        raise FormatError(path, None, f"a RealWorld log comes as two files: no "
+                                      f"{' or '.join(names)} beside it (give both files)")
+    return path, found[0]
 
 
 def _sensors(streams: list[Stream], placement: str) -> dict[str, dict[str, Stream]]:
