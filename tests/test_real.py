@@ -566,6 +566,12 @@ def test_reconstruct_file_height_and_foot_gait(tmp_path, demo_rec, demo_clip):
     assert report["gait"]["stride_length_m"] == pytest.approx(truth["stride_length_m"],
                                                               rel=0.05)
     assert len(report["strides"]) >= 3 and report["strides"][0]["foot"] == "right"
+    # no value of another source among the sensor's: the worn foot's stance is the sensor's,
+    # what it does not measure is None, and the motion's own parameters stand beside them
+    g, m = report["gait"], report.to_json()["motion_gait"]
+    assert g["right_stance_pct"] == g["stance_pct"] and g["left_stance_pct"] is None
+    assert g["cadence_rhythm_spm"] is None and g["duration_s"] == m["duration_s"]
+    assert m["cadence_rhythm_spm"] == pytest.approx(truth["cadence_spm"], rel=0.1)
     json.dumps(report.to_json())
 
 

@@ -709,8 +709,9 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
             f.write(json.dumps(report.to_json(), indent=2) + "\n")
         written.append(report_path)
     g = report.gait
+    rhythm = (report.motion_gait or g)["cadence_rhythm_spm"]  # the reconstruction's legs
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
-               f"cadence {_num(g['cadence_rhythm_spm'], 1)} steps/min from the legs' rhythm "
+               f"cadence {_num(rhythm, 1)} steps/min from the legs' rhythm "
                f"(raw signal: {_num(report.signal_cadence_spm, 1)}), "
                f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} steps; "
                f"speed {_num(g['speed_mps'], 2)} m/s"

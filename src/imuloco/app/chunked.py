@@ -112,14 +112,14 @@ def _sensor_gait(piece: Motion, rec: Recording, placement: str, height: float | 
                  ) -> dict[str, Any]:
     """A foot or lower-back sensor's own gait over the whole recording, as one piece reports
     it (:func:`imuloco.evaluate.sensorgait.gait_report`; ``piece``, on the reported skeleton,
-    gives the stature when ``height`` is None): ``gait`` (its keys), ``gait_source``,
-    ``gait_note`` and ``strides``; empty for other placements, whose gait is the motion's."""
-    from imuloco.evaluate.sensorgait import FOOT_PLACEMENTS, GAIT_KEYS, LOWER_BACK, gait_report
+    gives the stature when ``height`` is None): ``gait``, ``gait_source``, ``gait_note`` and
+    ``strides``; empty for other placements, whose gait is the motion's."""
+    from imuloco.evaluate.sensorgait import FOOT_PLACEMENTS, LOWER_BACK, gait_report
 
     if placement not in (*FOOT_PLACEMENTS, LOWER_BACK):
         return {}
     report = gait_report(piece, rec, placement, height)
-    report["gait"] = {k: report["gait"][k] for k in (*GAIT_KEYS, "double_support_pct")}
+    del report["motion_gait"]  # the last piece's: the caller combines every piece's
     return report
 
 
@@ -149,10 +149,12 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
 
     Parameters as :func:`imuloco.app.pipeline.reconstruct_file` (``method`` a name, or a fitted
     method); returns the report, with gait parameters and plausibility checks combined over
-    the pieces (:func:`combine`; a foot or lower-back sensor's own gait with ``gait_source``,
-    ``gait_note`` and ``strides``, as in one piece), ``pieces`` (their count and seconds) and
+    the pieces (:func:`combine`; for a foot or lower-back sensor, its own gait with
+    ``gait_source``, ``gait_note`` and ``strides`` as in one piece, the pieces' combined as
+    ``motion_gait``), ``pieces`` (their count and seconds) and
     ``confidence`` (:meth:`imuloco.app.confidence.Confidence.to_json` over the whole
-    recording, scaled with ``height``). ``unit``: the BVH's length unit (:func:`imuloco.io.bvh.write_bvh`).
+    recording, scaled with ``height``). ``unit``: the BVH's length unit
+    (:func:`imuloco.io.bvh.write_bvh`).
     ``height``: the wearer's body height in metres; every piece is scaled to it
     (:func:`imuloco.evaluate.gait.to_height`, the same factor for all) before its gait is
     measured and it is written.
@@ -212,6 +214,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     bar.close()
     sensor = _sensor_gait(final[0], raw, placement, height)
     confidence = Confidence.concatenate(confidences)
+    motion_gait = to_json(combine(gait, sizes))
     if sensor:
         sensor["strides"] = with_confidence(sensor["strides"], confidence.error_m, fitted.fps_)
     return {
@@ -221,10 +224,11 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         "motion": {"frames": frames, "fps": fitted.fps_,
                    "duration_s": round((frames - 1) / fitted.fps_, 3)},
         "pieces": {"count": len(sizes), "seconds": piece_s, "warmup_seconds": warmup_s},
-        "gait": to_json(combine(gait, sizes)) | sensor.get("gait", {}),
+        "gait": (sensor["gait"] | {"duration_s": motion_gait["duration_s"]} if sensor
+                 else motion_gait),
         "gait_source": sensor.get("gait_source", "the reconstructed motion, per piece"),
         "gait_note": sensor.get("gait_note"),
-        **({"strides": sensor["strides"]} if sensor else {}),
+        **({"strides": sensor["strides"], "motion_gait": motion_gait} if sensor else {}),
         "plausibility": to_json(combine(checks, sizes)),
         "confidence": confidence.to_json(),
         "seconds": round(time.perf_counter() - t0, 2),

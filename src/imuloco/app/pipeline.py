@@ -165,7 +165,9 @@ class ReconstructionReport:
     placement : the placement read.
     motion : frames, fps and duration of the reconstruction.
     height_m : the wearer's height given (``None``: the model skeleton's proportions).
-    gait, gait_source, gait_note, strides : :func:`imuloco.evaluate.sensorgait.gait_report`.
+    gait, gait_source, gait_note, strides, motion_gait :
+        :func:`imuloco.evaluate.sensorgait.gait_report` (``motion_gait``: a foot or lower-back
+        sensor's reconstructed motion's own gait, None otherwise).
     plausibility : :func:`imuloco.evaluate.gait.plausibility`, as JSON.
     signal_cadence_spm : the cadence of the raw signal (Welch), steps per minute.
     skeleton : the user's rig the motion was retargeted onto (``None``: the model's).
@@ -192,6 +194,7 @@ class ReconstructionReport:
     skeleton: dict[str, Any] | None = None
     seconds: float = 0.0
     confidence: Confidence | None = None
+    motion_gait: dict[str, Any] | None = None
 
     @property
     def method(self) -> str:
@@ -208,6 +211,8 @@ class ReconstructionReport:
                    height_m=self.height_m, gait=self.gait, gait_source=self.gait_source,
                    gait_note=self.gait_note, strides=self.strides,
                    signal_cadence_spm=self.signal_cadence_spm, plausibility=self.plausibility)
+        if self.motion_gait is not None:
+            out["motion_gait"] = self.motion_gait
         if self.skeleton is not None:
             out["skeleton"] = self.skeleton
         if self.confidence is not None:

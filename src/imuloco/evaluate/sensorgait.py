@@ -290,8 +290,6 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
         from 17.9 to 15.3 % (daily living 36.2 to 30.2 %, straight walks unchanged); on
         ipol-gait's straight bouts it stays 8.6 % (``docs/results/real/experiments.md``).
     """
-    import pandas as pd
-
     try:
         from sklearn.exceptions import InconsistentVersionWarning
 
@@ -305,6 +303,8 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
             from mobgap.stride_length import SlZijlstra
     except ImportError as e:
         raise MissingExtraError("lower-back gait", f"mobgap ({e})", "gait") from None
+    import pandas as pd  # after the check: the [gait] extra brings it
+
     times = np.asarray(times, float)
     if len(times) < 2 or times[-1] - times[0] < 3.0:
         return not_measured(LOWER_BACK, BACK_METHOD, "the recording is shorter than 3 s, "
@@ -382,9 +382,12 @@ def gait_report(motion, rec, placement: str, height_m: float | None = None) -> d
 
     Returns
     -------
-    dict: ``gait`` (JSON-ready parameters; NaN/None where nothing could be measured),
-    ``gait_source`` (what measured them), ``gait_note`` (why nothing was measured, or None)
-    and ``strides`` (one row per stride, :data:`imuloco.evaluate.strides.STRIDE_FIELDS`).
+    dict: ``gait`` (JSON-ready parameters; NaN/None where nothing could be measured: for a
+    sensor, also what it does not measure, such as the other foot's stance or the legs'
+    rhythm, so that no value mixes two sources), ``gait_source`` (what measured them),
+    ``gait_note`` (why nothing was measured, or None), ``strides`` (one row per stride,
+    :data:`imuloco.evaluate.strides.STRIDE_FIELDS`) and ``motion_gait``: for a sensor, the
+    reconstructed motion's own parameters beside it (None otherwise, where ``gait`` is that).
     """
     from imuloco.evaluate.gait import gait_parameters, stature, to_json
     from imuloco.evaluate.strides import stride_rows
@@ -393,7 +396,7 @@ def gait_report(motion, rec, placement: str, height_m: float | None = None) -> d
     phases = gait_phases(motion)
     gait = gait_parameters(motion, phases)
     strides = stride_rows(motion, phases)
-    source, note = "the reconstructed motion", None
+    source, note, motion_gait = "the reconstructed motion", None, None
     if placement in (*FOOT_PLACEMENTS, LOWER_BACK):
         if height_m is None:
             height_m = stature(motion.skeleton)
@@ -402,8 +405,13 @@ def gait_report(motion, rec, placement: str, height_m: float | None = None) -> d
                         "the pendulum length")
         sg = sensor_gait(rec, placement, height_m=height_m)
         summary = sg.summary()
+        motion_gait = to_json(gait)
+        gait = {k: (v if k == "duration_s" else math.nan) for k, v in gait.items()}
         gait.update({k: summary[k] for k in GAIT_KEYS})
-        gait["double_support_pct"] = math.nan
+        if placement in FOOT_PLACEMENTS:  # the worn foot's stance is the sensor's
+            gait[f"{placement.split('_')[0]}_stance_pct"] = summary["stance_pct"]
+        if summary["swing_pct"] > 0:
+            gait["stance_swing_ratio"] = summary["stance_pct"] / summary["swing_pct"]
         strides, source = sg.strides, f"the {placement} sensor's signal: {sg.method}"
         if not sg.measured:
             note = f"no gait could be measured: {sg.reason}"
@@ -414,4 +422,5 @@ def gait_report(motion, rec, placement: str, height_m: float | None = None) -> d
         gait = {k: (v if k == "duration_s" else math.nan) for k, v in gait.items()}
     return {"gait": to_json(gait), "gait_source": source, "gait_note": note,
             "strides": [{k: (v if isinstance(v, str) or v is None else
-                             to_json({"v": v})["v"]) for k, v in r.items()} for r in strides]}
+                             to_json({"v": v})["v"]) for k, v in r.items()} for r in strides],
+            "motion_gait": motion_gait}

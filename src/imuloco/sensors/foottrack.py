@@ -223,12 +223,13 @@ def foot_track(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray) -> FootTrac
 @lru_cache(maxsize=4)
 def _track(times_b: bytes, acc_b: bytes, gyro_b: bytes) -> FootTrack:
     """:func:`foot_track` of signals given as float64 bytes."""
+    _gaitmap()  # before pandas, which the [gait] extra brings too
+    import warnings
+
     import pandas as pd
 
     times = np.frombuffer(times_b)
     acc, gyro = np.frombuffer(acc_b).reshape(-1, 3), np.frombuffer(gyro_b).reshape(-1, 3)
-    _gaitmap()
-    import warnings
 
     from gaitmap.preprocessing.sensor_alignment import align_dataset_to_gravity
     from gaitmap.trajectory_reconstruction import RtsKalman
