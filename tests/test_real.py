@@ -232,6 +232,19 @@ def test_the_zupt_detector_is_rts_kalman_s_default():
     assert norm.get_params() == RtsKalman().zupt_detector.get_params()
 
 
+def test_cadence_leaves_pauses_out():
+    """A walker who stops for 7 s between two walks of 1 s strides walks at 120 steps/min:
+    an interval longer than the longest stride (3 s) is a pause, not a step."""
+    from imuloco.evaluate.sensorgait import SensorGait
+
+    ic = np.array([0.0, 1.0, 2.0, 3.0, 10.0, 11.0, 12.0])
+    foot = SensorGait("right_foot", "", initial_contacts=ic, steps_per_contact=2)
+    assert foot.summary()["cadence_spm"] == pytest.approx(120.0)
+    assert foot.summary()["steps"] == 14
+    back = SensorGait("lower_back", "", initial_contacts=np.array([0.0, 0.5, 1.0, 5.0, 5.5]))
+    assert back.summary()["cadence_spm"] == pytest.approx(120.0)
+
+
 def test_sensor_gait_is_consistent_by_construction(demo_rec):
     """speed = step length x cadence / 60 exactly, steps = 2 x contacts for a foot."""
     for placement in ("right_foot", "lower_back"):

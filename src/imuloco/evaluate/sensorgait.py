@@ -43,6 +43,7 @@ LOWER_BACK = "lower_back"
 # not measured.
 L5_HEIGHT_RATIO = 0.530
 MIN_STRIDES = 2
+MAX_STRIDE_S = 3.0  # the longest stride (Kluge et al. 2021, Mobilise-D's stride definition)
 GYRO_CUTOFF_HZ = 6.0  # walking kinematics' low-pass cutoff (Winter 2009), see foot_gait
 HERZER_IC_SHARE = 0.7  # gaitmap's HerzerEventDetection searches the IC in a stride's first 70 %
 
@@ -93,13 +94,17 @@ class SensorGait:
     def summary(self) -> dict[str, float]:
         """``steps``, ``strides``, ``cadence_spm``, ``stride_length_m``, ``step_length_m``,
         ``speed_mps``, ``stance_pct``, ``swing_pct`` (NaN where undefined). Cadence counts the
-        contacts over the time they span; speed is stride length x cadence / 120, so
-        ``speed = step_length x cadence / 60`` holds exactly."""
+        contacts over the time they span, pauses left out: an interval between two contacts
+        longer than a stride lasts (MAX_STRIDE_S; half of it between both feet's contacts) is
+        no step. Speed is stride length x cadence / 120, so ``speed = step_length x cadence /
+        60`` holds exactly."""
         ic = np.sort(self.initial_contacts)
         nan = math.nan
         steps = float(len(ic) * self.steps_per_contact) if self.measured else nan
-        span = ic[-1] - ic[0] if len(ic) >= 2 else 0.0
-        cadence = 60.0 * self.steps_per_contact * (len(ic) - 1) / span if span > 0 else nan
+        gaps = np.diff(ic)
+        gaps = gaps[gaps <= MAX_STRIDE_S * self.steps_per_contact / 2]
+        span = float(gaps.sum())
+        cadence = 60.0 * self.steps_per_contact * len(gaps) / span if span > 0 else nan
         lengths = np.array([s["length_m"] for s in self.strides], dtype=float)
         lengths = lengths[np.isfinite(lengths)]
         stride = float(np.mean(lengths)) if len(lengths) else nan
