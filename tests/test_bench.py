@@ -160,6 +160,19 @@ def test_method_spec_carries_hyperparameters():
         "eom2014", {"variant": "mlp-no-hmm", "context": 7})
     with pytest.raises(KeyError, match="expected"):
         parse_method_spec("ridge[window")
+    # Python's spellings of true, false and none are read as such, and a value of the wrong
+    # kind is refused by name before any work ("True" reached torch's GRU as a string)
+    assert parse_method_spec("learned[bidirectional=True;mirror=False]")[1] == {
+        "bidirectional": True, "mirror": False}
+    from imuloco.errors import InputError
+    from imuloco.methods import get_method
+
+    for spec, word in (("learned[bidirectional=yes]", "true or false"),
+                       ("learned[epochs=2.5]", "whole number"), ("ridge[alpha=big]", "number"),
+                       ("ridge[nosuch=1]", "no parameter")):
+        name, params = parse_method_spec(spec)
+        with pytest.raises(InputError, match=word):
+            get_method(name, **params)
     recs = run_bench(["ridge[window=3]"], out=None, **QUICK)
     assert {r["method"] for r in recs} == {"ridge[window=3]"}
     # the hyperparameter reached the method: a 3-sample window differs from the default

@@ -116,8 +116,45 @@ def available_methods() -> dict[str, type[Method]]:
 
 
 def get_method(name: str, **params) -> Method:
-    """A new, unfitted method by name."""
-    return method_class(name)(**params)
+    """A new, unfitted method by name. A hyperparameter whose default is a bool or a number
+    must be one (:class:`~imuloco.errors.InputError` naming it otherwise: ``"True"`` reaching
+    torch as a string failed deep inside a training)."""
+    cls = method_class(name)
+    _check_types(name, cls, params)
+    return cls(**params)
+
+
+def _check_types(name: str, cls: type, params: dict[str, Any]) -> None:
+    """Raise InputError for a parameter the constructor does not take, or whose value is not
+    of its default's kind (bool; int or float, where an int is a float too)."""
+    import inspect
+    from numbers import Integral, Real
+
+    import numpy as np
+
+    from imuloco.errors import InputError
+
+    sig = inspect.signature(cls.__init__)
+    takes_any = any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values())
+    for key, value in params.items():
+        p = sig.parameters.get(key)
+        if p is None or p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
+            if takes_any:
+                continue
+            raise InputError(f"method {name!r} has no parameter {key!r}; it takes "
+                             f"{[k for k in sig.parameters if k != 'self']}")
+        default, flag = p.default, isinstance(value, (bool, np.bool_))
+        if isinstance(default, bool):
+            ok, kind = flag, "true or false"
+        elif isinstance(default, Real):
+            whole = isinstance(default, Integral)
+            ok = not flag and isinstance(value, Integral if whole else Real)
+            kind = "a whole number" if whole else "a number"
+        else:
+            continue
+        if not ok:
+            raise InputError(f"method {name!r}: parameter {key!r} expects {kind}, got "
+                             f"{value!r}")
 
 
 @dataclass(frozen=True)
@@ -195,9 +232,13 @@ def _module_source(module: str) -> str | None:
     return None
 
 
+PYTHON_LITERALS = {"True": "true", "False": "false", "None": "null"}
+
+
 def parse_params(items: Iterable[str], where: str = "parameter") -> dict[str, Any]:
     """``key=value`` strings -> a dict of hyperparameters; values parsed as JSON when they can
-    be (numbers, ``true``, ``null``, lists), else kept as stripped strings.
+    be (numbers, ``true``, ``null``, lists; also Python's ``True``, ``False``, ``None``),
+    else kept as stripped strings.
 
     Raises :class:`UnknownNameError` naming ``where`` for an item without ``=``."""
     params: dict[str, Any] = {}
@@ -205,6 +246,7 @@ def parse_params(items: Iterable[str], where: str = "parameter") -> dict[str, An
         key, eq, value = item.partition("=")
         if not eq or not key.strip():
             raise UnknownNameError(f"{where}: expected key=value, got {item!r}")
+        value = PYTHON_LITERALS.get(value.strip(), value)
         try:
             params[key.strip()] = json.loads(value)
         except json.JSONDecodeError:
