@@ -173,6 +173,16 @@ def test_bidirectional_looks_both_ways_and_is_offline_only(sample_db, signals):
     with pytest.raises(NotImplementedError, match="offline"):
         bi.stream()
     assert bi.reconstruct_signals(signals).num_frames == 80
+    # the bench measures it without an online step (it tried to stream it and failed), and
+    # live refuses it by name before it starts
+    from imuloco.app.live.session import LiveSession
+    from imuloco.errors import InputError
+    from imuloco.evaluate.bench import _latency
+
+    assert not bi.can_stream() and bi.supports_online
+    assert _latency(bi, signals) == (None, None, None)
+    with pytest.raises(InputError, match="bidirectional"):
+        LiveSession(bi)
 
 
 def rows(n_per: int = 400, seed: int = 0) -> conf.Rows:

@@ -122,7 +122,7 @@ def aggregate(clips: list[dict[str, Any]]) -> dict[str, Any]:
 
 def _latency(method, signals: np.ndarray) -> tuple[float | None, float | None, float | None]:
     """Compute time per online step (p50, p99 ms) and the stream's delay (ms of look-ahead)."""
-    if not method.supports_online:
+    if not method.can_stream():
         return None, None, None
     stream = method.stream()
     times = []

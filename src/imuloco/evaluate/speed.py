@@ -305,7 +305,7 @@ def speed_benchmark(
                                        "fit_s": fit_s}
                 lower = getattr(method, "lower_", None)
                 rec["states"] = int(lower.num_states) if lower is not None else None
-                if method.supports_online:
+                if method.can_stream():
                     load = os.getloadavg()[0]
                     dt, cpu = time_stream(method, test.signals)
                     ms, cpu_ms = dt * 1e3, cpu * 1e3

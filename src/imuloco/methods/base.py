@@ -226,6 +226,11 @@ class Method(ABC):
 
         raise InputError(f"method {self.name!r} predicts no per-frame error to calibrate")
 
+    def can_stream(self) -> bool:
+        """Whether this instance reconstructs online (:meth:`stream`): its class's
+        ``supports_online``, unless a hyperparameter rules it out."""
+        return self.supports_online
+
     def stream(self) -> Stream:
         """A fresh online reconstruction session (online methods only)."""
         raise NotImplementedError(f"method {self.name!r} has no online mode")

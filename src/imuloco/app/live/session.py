@@ -212,9 +212,10 @@ class LiveSession:
     def __init__(self, method, calibrate_s: float = 5.0, sigma_s: float | None = None,
                  radius_s: float | None = None, calibration: Calibration | None = None,
                  max_gap_s: float = MAX_GAP_S, height_m: float | None = None) -> None:
-        if not getattr(method, "supports_online", False):
-            raise InputError(f"method {method.name!r} has no online mode; live needs one of "
-                             "the methods `imuloco methods` lists as online")
+        if not getattr(method, "can_stream", lambda: False)():
+            raise InputError(f"method {method.name!r} has no online mode as configured; live "
+                             "needs one of the methods `imuloco methods` lists as online "
+                             "(a learned model: causal, not bidirectional)")
         if not 0 <= calibrate_s <= MAX_CALIBRATE_S:
             raise ValueError(f"calibrate_s must be between 0 and {MAX_CALIBRATE_S:g} seconds, "
                              f"got {calibrate_s}")

@@ -408,6 +408,10 @@ class Learned(Method):
         err, flag, note = self.confidence(out)
         return Reconstruction(motion, err, flag, note, out.scores())
 
+    def can_stream(self) -> bool:
+        """Online unless the network reads the recording both ways (``bidirectional``)."""
+        return not self.bidirectional
+
     def stream(self) -> LearnedStream:
         if self.bidirectional:
             raise NotImplementedError(
