@@ -212,7 +212,8 @@ class LiveSession:
     def __init__(self, method, calibrate_s: float = 5.0, sigma_s: float | None = None,
                  radius_s: float | None = None, calibration: Calibration | None = None,
                  max_gap_s: float = MAX_GAP_S, height_m: float | None = None) -> None:
-        if not getattr(method, "can_stream", lambda: False)():
+        if not (getattr(method, "supports_online", False)
+                and getattr(method, "can_stream", lambda: True)()):
             raise InputError(f"method {method.name!r} has no online mode as configured; live "
                              "needs one of the methods `imuloco methods` lists as online "
                              "(a learned model: causal, not bidirectional)")
