@@ -172,15 +172,83 @@ def test_rerun_skips_complete_outputs_and_force_redoes(logs, fitted, client, tmp
     # another model's outputs are never replaced without --force
     with pytest.raises(OutputExistsError, match="--force"):
         run_batch(paths, tmp_path, method="mean", scheduler=client)
-    # nor another height's: they were skipped as complete, their lengths in the other
-    # proportions
-    with pytest.raises(OutputExistsError, match="height"):
-        run_batch(paths, tmp_path, fitted=fitted, scheduler=client, height_m=1.9)
-    tall = run_batch(paths, tmp_path, fitted=fitted, scheduler=client, height_m=1.9,
-                     force=True)
-    assert tall["done"] == 3
+    # another height's are redone (they were skipped as complete, their lengths in the other
+    # proportions)
+    tall = run_batch(paths, tmp_path, fitted=fitted, scheduler=client, height_m=1.9)
+    assert (tall["done"], tall["skipped"]) == (3, 0)
     again = run_batch(paths, tmp_path, fitted=fitted, scheduler=client, height_m=1.9)
     assert (again["done"], again["skipped"]) == (0, 3)
+
+
+def test_a_walkers_file_gives_each_walker_its_height(logs, fitted, client, tmp_path):
+    """--walkers on a scheduler: each walker's height reaches its skeleton, report and
+    tables (an empty cell or no row: --height), the study's columns the tables; a re-run
+    redoes only the walker whose height changed."""
+    from imuloco.evaluate.gait import stature
+
+    paths, _ = logs
+    names = output_names(paths)
+    model = fitted.save(tmp_path / "ridge.npz")
+    study = tmp_path / "walkers.csv"
+    study.write_text(f"name,height_m,age\n{names[0]},1.6,31\n{names[1]},,45\n")
+    out = tmp_path / "out"
+    args = ["batch", *map(str, paths), "--out", str(out), "--model", str(model),
+            "--scheduler", client.scheduler.address, "--walkers", str(study), "--height", "1.9"]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    expected = [1.6, 1.9, 1.9]
+
+    def heights() -> list[float]:
+        return [stature(read_bvh(out / f"{n}.bvh", unit="cm").skeleton) for n in names]
+
+    assert heights() == pytest.approx(expected, abs=0.01)
+    assert [json.loads((out / f"{n}.json").read_text())["batch"]["height_m"]
+            for n in names] == expected
+    with open(out / "summary.csv") as f:
+        table = list(csv.DictReader(f))
+    assert [(float(t["height_m"]), t["age"]) for t in table] == [
+        (1.6, "31"), (1.9, "45"), (1.9, "")]
+    w = pq.read_table(out / "walkers.parquet")
+    assert w.column_names == [*WALKER_FIELDS, "age"]
+    assert w.column("height_m").to_pylist() == expected
+    assert w.column("age").to_pylist() == [31, 45, None]
+    stamps = [(out / f"{n}.bvh").stat().st_mtime_ns for n in names]
+    study.write_text(f"name,height_m,age\n{names[0]},1.6,31\n{names[1]},1.7,45\n")
+    again = run_batch(paths, out, fitted=fitted, scheduler=client, height_m=1.9,
+                      walkers=study)
+    assert (again["done"], again["skipped"]) == (1, 2)
+    assert [r["height_m"] for r in again["recordings"]] == [1.6, 1.7, 1.9]
+    assert heights() == pytest.approx([1.6, 1.7, 1.9], abs=0.01)
+    assert [(out / f"{n}.bvh").stat().st_mtime_ns == t for n, t in zip(names, stamps)] == [
+        True, False, True]
+    # a typo is refused before any work, naming the file, line and the name meant
+    study.write_text(f"name,height_m\n{names[0]}x,1.6\n")
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 1 and f"{study}:2: name '{names[0]}x'" in res.output
+    assert f"close: '{names[0]}'" in res.output
+
+
+def test_a_walker_redone_for_another_height_is_incomplete_until_done(logs, fitted, client,
+                                                                    tmp_path, monkeypatch):
+    """Its BVH written, its report not: the earlier height's report must not mark it
+    complete (a re-run at that height would keep the BVH of the other)."""
+    from imuloco.app import batch
+
+    paths, _ = logs
+    run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=client, height_m=1.6)
+    real = batch.atomic_write
+
+    def no_report(path, *args, **kwargs):  # workers are threads of this process
+        if path.suffix == ".json" and path.name != "summary.json":
+            raise OSError(28, "No space left on device")
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(batch, "atomic_write", no_report)
+    assert run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=client,
+                     height_m=1.8)["failed"] == 1
+    monkeypatch.undo()
+    again = run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=client, height_m=1.6)
+    assert (again["done"], again["skipped"]) == (1, 0)
 
 
 def test_a_failed_write_leaves_no_partial_file(logs, fitted, client, tmp_path, monkeypatch):

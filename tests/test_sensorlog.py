@@ -320,6 +320,16 @@ def test_milliseconds_in_a_seconds_column_are_detected(walk_rec, rows, tmp_path,
     assert abs(report.duration - span) < 0.01 and abs(rec.times[-1] - span) < 0.02
 
 
+def test_a_slow_log_in_seconds_is_refused_for_its_rate(rows, tmp_path):
+    """2 Hz in seconds for 30 s: refused for its rate, not read as milliseconds (2 kHz for
+    0.03 s) and refused for its length."""
+    lines = [rows[0]] + [f"{k * 0.5:.6f}," + r.split(",", 1)[1] for k, r in enumerate(rows[1:61])]
+    with pytest.raises(FormatError, match=r"rate of 2 Hz: too low for gait, expected at least "
+                                          r"5 Hz") as e:
+        read_log(_write(tmp_path, lines))
+    assert "cover" not in str(e.value)
+
+
 def test_bytes_that_are_not_text_name_their_line(rows, tmp_path):
     path = tmp_path / "bin.csv"
     path.write_bytes(("\n".join(rows[:10]) + "\n").encode() + b"\xff\xfe\x00garbage\n")

@@ -853,17 +853,26 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
 @platform_option
 @skeleton_option
 @height_option
+@click.option("--walkers", "walkers_file", type=_existing_file(), default=None, metavar="CSV",
+              help="Each walker's height: a CSV with a header and the columns name (the "
+                   "recording's output NAME, as in NAME.bvh) and height_m (metres; empty: "
+                   "--height); its other columns are carried into summary.csv and "
+                   "walkers.parquet.")
 @click.option("--force", is_flag=True,
               help="Redo recordings whose outputs are complete (a re-run skips them).")
 @_units_option
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path,
           jobs: int | None, scheduler: str | None, model_path: Path | None,
           method_name: str | None, placement: str, fmt: str, skeleton: Path | None,
-          no_calibrate: bool, platform: str | None, height: float | None, force: bool,
-          units: str) -> None:
+          no_calibrate: bool, platform: str | None, height: float | None,
+          walkers_file: Path | None, force: bool, units: str) -> None:
     """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
     recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
-    finished recordings)."""
+    finished recordings, redoes walkers whose height changed).
+
+    A recording's NAME is its file name without extension (acc_X for a RealWorld pair, the
+    folder's or zip's name for a Sensor Logger export), with its folder's name prepended where
+    names repeat."""
     from imuloco.app.batch import find_recordings, run_batch
 
     paths = find_recordings(recordings, patterns)
@@ -872,7 +881,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
                         calibrate=not no_calibrate, force=force, progress=True,
                         scheduler=scheduler, platform=platform, unit=units,
-                        skeleton=skeleton, height_m=height)
+                        skeleton=skeleton, height_m=height, walkers=walkers_file)
     click.echo(f"model: {summary['model']}", err=True)
     click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
     for r in summary["recordings"]:

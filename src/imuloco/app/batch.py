@@ -8,17 +8,18 @@ machines these live on a shared file system). Per recording a worker writes ``NA
 ``NAME.json`` (the reconstruction report: import, calibration, gait parameters, plausibility
 checks, plus ``strides`` and ``batch``: recording, model hash, placement, height); then this
 process writes ``summary.csv`` and ``summary.json`` (one row per walker: cadence, speed, step
-and stride length, ...), ``walkers.parquet`` (the same rows with height, placement and model,
+and stride length, ..., height), ``walkers.parquet`` (the same rows with placement and model,
 :data:`WALKER_FIELDS`, with the method's mean predicted error and flagged share) and
 ``strides.parquet`` (one row per stride, ``walker`` then
-:data:`imuloco.evaluate.strides.STRIDE_FIELDS`).
+:data:`imuloco.evaluate.strides.STRIDE_FIELDS`). A walkers file
+(:mod:`imuloco.app.walkers`) gives each walker a height and the study's own columns.
 
 - The model travels as its file's bytes, scattered once to the workers and loaded once per
   worker process (cached by SHA-256): never a pickled method object.
 - Every file is written atomically (:func:`imuloco.io.atomic.atomic_write`), the JSON last: a
   recording is complete when its JSON names the same recording, model, unit, height and
-  placement. A re-run skips complete recordings (``force`` redoes them) and refuses to
-  replace another job's outputs.
+  placement. A re-run skips complete recordings (``force`` redoes them), redoes a walker
+  whose height changed and refuses to replace another job's outputs.
 - A recording that fails becomes a row with status ``error`` and its error; the others go on.
   A task whose worker dies is rescheduled by Dask (up to ``distributed.scheduler.allowed-
   failures`` times), one that raises outside the reconstruction is retried ``retries`` times.
@@ -41,6 +42,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from imuloco.app.walkers import Walkers, read_walkers
 from imuloco.errors import ImulocoError, MissingExtraError, OutputExistsError
 from imuloco.evaluate.strides import STRIDE_FIELDS
 from imuloco.io.atomic import atomic_write, check_output
@@ -51,10 +53,10 @@ log = logging.getLogger(__name__)
 GAIT_COLUMNS = ("cadence_spm", "cadence_rhythm_spm", "speed_mps", "step_length_m",
                 "stride_length_m", "steps", "stance_pct", "double_support_pct")
 COLUMNS = ("name", "recording", "status", "frames", "duration_s", *GAIT_COLUMNS,
-           "signal_cadence_spm", "seconds", "error")  # summary.csv
+           "signal_cadence_spm", "seconds", "error", "height_m")  # summary.csv
 # + the method's confidence over the recording (metres of predicted rms joint position error,
 # share of frames flagged; None for methods without one)
-WALKER_FIELDS = (*COLUMNS, "height_m", "placement", "method", "model", "model_sha256",
+WALKER_FIELDS = (*COLUMNS, "placement", "method", "model", "model_sha256",
                  "mean_error_m", "unreliable_fraction")
 _STRINGS = {"name", "recording", "status", "error", "placement", "method", "model",
             "model_sha256", "walker", "foot"}
@@ -187,8 +189,9 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
                      height_m: float | None = None, placement: str | None = None
                      ) -> dict | None | bool:
     """``NAME.json`` when it completes this recording with this model, BVH unit, height and
-    placement (``None``: any placement); ``None`` when there is no JSON (to do); ``False`` when
-    outputs of another recording, model, unit, height, placement or program are there."""
+    placement (``None``: any placement); ``None`` when there is no JSON or it has another
+    height (to do); ``False`` when outputs of another recording, model, unit, placement or
+    program are there."""
     path = out / f"{name}.json"
     if not path.exists():
         return None
@@ -196,19 +199,21 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
         report = json.loads(path.read_text())
         batch = report["batch"]
         same = (batch["recording"] == recording and batch["model_sha256"] == sha256
-                and batch.get("unit", "cm") == unit and batch.get("height_m") == height_m
+                and batch.get("unit", "cm") == unit
                 and placement in (None, batch.get("placement", placement))
                 and (out / f"{name}.bvh").is_file())
     except (OSError, ValueError, KeyError, TypeError):
         return False
-    return report if same else False
+    return False if not same else report if batch.get("height_m") == height_m else None
 
 
-def _schema(fields: Sequence[str]):
+def _schema(fields: Sequence[str], extra: Sequence = ()):
+    """The columns ``fields`` typed, then the pyarrow fields ``extra``."""
     import pyarrow as pa
 
-    return pa.schema([(f, pa.string() if f in _STRINGS else
-                          pa.int64() if f in _INTEGERS else pa.float64()) for f in fields])
+    return pa.schema([*((f, pa.string() if f in _STRINGS else
+                         pa.int64() if f in _INTEGERS else pa.float64()) for f in fields),
+                      *extra])
 
 
 def stride_table(strides: list[dict]):
@@ -219,10 +224,11 @@ def stride_table(strides: list[dict]):
     return pa.Table.from_pylist(strides, schema=_schema(("walker", *STRIDE_FIELDS)))
 
 
-def write_tables(out: Path, rows: list[dict], strides: list, inputs: Sequence[Path] = ()
-                 ) -> list[Path]:
+def write_tables(out: Path, rows: list[dict], strides: list, inputs: Sequence[Path] = (),
+                 extra: Sequence = ()) -> list[Path]:
     """Write ``summary.csv``, ``walkers.parquet`` and ``strides.parquet`` (from the walkers'
-    :func:`stride_table`, in order) atomically."""
+    :func:`stride_table`, in order) atomically; ``extra``: pyarrow fields of the study's own
+    columns (:class:`imuloco.app.walkers.Walkers`) that follow batch's in the rows."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -232,11 +238,12 @@ def write_tables(out: Path, rows: list[dict], strides: list, inputs: Sequence[Pa
     paths = [check_output(out / n, force=True, inputs=inputs)
              for n in ("summary.csv", "walkers.parquet", "strides.parquet")]
     with atomic_write(paths[0], "w") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
+        writer = csv.DictWriter(f, fieldnames=[*COLUMNS, *(x.name for x in extra)],
+                                extrasaction="ignore")
         writer.writeheader()
         writer.writerows(rows)
     walkers = [{**r, **{k: whole(r.get(k)) for k in _INTEGERS}} for r in rows]
-    tables = (pa.Table.from_pylist(walkers, schema=_schema(WALKER_FIELDS)),
+    tables = (pa.Table.from_pylist(walkers, schema=_schema(WALKER_FIELDS, extra)),
               pa.concat_tables([stride_table([]), *strides]))
     for path, table in zip(paths[1:], tables):
         with atomic_write(path, "wb") as f:
@@ -285,7 +292,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
               placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
               force: bool = False, progress: bool = False, fitted=None, scheduler=None,
               platform: str | None = None, height_m: float | None = None, retries: int = 2,
-              unit: str = "cm", skeleton: str | Path | None = None) -> dict[str, Any]:
+              unit: str = "cm", skeleton: str | Path | None = None,
+              walkers: str | Path | None = None) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
     Parameters
@@ -301,11 +309,14 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     fitted : an already fitted method (skips the choice).
     scheduler : address of an existing Dask scheduler (``tcp://host:8786``) or a
         ``distributed.Client`` to use instead of a local cluster.
-    height_m : the walkers' height in metres, recorded in the tables (``None``: not given).
+    height_m : the walkers' height in metres, recorded in the tables (``None``: not given);
+        the default of those the walkers file gives none.
     retries : Dask retries of a task that raises outside the reconstruction.
     unit : length unit of the BVH files (``cm`` or ``m``; see :func:`imuloco.io.bvh.write_bvh`).
     skeleton : a motion file of the user's rig: every BVH comes out on it (checked before
         starting; see :func:`imuloco.app.pipeline.onto_rig`).
+    walkers : a CSV of the walkers' heights and the study's own columns, by output name
+        (:func:`imuloco.app.walkers.read_walkers`; read before starting).
 
     Returns
     -------
@@ -324,6 +335,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     if not paths:
         raise ValueError("no recordings given")
     names = output_names(paths)
+    study = Walkers() if walkers is None else read_walkers(walkers, names, WALKER_FIELDS)
+    heights = {n: study.heights.get(n, height_m) for n in names}
+    inputs = [*paths, *([] if walkers is None else [Path(walkers)])]
     recs = [os.path.normpath(p.absolute()) for p in paths]
     out = Path(out_dir).absolute()
     if skeleton is not None:
@@ -341,12 +355,12 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     sha = hashlib.sha256(blob).hexdigest()
     model_seconds = time.perf_counter() - t0
 
-    reports = {n: _complete_report(out, n, r, sha, unit, height_m, placement)
+    reports = {n: _complete_report(out, n, r, sha, unit, heights[n], placement)
                for n, r in zip(names, recs)}
     foreign = [str(out / f"{n}.json") for n, rep in reports.items() if rep is False]
     if foreign and not force:
         raise OutputExistsError(f"{', '.join(foreign[:3])}{' ...' if len(foreign) > 3 else ''}"
-                                " hold(s) another recording's, model's, unit's, height's or "
+                                " hold(s) another recording's, model's, unit's or "
                                 "placement's outputs; pass --force "
                                 "(force=True) to replace them or choose another --out")
     rows: dict[str, dict] = {}
@@ -357,6 +371,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
             strides[n] = stride_table(table)
     skipped = len(rows)
     todo = [(n, r) for n, r in zip(names, recs) if n not in rows]
+    for n, _ in todo:  # a walker redone for another height is incomplete until it is done
+        (out / f"{n}.json").unlink(missing_ok=True)
     with dask_client(scheduler, jobs) as client:
         from distributed import as_completed
 
@@ -369,7 +385,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
             for n, r in todo:
                 fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
                                     placement=placement, fmt=fmt, calibrate=calibrate,
-                                    platform=platform, height_m=height_m, unit=unit,
+                                    platform=platform, height_m=heights[n], unit=unit,
                                     skeleton=None if skeleton is None else str(skeleton),
                                     key=f"imuloco-batch-{job}-{n}", retries=retries,
                                     pure=False)
@@ -389,11 +405,11 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
             bar.update()
         bar.close()
     seconds = time.perf_counter() - t0
-    ordered = [{k: rows[n].get(k) for k in WALKER_FIELDS} | {"method": fitted.name,
-                                                               "model": note}
-               for n in names]
+    ordered = [{k: rows[n].get(k) for k in WALKER_FIELDS}
+               | {"height_m": heights[n], "method": fitted.name, "model": note}
+               | study.columns(n) for n in names]
     all_strides = [strides[n] for n in names]
-    write_tables(out, ordered, all_strides, inputs=paths)
+    write_tables(out, ordered, all_strides, inputs=inputs, extra=study.fields)
     failed = sum(r["status"] != "ok" for r in ordered)
     summary = {"model": note, "method": fitted.name, "model_sha256": sha, "jobs": workers,
                "scheduler": scheduler if isinstance(scheduler, str) else None,
@@ -402,7 +418,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                "ok": len(names) - failed, "failed": failed,
                "frames": sum(r["frames"] or 0 for r in ordered),
                "strides": sum(t.num_rows for t in all_strides),
-               "recordings": [{k: r[k] for k in COLUMNS} for r in ordered]}
-    with atomic_write(check_output(out / "summary.json", force=True, inputs=paths), "w") as f:
+               "recordings": [{k: r[k] for k in (*COLUMNS, *(x.name for x in study.fields))}
+                              for r in ordered]}
+    with atomic_write(check_output(out / "summary.json", force=True, inputs=inputs), "w") as f:
         f.write(json.dumps(summary, indent=2) + "\n")
     return summary

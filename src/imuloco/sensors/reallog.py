@@ -282,16 +282,31 @@ def _line(s: Stream, k: int) -> int | None:
 def _time_scale(s: Stream, times: np.ndarray) -> float:
     """Seconds per unit of the stream's timestamps: 1 when its median rate is plausible, else
     the unit (ms, us, ns) that makes it so (a ``time_s`` column holding milliseconds), warned.
+    A unit is only taken if the signal then lasts :data:`MIN_DURATION`: a log of a few Hz in
+    seconds is refused for its rate, not read as milliseconds lasting a few hundredths of a
+    second.
 
     ``times`` : ndarray, shape (N,), sorted distinct timestamps of ``s`` as read."""
     med = float(np.median(np.diff(times)))
-    for unit, scale in TIME_UNITS.items():
-        if MIN_RATE <= 1.0 / (med * scale) <= MAX_RATE:
-            if unit != "s":
-                log.warning("%s (%s): the timestamps step by %.4g per sample, %.3g Hz in seconds; "
-                            "read as %s (%.3g Hz)", s.path, s.quantity, med, 1.0 / med, unit,
-                            1.0 / (med * scale))
-            return scale
+    span = float(times[-1] - times[0])
+    rated = [(u, k) for u, k in TIME_UNITS.items() if MIN_RATE <= 1.0 / (med * k) <= MAX_RATE]
+    lasting = [(u, k) for u, k in rated if span * k >= MIN_DURATION]
+    if lasting:
+        unit, scale = lasting[0]
+        if unit != "s":
+            log.warning("%s (%s): the timestamps step by %.4g per sample, %.3g Hz in seconds; "
+                        "read as %s (%.3g Hz)", s.path, s.quantity, med, 1.0 / med, unit,
+                        1.0 / (med * scale))
+        return scale
+    if span >= MIN_DURATION and 1.0 / med < MIN_RATE:  # in seconds, long enough but too slow
+        other = "".join(f"; read as {u} ({1.0 / (med * k):.3g} Hz) it would last only "
+                        f"{span * k:.3g} s" for u, k in rated[:1])
+        raise FormatError(s.path, None, f"{s.quantity}: the timestamps step by a median "
+                                        f"{med:.3g} s per sample, a rate of {1.0 / med:.3g} Hz: "
+                                        f"too low for gait, expected at least {MIN_RATE:g} Hz"
+                                        + other)
+    if rated:
+        return rated[0][1]  # too short in every unit: refused for its length
     raise FormatError(s.path, None, f"{s.quantity}: the timestamps step by a median {med:.3g} "
                                     f"per sample: in s, ms, us or ns that is no sampling rate "
                                     f"between {MIN_RATE:g} and {MAX_RATE:g} Hz")

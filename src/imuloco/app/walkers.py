@@ -1,0 +1,135 @@
+"""A study's walkers file (``imuloco batch --walkers``): each walker's height and own columns.
+
+A CSV with a header and one row per walker: ``name``, the walker's output name in the batch
+(``NAME.bvh``, ``NAME.json``; see :func:`imuloco.app.batch.output_names`), and ``height_m``,
+the body height in metres (an empty cell: the batch's default height). Any other column is the
+study's own (age, group, ...): carried into ``summary.csv``, ``summary.json`` and
+``walkers.parquet``, as int64 or float64 when every filled cell is one, else as text. A name
+matching no recording, a name twice, a bad height or a column clashing with batch's own is a
+:class:`~imuloco.errors.FormatError` naming the file and line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import difflib
+import math
+from collections.abc import Collection, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from imuloco.errors import FormatError
+
+NAME, HEIGHT = "name", "height_m"  # the file's own columns
+HEIGHT_RANGE_M = (0.5, 2.6)  # as imuloco.evaluate.gait.height_scale and --height take
+
+
+@dataclass(frozen=True)
+class Walkers:
+    """What a walkers file says: ``heights`` (metres, walkers with a filled cell only),
+    ``fields`` (the study's own columns as pyarrow fields) and ``values`` (per name, the
+    study's columns; ``None`` where empty)."""
+
+    heights: dict[str, float] = field(default_factory=dict)
+    fields: tuple = ()
+    values: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    def columns(self, name: str) -> dict[str, Any]:
+        """The study's columns of walker ``name`` (all ``None`` without a row)."""
+        return self.values.get(name) or {f.name: None for f in self.fields}
+
+
+def read_walkers(path: str | Path, names: Sequence[str], reserved: Collection[str] = ()
+                 ) -> Walkers:
+    """Read the walkers file ``path`` of a batch whose walkers are ``names``; ``reserved``:
+    columns the study's own may not be named (the batch's)."""
+    path = Path(path)
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:  # a spreadsheet's BOM
+            reader = csv.DictReader(f)
+            header = [c.strip() for c in reader.fieldnames or []]
+            reader.fieldnames = header
+            rows = [(reader.line_num, row) for row in reader]
+    except (UnicodeDecodeError, csv.Error) as e:
+        raise FormatError(path, None, f"not a CSV file of walkers: {e}") from None
+    extra = _check_header(path, header, reserved)
+    lines: dict[str, int] = {}
+    heights: dict[str, float] = {}
+    cells: dict[str, dict[str, str | None]] = {}
+    for line, row in rows:
+        if None in row:
+            raise FormatError(path, line, f"more cells than the header's {len(header)} columns")
+        row = {k: (v or "").strip() or None for k, v in row.items()}
+        if not any(row.values()):
+            continue  # a spreadsheet's empty row
+        name = _check_name(path, line, row[NAME], names, lines)
+        lines[name] = line
+        if row[HEIGHT] is not None:
+            heights[name] = _height(path, line, row[HEIGHT])
+        cells[name] = {c: row[c] for c in extra}
+    fields, values = _typed(extra, cells)
+    return Walkers(heights, fields, values)
+
+
+def _check_header(path: Path, header: list[str], reserved: Collection[str]) -> list[str]:
+    """The study's own columns of ``header``, after checking it."""
+    if NAME not in header or HEIGHT not in header:
+        raise FormatError(path, 1, f"expected a header with the columns {NAME!r} and "
+                                   f"{HEIGHT!r}, found {header}")
+    twice = sorted({c for c in header if header.count(c) > 1})
+    clash = [c for c in header if c in reserved and c not in (NAME, HEIGHT)]
+    if twice or clash or "" in header:
+        raise FormatError(path, 1, f"column(s) {twice} appear twice" if twice else
+                          "a column has no name" if "" in header else
+                          f"column(s) {clash} are batch's own: rename them")
+    return [c for c in header if c not in (NAME, HEIGHT)]
+
+
+def _check_name(path: Path, line: int, name: str | None, names: Sequence[str],
+                lines: dict[str, int]) -> str:
+    """``name`` when it is one of the batch's ``names`` not seen before (``lines``)."""
+    if name is None:
+        raise FormatError(path, line, f"field {NAME!r}: empty; expected a walker's name")
+    if name in lines:
+        raise FormatError(path, line, f"name {name!r} is on lines {lines[name]} and {line}")
+    if name not in names:
+        close = difflib.get_close_matches(name, names, n=3)
+        hint = (f"close: {', '.join(map(repr, close))}" if close else
+                f"the batch's names are e.g. {', '.join(map(repr, names[:3]))}")
+        raise FormatError(path, line, f"name {name!r} matches no recording of the batch ({hint}; "
+                                      "a name is the recording's output NAME, NAME.bvh)")
+    return name
+
+
+def _height(path: Path, line: int, cell: str) -> float:
+    lo, hi = HEIGHT_RANGE_M
+    try:
+        value = float(cell)
+    except ValueError:
+        value = math.nan
+    if not lo <= value <= hi:  # also NaN
+        cm = " (metres, not centimetres)" if lo * 100 <= value <= hi * 100 else ""
+        raise FormatError(path, line, f"field {HEIGHT!r}: {cell!r} is not a body height in "
+                                      f"metres; expected {lo:g} to {hi:g}{cm}")
+    return value
+
+
+def _typed(columns: list[str], cells: dict[str, dict[str, str | None]]
+           ) -> tuple[tuple, dict[str, dict[str, Any]]]:
+    """The columns' pyarrow fields, each int64, float64 or string (the first that every
+    filled cell converts to), and the typed values per name."""
+    import pyarrow as pa
+
+    fields, typed = [], {}
+    for c in columns:
+        array = pa.array([row[c] for row in cells.values()], pa.string())
+        for kind in (pa.int64(), pa.float64()):
+            with contextlib.suppress(pa.ArrowInvalid):
+                array = array.cast(kind)
+                break
+        fields.append(pa.field(c, array.type))
+        typed[c] = array.to_pylist()
+    values = {n: {c: typed[c][k] for c in columns} for k, n in enumerate(cells)}
+    return tuple(fields), values
