@@ -186,6 +186,24 @@ def test_a_running_foot_s_brief_stances_still_separate_its_swings():
     assert len(moments) == n + 1 and np.all(norm[moments[1:-1]] == 20.0)
 
 
+def test_a_pivot_on_the_floor_is_no_swing():
+    """Between two swings (pitch at 400 deg/s), a 0.4 s turn of the foot about the vertical at
+    400 deg/s (a U-turn's pivot, the foot down) is part of the stance: 2 swings, one stance
+    between them. The same turn about a horizontal axis is a third swing."""
+    rate = 100.0
+    t = np.arange(0, 4.0, 1 / rate)
+    gyro = np.zeros((len(t), 3))
+    for s in (0.5, 2.9):
+        gyro[(t >= s) & (t < s + 0.4), 1] = 400.0  # swings: pitch
+    turn = (t >= 1.7) & (t < 2.1)
+    gyro[turn, 2] = 400.0  # a pivot: yaw
+    found, moments = swings(gyro, rate)
+    assert len(found) == 2 and len(moments) == 3
+    assert 0.9 * rate < moments[1] < 2.9 * rate
+    gyro[turn] = gyro[turn][:, [2, 1, 0]]  # the same turn about x
+    assert len(swings(gyro, rate)[0]) == 3
+
+
 def _slow_start_walk(rate: float, first_step_m: float) -> tuple[np.ndarray, np.ndarray, int]:
     """A gyroscope norm (deg/s, on x) and a path: 2 s standing, a first step of 0.4 s peaking
     at 120 deg/s (over the swing threshold for less than MIN_SWING_S), then 4 swings at

@@ -1,8 +1,9 @@
 """A foot sensor's swings and path, and the level frame it walks in.
 
 The foot swings while the gyroscope norm's 50 ms window maximum exceeds 100 deg/s for at least
-0.2 s (:func:`swings`); between two swings is one stance, and its stillest moment the foot's
-rest. A zero-velocity-update Kalman filter with Rauch-Tung-Striebel smoothing (gaitmap's
+0.2 s, and the rotation about horizontal axes alone does for 0.2 s of it (:func:`swings`; a
+pivot about the vertical with the foot down is part of a stance); between two swings is one
+stance, and its stillest moment the foot's rest. A zero-velocity-update Kalman filter with Rauch-Tung-Striebel smoothing (gaitmap's
 ``RtsKalman``) gives the foot's 3-D path, with ``RtsKalman``'s default ZUPTs (the gyroscope's
 norm under 34 deg/s over 50 ms) or-ed with one at each stance's stillest moment: some walkers'
 feet never get under 34 deg/s (their stance minimum is 40-60 deg/s). Steps too slow for the
@@ -89,6 +90,17 @@ def _energy(gyro_dps: np.ndarray, rate: float) -> np.ndarray:
     return maximum_filter1d(np.linalg.norm(gyro_dps, axis=1), max(1, round(ZUPT_WINDOW_S * rate)))
 
 
+def _lifted(gyro_dps: np.ndarray, rate: float) -> np.ndarray:
+    """Where the foot turns about a horizontal axis faster than a swing's threshold: the
+    ZUPT-window maximum of the gyroscope's x-y norm (z up at rest) over SWING_DPS.
+
+    A swing lifts and pitches the foot; a pivot on the floor turns it about the vertical with
+    the foot down. Swing detectors read the foot's or shank's sagittal angular velocity for
+    that reason (Aminian et al. 2002, Salarian et al. 2004, gaitmap's Rampp event detection).
+    """
+    return _energy(gyro_dps[:, :2], rate) > SWING_DPS
+
+
 def _moments(energy: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
     """The stillest sample before the first swing, between two swings and after the last."""
     bounds = np.concatenate([[0], starts, [len(energy)]])
@@ -97,13 +109,19 @@ def _moments(energy: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> np.nd
                      zip(lows[:-1], bounds[1:])], int)
 
 
-def _swing_runs(energy: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
-    """Starts and exclusive stops (samples) of the swings over SWING_DPS."""
+def _swing_runs(energy: np.ndarray, lifted: np.ndarray, rate: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Starts and exclusive stops (samples) of the swings: runs of ``energy`` over SWING_DPS
+    in which the foot is ``lifted`` (:func:`_lifted`) for at least MIN_SWING_S; a run that
+    only turns the foot about the vertical is a pivot on the floor, part of a stance."""
     above = energy > SWING_DPS
     above[[0, -1]] = False  # a stance (however short) before the first and after the last
     window = max(1, round(ZUPT_WINDOW_S * rate))
-    return _bridged(*_runs(above), window, round(MIN_SWING_S * rate),
-                    round(SHORTEST_SWING_S * rate))
+    starts, stops = _bridged(*_runs(above), window, round(MIN_SWING_S * rate),
+                             round(SHORTEST_SWING_S * rate))
+    keep = np.array([lifted[a:b].sum() >= round(MIN_SWING_S * rate)
+                     for a, b in zip(starts, stops)], bool)
+    return starts[keep], stops[keep]
 
 
 def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
@@ -116,7 +134,7 @@ def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
     before the first swing, between two swings and after the last one.
     """
     energy = _energy(gyro_dps, rate)
-    starts, stops = _swing_runs(energy, rate)
+    starts, stops = _swing_runs(energy, _lifted(gyro_dps, rate), rate)
     return starts, _moments(energy, starts, stops)
 
 
@@ -132,7 +150,7 @@ def slow_swings(gyro_dps: np.ndarray, rate: float, path: np.ndarray
     that of the rest after).
     """
     energy = _energy(gyro_dps, rate)
-    starts, stops = _swing_runs(energy, rate)
+    starts, stops = _swing_runs(energy, _lifted(gyro_dps, rate), rate)
     moving = energy > ZUPT_GYRO_DPS
     for a, b in zip(starts, stops):
         moving[a:b] = True
