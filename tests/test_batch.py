@@ -180,22 +180,27 @@ def test_rerun_skips_complete_outputs_and_force_redoes(logs, fitted, client, tmp
     assert (again["done"], again["skipped"]) == (0, 3)
 
 
-def test_a_walkers_file_gives_each_walker_its_height(logs, fitted, client, tmp_path):
+def test_a_walkers_file_gives_each_walker_its_height(logs, fitted, client, tmp_path, caplog):
     """--walkers on a scheduler: each walker's height reaches its skeleton, report and
-    tables (an empty cell or no row: --height), the study's columns the tables; a re-run
-    redoes only the walker whose height changed."""
+    tables (an empty cell or no row: --height), the study's columns the tables (a walker of
+    another batch is counted and left out); a re-run redoes only the walker whose height
+    changed."""
     from imuloco.evaluate.gait import stature
 
     paths, _ = logs
     names = output_names(paths)
     model = fitted.save(tmp_path / "ridge.npz")
     study = tmp_path / "walkers.csv"
-    study.write_text(f"name,height_m,age\n{names[0]},1.6,31\n{names[1]},,45\n")
+    study.write_text(f"name,height_m,age\n{names[0]},1.6,31\n{names[1]},,45\nzed,1.5,50\n")
     out = tmp_path / "out"
     args = ["batch", *map(str, paths), "--out", str(out), "--model", str(model),
             "--scheduler", client.scheduler.address, "--walkers", str(study), "--height", "1.9"]
     res = CliRunner().invoke(cli, args)
     assert res.exit_code == 0, res.output
+    warned = [r.getMessage() for r in caplog.records if r.name == "imuloco.app.walkers"]
+    assert warned == [f"{study}: 1 walker has no recording in this batch",
+                      (f"{study}: no row for 1 recording(s) of this batch, which get the "
+                       f"default height (--height, else the model skeleton's): {names[2]}")]
     expected = [1.6, 1.9, 1.9]
 
     def heights() -> list[float]:

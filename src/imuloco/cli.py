@@ -855,9 +855,11 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
 @height_option
 @click.option("--walkers", "walkers_file", type=_existing_file(), default=None, metavar="CSV",
               help="Each walker's height: a CSV with a header and the columns name (the "
-                   "recording's output NAME, as in NAME.bvh) and height_m (metres; empty: "
-                   "--height); its other columns are carried into summary.csv and "
-                   "walkers.parquet.")
+                   "recording's output NAME, as in NAME.bvh) and height_m (metres; empty or "
+                   "no row: --height); its other columns are carried into summary.csv and "
+                   "walkers.parquet. One file can hold the whole study: rows without a "
+                   "recording here are counted, not refused, unless close to a recording "
+                   "without a row (a typo).")
 @click.option("--force", is_flag=True,
               help="Redo recordings whose outputs are complete (a re-run skips them).")
 @_units_option

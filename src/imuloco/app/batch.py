@@ -315,8 +315,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     unit : length unit of the BVH files (``cm`` or ``m``; see :func:`imuloco.io.bvh.write_bvh`).
     skeleton : a motion file of the user's rig: every BVH comes out on it (checked before
         starting; see :func:`imuloco.app.pipeline.onto_rig`).
-    walkers : a CSV of the walkers' heights and the study's own columns, by output name
-        (:func:`imuloco.app.walkers.read_walkers`; read before starting).
+    walkers : a CSV of the walkers' heights and the study's own columns, by output name, that
+        may hold walkers of other batches (:func:`imuloco.app.walkers.read_walkers`; read
+        before starting).
 
     Returns
     -------
