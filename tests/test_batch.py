@@ -85,6 +85,33 @@ def test_a_realworld_pair_is_one_walker(tmp_path):
     assert [p.name for p in found] == ["Gyroscope_b.csv", "acc_a.csv", "other.csv"]
 
 
+def test_a_sensor_logger_folder_is_one_walker(fitted, client, tmp_path, monkeypatch,
+                                              sample_db):
+    """``--glob 'study/*/*.csv'`` over Sensor Logger exports matches every file of each: the
+    folder reads the export, one walker named after it (each file was a walker, Metadata.csv a
+    failed one); a CSV the app did not write stays a recording of its own."""
+    from tests.test_sensorlog import _sensor_logger
+
+    study = tmp_path / "study"
+    study.mkdir()
+    rec = simulate(next(c for c in sample_db.clips if c.name == WALKERS[0]), ["right_ankle"],
+                   100.0, "phone", seed=5)
+    for name, total in (("alice", False), ("bob", True)):
+        _sensor_logger(study / name, rec, total=total, ios=False)
+    (study / "alice" / "notes.csv").write_text("walker,note\nalice,limps\n")
+    (study / "carol").mkdir()
+    write_generic_csv(rec, study / "carol" / "carol.csv")
+    found = find_recordings([study / "bob"], [str(study / "*" / "*.csv")])
+    assert found == [study / "bob", study / "alice", study / "alice" / "notes.csv",
+                     study / "carol" / "carol.csv"]
+    assert output_names(found) == ["bob", "alice", "notes", "carol"]
+    monkeypatch.chdir(study / "bob")  # bare names: the folder still has one
+    assert output_names(find_recordings([], ["*.csv"])) == ["bob"]
+    summary = run_batch(found[:2], tmp_path / "out", fitted=fitted, scheduler=client)
+    assert [(r["name"], r["status"]) for r in summary["recordings"]] == [
+        ("bob", "ok"), ("alice", "ok")]
+
+
 def test_strides_follow_the_strikes(sample_db):
     from imuloco.phases import gait_phases
 

@@ -839,7 +839,8 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
 @cli.command()
 @click.argument("recordings", nargs=-1, type=click.Path(exists=True, path_type=Path))
 @click.option("--glob", "patterns", multiple=True, metavar="PATTERN",
-              help="Recordings matching a glob pattern, e.g. 'logs/*.csv' (repeatable).")
+              help="Recordings matching a glob pattern, e.g. 'logs/*.csv' (repeatable); the "
+                   "files of a Sensor Logger export are its folder, one walker.")
 @click.option("--out", "out_dir", type=_folder(), required=True,
               help="Folder for NAME.bvh, NAME.json, summary.csv/.json, walkers.parquet and "
                    "strides.parquet.")
