@@ -85,6 +85,33 @@ def test_a_realworld_pair_is_one_walker(tmp_path):
     assert [p.name for p in found] == ["Gyroscope_b.csv", "acc_a.csv", "other.csv"]
 
 
+def test_a_sensor_logger_folder_is_one_walker(fitted, client, tmp_path, monkeypatch,
+                                              sample_db):
+    """``--glob 'study/*/*.csv'`` over Sensor Logger exports matches every file of each: the
+    folder reads the export, one walker named after it (each file was a walker, Metadata.csv a
+    failed one); a CSV the app did not write stays a recording of its own."""
+    from tests.test_sensorlog import _sensor_logger
+
+    study = tmp_path / "study"
+    study.mkdir()
+    rec = simulate(next(c for c in sample_db.clips if c.name == WALKERS[0]), ["right_ankle"],
+                   100.0, "phone", seed=5)
+    for name, total in (("alice", False), ("bob", True)):
+        _sensor_logger(study / name, rec, total=total, ios=False)
+    (study / "alice" / "notes.csv").write_text("walker,note\nalice,limps\n")
+    (study / "carol").mkdir()
+    write_generic_csv(rec, study / "carol" / "carol.csv")
+    found = find_recordings([study / "bob"], [str(study / "*" / "*.csv")])
+    assert found == [study / "bob", study / "alice", study / "alice" / "notes.csv",
+                     study / "carol" / "carol.csv"]
+    assert output_names(found) == ["bob", "alice", "notes", "carol"]
+    monkeypatch.chdir(study / "bob")  # bare names: the folder still has one
+    assert output_names(find_recordings([], ["*.csv"])) == ["bob"]
+    summary = run_batch(found[:2], tmp_path / "out", fitted=fitted, scheduler=client)
+    assert [(r["name"], r["status"]) for r in summary["recordings"]] == [
+        ("bob", "ok"), ("alice", "ok")]
+
+
 def test_strides_follow_the_strikes(sample_db):
     from imuloco.phases import gait_phases
 
@@ -180,22 +207,27 @@ def test_rerun_skips_complete_outputs_and_force_redoes(logs, fitted, client, tmp
     assert (again["done"], again["skipped"]) == (0, 3)
 
 
-def test_a_walkers_file_gives_each_walker_its_height(logs, fitted, client, tmp_path):
+def test_a_walkers_file_gives_each_walker_its_height(logs, fitted, client, tmp_path, caplog):
     """--walkers on a scheduler: each walker's height reaches its skeleton, report and
-    tables (an empty cell or no row: --height), the study's columns the tables; a re-run
-    redoes only the walker whose height changed."""
+    tables (an empty cell or no row: --height), the study's columns the tables (a walker of
+    another batch is counted and left out); a re-run redoes only the walker whose height
+    changed."""
     from imuloco.evaluate.gait import stature
 
     paths, _ = logs
     names = output_names(paths)
     model = fitted.save(tmp_path / "ridge.npz")
     study = tmp_path / "walkers.csv"
-    study.write_text(f"name,height_m,age\n{names[0]},1.6,31\n{names[1]},,45\n")
+    study.write_text(f"name,height_m,age\n{names[0]},1.6,31\n{names[1]},,45\nzed,1.5,50\n")
     out = tmp_path / "out"
     args = ["batch", *map(str, paths), "--out", str(out), "--model", str(model),
             "--scheduler", client.scheduler.address, "--walkers", str(study), "--height", "1.9"]
     res = CliRunner().invoke(cli, args)
     assert res.exit_code == 0, res.output
+    warned = [r.getMessage() for r in caplog.records if r.name == "imuloco.app.walkers"]
+    assert warned == [f"{study}: 1 walker has no recording in this batch",
+                      (f"{study}: no row for 1 recording(s) of this batch, which get the "
+                       f"default height (--height, else the model skeleton's): {names[2]}")]
     expected = [1.6, 1.9, 1.9]
 
     def heights() -> list[float]:

@@ -48,9 +48,22 @@ def test_reconstruct_never_replaces_its_input(log):
     assert log.read_bytes() == before
 
 
-def test_simulate_rate_zero(tmp_path):
-    code, out = run("simulate", BVH, "--rate", "0", "-o", tmp_path / "s.csv")
+@pytest.mark.parametrize("rate", ["0", "2", "4.9", "10001"])
+def test_simulate_rates_the_reader_refuses(tmp_path, rate):
+    """simulate writes no log that reconstruct would refuse for its rate (2 Hz was written)."""
+    code, out = run("simulate", BVH, "--rate", rate, "-o", tmp_path / "s.csv")
     assert code == 2 and "--rate" in out and not (tmp_path / "s.csv").exists()
+    assert "5.0<=x<=10000.0" in out
+
+
+def test_simulate_rates_follow_the_readers(tmp_path, monkeypatch):
+    """The bounds are read_log's own constants, read when the option is parsed."""
+    from imuloco.sensors import reallog
+
+    monkeypatch.setattr(reallog, "MIN_RATE", 8.0)
+    code, out = run("simulate", BVH, "--rate", "6", "-o", tmp_path / "s.csv")
+    assert code == 2 and "8.0<=x<=10000.0" in out
+    assert "8.0<=x<=10000.0" in run("simulate", "--help")[1]
 
 
 def test_train_with_an_invalid_hyperparameter(tmp_path):

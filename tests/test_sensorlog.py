@@ -330,6 +330,18 @@ def test_a_slow_log_in_seconds_is_refused_for_its_rate(rows, tmp_path):
     assert "cover" not in str(e.value)
 
 
+def test_a_log_at_the_lowest_rate_is_read(sample_db, tmp_path):
+    """Logs simulated at exactly MIN_RATE (simulate's lowest --rate) are read: a median step
+    of 0.20000000000000018 s (float rounding of the timestamps' differences) is 5 Hz, not
+    "a rate of 5 Hz: too low for gait, expected at least 5 Hz" (8 of the 16 sample clips)."""
+    from imuloco.sensors.reallog import MIN_RATE
+
+    for k, clip in enumerate(sample_db.clips):
+        rec = simulate(clip, ["right_ankle"], MIN_RATE, "clean", 0)
+        report = read_log(write_generic_csv(rec, tmp_path / f"{k}.csv"))[1]
+        assert report.source_rate == pytest.approx(MIN_RATE)
+
+
 def test_bytes_that_are_not_text_name_their_line(rows, tmp_path):
     path = tmp_path / "bin.csv"
     path.write_bytes(("\n".join(rows[:10]) + "\n").encode() + b"\xff\xfe\x00garbage\n")

@@ -73,6 +73,26 @@ class _LogFormat(click.Choice):
         return ("auto", *FORMATS)
 
 
+class _LogRate(click.FloatRange):
+    """A sampling rate in Hz that ``read_log`` accepts (:data:`imuloco.sensors.reallog.MIN_RATE`
+    to ``MAX_RATE``), read on first use as :class:`_LogFormat` reads its choices."""
+
+    def __init__(self) -> None:
+        self.min_open = self.max_open = self.clamp = False
+
+    @property
+    def min(self) -> float:  # type: ignore[override]
+        from imuloco.sensors.reallog import MIN_RATE
+
+        return MIN_RATE
+
+    @property
+    def max(self) -> float:  # type: ignore[override]
+        from imuloco.sensors.reallog import MAX_RATE
+
+        return MAX_RATE
+
+
 def _existing_file(**kw: Any) -> click.Path:
     return click.Path(exists=True, dir_okay=False, path_type=Path, **kw)
 
@@ -603,8 +623,8 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
 @click.argument("motion_file", type=_existing_file())
 @placement_option
 @noise_option
-@click.option("--rate", default=100.0, show_default=True, type=click.FloatRange(1.0, 10_000.0),
-              help="Sampling rate, Hz.")
+@click.option("--rate", default=100.0, show_default=True, type=_LogRate(),
+              help="Sampling rate, Hz (as reconstruct reads logs).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the noise draws.")
 @click.option("-o", "--output", required=True, type=_file(),
               help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s).")
@@ -839,7 +859,8 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
 @cli.command()
 @click.argument("recordings", nargs=-1, type=click.Path(exists=True, path_type=Path))
 @click.option("--glob", "patterns", multiple=True, metavar="PATTERN",
-              help="Recordings matching a glob pattern, e.g. 'logs/*.csv' (repeatable).")
+              help="Recordings matching a glob pattern, e.g. 'logs/*.csv' (repeatable); the "
+                   "files of a Sensor Logger export are its folder, one walker.")
 @click.option("--out", "out_dir", type=_folder(), required=True,
               help="Folder for NAME.bvh, NAME.json, summary.csv/.json, walkers.parquet and "
                    "strides.parquet.")
@@ -855,9 +876,11 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
 @height_option
 @click.option("--walkers", "walkers_file", type=_existing_file(), default=None, metavar="CSV",
               help="Each walker's height: a CSV with a header and the columns name (the "
-                   "recording's output NAME, as in NAME.bvh) and height_m (metres; empty: "
-                   "--height); its other columns are carried into summary.csv and "
-                   "walkers.parquet.")
+                   "recording's output NAME, as in NAME.bvh) and height_m (metres; empty or "
+                   "no row: --height); its other columns are carried into summary.csv and "
+                   "walkers.parquet. One file can hold the whole study: rows without a "
+                   "recording here are counted, not refused, unless close to a recording "
+                   "without a row (a typo).")
 @click.option("--force", is_flag=True,
               help="Redo recordings whose outputs are complete (a re-run skips them).")
 @_units_option

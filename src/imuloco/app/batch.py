@@ -70,8 +70,11 @@ LOCAL_CLUSTER = {"dashboard_address": None, "scheduler_kwargs": {"dashboard_addr
 def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = ()
                     ) -> list[Path]:
     """The recordings named and matched by glob ``patterns`` (``**`` recurses), sorted within
-    each pattern, duplicates dropped, in the order given. A RealWorld gyroscope file whose
-    ``acc_`` file is among them is dropped too: that file reads the pair, one walker."""
+    each pattern, duplicates dropped, in the order given. A file of an unzipped Sensor Logger
+    export (``study/*/*.csv``) is its folder, which reads the export: one walker named after
+    it. A RealWorld gyroscope file whose ``acc_`` file is among them is dropped too: that
+    file reads the pair, one walker."""
+    from imuloco.io.sensorlog import sensorlogger_members
     from imuloco.sensors.reallog import realworld_accelerometer
 
     found: list[Path] = [Path(p) for p in paths]
@@ -80,10 +83,21 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
         if not matches:
             log.warning("no recording matches %r", pattern)
         found += [Path(m) for m in matches]
+    members: dict[Path, set[str]] = {}  # per folder: the files of its Sensor Logger export
+
+    def walker(p: Path) -> Path:
+        """The path that reads ``p``'s walker: ``p``, or its export's folder."""
+        if p.suffix.lower() != ".csv" or not p.is_file():
+            return p
+        folder = Path(os.path.normpath(p.absolute())).parent  # named, also for a bare name
+        if folder not in members:
+            members[folder] = sensorlogger_members(folder)
+        return folder if p.name in members[folder] else p
 
     def key(p: Path) -> str:
         return os.path.normpath(p.absolute())  # not resolve(): two links are two walkers
 
+    found = [walker(p) for p in found]
     keys = {key(p) for p in found}
     seen, out = set(), []
     for p in found:
@@ -315,8 +329,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     unit : length unit of the BVH files (``cm`` or ``m``; see :func:`imuloco.io.bvh.write_bvh`).
     skeleton : a motion file of the user's rig: every BVH comes out on it (checked before
         starting; see :func:`imuloco.app.pipeline.onto_rig`).
-    walkers : a CSV of the walkers' heights and the study's own columns, by output name
-        (:func:`imuloco.app.walkers.read_walkers`; read before starting).
+    walkers : a CSV of the walkers' heights and the study's own columns, by output name, that
+        may hold walkers of other batches (:func:`imuloco.app.walkers.read_walkers`; read
+        before starting).
 
     Returns
     -------

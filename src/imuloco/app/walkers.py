@@ -4,9 +4,12 @@ A CSV with a header and one row per walker: ``name``, the walker's output name i
 (``NAME.bvh``, ``NAME.json``; see :func:`imuloco.app.batch.output_names`), and ``height_m``,
 the body height in metres (an empty cell: the batch's default height). Any other column is the
 study's own (age, group, ...): carried into ``summary.csv``, ``summary.json`` and
-``walkers.parquet``, as int64 or float64 when every filled cell is one, else as text. A name
-matching no recording, a name twice, a bad height or a column clashing with batch's own is a
-:class:`~imuloco.errors.FormatError` naming the file and line.
+``walkers.parquet``, as int64 or float64 when every filled cell of the file is one, else as
+text. One file can serve all the study's batches: rows of walkers without a recording in this
+batch are counted in one warning, and the batch's recordings without a row (the default
+height) named in another. A name twice, a bad height, a column clashing with batch's own or a
+name matching no recording but close to one without a row (a typo would lose that walker's
+height) is a :class:`~imuloco.errors.FormatError` naming the file and line.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import difflib
+import logging
 import math
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
@@ -22,8 +26,10 @@ from typing import Any
 
 from imuloco.errors import FormatError
 
+log = logging.getLogger(__name__)
 NAME, HEIGHT = "name", "height_m"  # the file's own columns
 HEIGHT_RANGE_M = (0.5, 2.6)  # as imuloco.evaluate.gait.height_scale and --height take
+NAMED = 3  # recordings without a row named in the warning, then "..."
 
 
 @dataclass(frozen=True)
@@ -64,11 +70,12 @@ def read_walkers(path: str | Path, names: Sequence[str], reserved: Collection[st
         row = {k: (v or "").strip() or None for k, v in row.items()}
         if not any(row.values()):
             continue  # a spreadsheet's empty row
-        name = _check_name(path, line, row[NAME], names, lines)
+        name = _check_name(path, line, row[NAME], lines)
         lines[name] = line
         if row[HEIGHT] is not None:
             heights[name] = _height(path, line, row[HEIGHT])
         cells[name] = {c: row[c] for c in extra}
+    _check_batch(path, lines, names)
     fields, values = _typed(extra, cells)
     return Walkers(heights, fields, values)
 
@@ -87,20 +94,38 @@ def _check_header(path: Path, header: list[str], reserved: Collection[str]) -> l
     return [c for c in header if c not in (NAME, HEIGHT)]
 
 
-def _check_name(path: Path, line: int, name: str | None, names: Sequence[str],
-                lines: dict[str, int]) -> str:
-    """``name`` when it is one of the batch's ``names`` not seen before (``lines``)."""
+def _check_name(path: Path, line: int, name: str | None, lines: dict[str, int]) -> str:
+    """``name`` when it is filled and not seen before (``lines``)."""
     if name is None:
         raise FormatError(path, line, f"field {NAME!r}: empty; expected a walker's name")
     if name in lines:
         raise FormatError(path, line, f"name {name!r} is on lines {lines[name]} and {line}")
-    if name not in names:
-        close = difflib.get_close_matches(name, names, n=3)
-        hint = (f"close: {', '.join(map(repr, close))}" if close else
-                f"the batch's names are e.g. {', '.join(map(repr, names[:3]))}")
-        raise FormatError(path, line, f"name {name!r} matches no recording of the batch ({hint}; "
-                                      "a name is the recording's output NAME, NAME.bvh)")
     return name
+
+
+def _check_batch(path: Path, lines: dict[str, int], names: Sequence[str]) -> None:
+    """Refuse a row (``lines``: name to line) matching none of the batch's ``names`` but close
+    to one without a row, a likely typo; warn once of the other rows matching none (walkers of
+    other batches) and once of the recordings without a row."""
+    batch = set(names)
+    rowless = [n for n in names if n not in lines]
+    others = [n for n in lines if n not in batch]
+    for name in others if rowless else ():
+        close = difflib.get_close_matches(name, rowless, n=3)
+        if close:
+            raise FormatError(path, lines[name], (
+                f"name {name!r} matches no recording of the batch (close: "
+                f"{', '.join(map(repr, close))}, without a row; a name is the recording's "
+                f"output NAME, NAME.bvh; if {name!r} is another walker, give {close[0]!r} a "
+                "row too, its height_m empty for the default)"))
+    if others:
+        log.warning("%s: %d walker%s no recording in this batch", path, len(others),
+                    " has" if len(others) == 1 else "s have")
+    if rowless:
+        shown = ", ".join(rowless[:NAMED]) + (", ..." if len(rowless) > NAMED else "")
+        log.warning("%s: no row for %d recording(s) of this batch, which get the default "
+                    "height (--height, else the model skeleton's): %s", path, len(rowless),
+                    shown)
 
 
 def _height(path: Path, line: int, cell: str) -> float:

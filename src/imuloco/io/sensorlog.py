@@ -485,10 +485,14 @@ class Export:
               ) -> tuple[list[str], np.ndarray, np.ndarray]:
         return _read_table(self.label(name), allow_empty, self.open(name))
 
+    def is_sensorlogger(self) -> bool:
+        """Whether a Sensor Logger table of acceleration or rotation rate is among the files."""
+        return any(self.header(n).startswith(_SENSOR_LOGGER_HEADER) for n in _SENSOR_LOGGER_FILES
+                   if self.has(n))
+
     def kind(self) -> str | None:
         """``"sensorlogger"``, ``"phyphox"`` or ``None`` from the members' headers."""
-        if any(self.header(n).startswith("time,seconds_elapsed") for n in _SENSOR_LOGGER_FILES
-               if self.has(n)):
+        if self.is_sensorlogger():
             return "sensorlogger"
         if any("time (s)" in self.header(n) for n in self.names() if n.lower().endswith(".csv")):
             return "phyphox"
@@ -523,6 +527,7 @@ def read_phyphox_export(path: str | Path) -> list[Stream]:
 # Sensor Logger
 
 _SENSOR_LOGGER_FILES = ("Gyroscope.csv", "TotalAcceleration.csv", "Accelerometer.csv")
+_SENSOR_LOGGER_HEADER = "time,seconds_elapsed"  # every sensor's table starts so
 PLATFORMS = ("android", "ios")
 
 
@@ -607,6 +612,19 @@ def read_sensor_logger(folder: str | Path, platform: str | None = None) -> list[
     return [acc, gyro]
 
 
+def sensorlogger_members(folder: str | Path) -> set[str]:
+    """The files of an unzipped Sensor Logger export in ``folder`` (its sensors' tables and
+    ``Metadata.csv``), which the folder reads as one log; none when ``folder`` is no export."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return set()
+    with Export(folder) as ex:
+        if not ex.is_sensorlogger():
+            return set()
+        return {n for n in ex.names()
+                if n == "Metadata.csv" or ex.header(n).startswith(_SENSOR_LOGGER_HEADER)}
+
+
 # ---------------------------------------------------------------------------------------------
 
 def is_export(path: str | Path) -> bool:
@@ -642,7 +660,7 @@ def detect_format(path: str | Path) -> str:
         return "realworld"
     if "time (s)" in h:
         return "phyphox"
-    if h.startswith("time,seconds_elapsed"):
+    if h.startswith(_SENSOR_LOGGER_HEADER):
         return "sensorlogger"
     raise FormatError(path, 1, "unknown sensor log: expected a header starting 'time_s' "
                                "(generic), 'id,attr_time' (RealWorld), '\"Time (s)\"' (phyphox) "

@@ -166,6 +166,9 @@ def _merge_gaps(gaps: list[Gap]) -> list[Gap]:
 
 # plausibility ranges of an imported log (bad files are refused with the line that breaks them)
 MIN_RATE, MAX_RATE = 5.0, 10_000.0  # Hz, median source rate: gait needs > 5 Hz; IMUs < 10 kHz
+# a median rate this close to a bound is on it: the float rounding of timestamps' differences
+# (10 ppm covers Unix seconds), below a sensor clock's accuracy (tens of ppm)
+RATE_RTOL = 1e-5
 MIN_DURATION = 1.0  # seconds both signals cover: shorter is not a movement to reconstruct
 MAX_DURATION = 48 * 3600.0  # seconds: longer logs are refused rather than resampled
 MAX_SPAN_RATIO = 10.0  # the log may span at most 10x (+ 60 s) the time its samples cover
@@ -289,7 +292,8 @@ def _time_scale(s: Stream, times: np.ndarray) -> float:
     ``times`` : ndarray, shape (N,), sorted distinct timestamps of ``s`` as read."""
     med = float(np.median(np.diff(times)))
     span = float(times[-1] - times[0])
-    rated = [(u, k) for u, k in TIME_UNITS.items() if MIN_RATE <= 1.0 / (med * k) <= MAX_RATE]
+    lo, hi = MIN_RATE * (1 - RATE_RTOL), MAX_RATE * (1 + RATE_RTOL)
+    rated = [(u, k) for u, k in TIME_UNITS.items() if lo <= 1.0 / (med * k) <= hi]
     lasting = [(u, k) for u, k in rated if span * k >= MIN_DURATION]
     if lasting:
         unit, scale = lasting[0]
@@ -298,7 +302,7 @@ def _time_scale(s: Stream, times: np.ndarray) -> float:
                         "read as %s (%.3g Hz)", s.path, s.quantity, med, 1.0 / med, unit,
                         1.0 / (med * scale))
         return scale
-    if span >= MIN_DURATION and 1.0 / med < MIN_RATE:  # in seconds, long enough but too slow
+    if span >= MIN_DURATION and 1.0 / med < lo:  # in seconds, long enough but too slow
         other = "".join(f"; read as {u} ({1.0 / (med * k):.3g} Hz) it would last only "
                         f"{span * k:.3g} s" for u, k in rated[:1])
         raise FormatError(s.path, None, f"{s.quantity}: the timestamps step by a median "
