@@ -1,15 +1,15 @@
 """A foot sensor's swings and path, and the level frame it walks in.
 
-The foot swings while the gyroscope norm's 50 ms window maximum exceeds 100 deg/s for at least
-0.2 s, and the rotation about horizontal axes alone does for 0.2 s of it (:func:`swings`; a
-pivot about the vertical with the foot down is part of a stance); between two swings is one
-stance, and its stillest moment the foot's rest. A zero-velocity-update Kalman filter with Rauch-Tung-Striebel smoothing (gaitmap's
-``RtsKalman``) gives the foot's 3-D path, with ``RtsKalman``'s default ZUPTs (the gyroscope's
-norm under 34 deg/s over 50 ms) or-ed with one at each stance's stillest moment: some walkers'
-feet never get under 34 deg/s (their stance minimum is 40-60 deg/s). Steps too slow for the
-swing threshold (a first step from standing, a last one to a stop) are then read off the path
-(:func:`slow_swings`): a movement between two rests that carries the foot farther than the
-shortest stride.
+The foot swings while the gyroscope norm's 50 ms window maximum exceeds 102 deg/s (SWING_DPS)
+for at least 0.2 s, and the rotation about horizontal axes alone does for 0.2 s of it
+(:func:`swings`; a pivot about the vertical with the foot down is part of a stance); between two
+swings is one stance, and its stillest moment the foot's rest. A zero-velocity-update Kalman
+filter with Rauch-Tung-Striebel smoothing (gaitmap's ``RtsKalman``) gives the foot's 3-D path,
+with ``RtsKalman``'s default ZUPTs (the gyroscope's norm under 34 deg/s over 50 ms) or-ed with
+one at each stance's stillest moment: some walkers' feet never get under 34 deg/s (their stance
+minimum is 40-60 deg/s). Steps too slow for the swing threshold (a first step from standing, a
+last one to a stop) are then read off the path (:func:`slow_swings`): a movement between two
+rests that carries the foot farther than the shortest stride.
 
 :func:`foot_track` also finds how the sensor sits on the shoe, in any orientation: gravity at
 rest gives up (gaitmap's ``align_dataset_to_gravity``), and the strides' displacement seen from
