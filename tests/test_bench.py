@@ -169,12 +169,32 @@ def test_method_spec_carries_hyperparameters():
 
     for spec, word in (("learned[bidirectional=yes]", "true or false"),
                        ("learned[epochs=2.5]", "whole number"), ("ridge[alpha=big]", "number"),
-                       ("ridge[nosuch=1]", "no parameter")):
+                       ("ridge[nosuch=1]", "no parameter"),
+                       # a default of None or a string: the annotation's kind, the string
+                       ("learned[threads=two]", "whole number or None"),
+                       ("tautges2008[style_rank=x]", "whole number or None"),
+                       ("mousas2017[engine=3]", "a string"),
+                       # a constructor's own check of a choice, named as the others
+                       ("eom2014[variant=foo]", "unknown variant 'foo'"),
+                       ("mousas2017[engine=fast]", "engine must be one of")):
         name, params = parse_method_spec(spec)
         with pytest.raises(InputError, match=word):
             get_method(name, **params)
+    assert get_method("learned", threads=None).threads is None
+    assert get_method("tautges2008", style_rank=2).style_rank == 2
     recs = run_bench(["ridge[window=3]"], out=None, **QUICK)
     assert {r["method"] for r in recs} == {"ridge[window=3]"}
     # the hyperparameter reached the method: a 3-sample window differs from the default
     default = run_bench(["ridge"], out=None, **QUICK)
     assert recs[-1]["mpjpe_cm"] != default[-1]["mpjpe_cm"]
+
+
+def test_a_split_that_leaves_no_test_clips_is_refused_by_name(sample_db):
+    """Data with none of the held-out styles (e.g. ``--limit`` too small) is an InputError
+    naming the split and the counts, which the CLI prints as one line, not a traceback."""
+    from imuloco.errors import InputError
+    from imuloco.evaluate.protocols import HELDOUT_STYLES, split
+
+    keep = [i for i, lab in enumerate(sample_db.labels) if lab.get("style") not in HELDOUT_STYLES]
+    with pytest.raises(InputError, match=r"heldout-styles.*\(\d+ / 0 clips\)"):
+        split(sample_db.subset(keep), "heldout-styles")

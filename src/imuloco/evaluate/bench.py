@@ -274,12 +274,12 @@ def run_bench(
     only_folds : run only these folds of ``heldout-contents`` (left-out contents).
     """
     from imuloco.core.retarget import resampled
-    from imuloco.methods import method_class
+    from imuloco.methods import get_method
     from imuloco.methods.registry import parse_method_spec
 
     specs = {m: parse_method_spec(m) for m in methods}
-    for name, _ in specs.values():  # fail before any work on an unknown or uninstalled method
-        method_class(name)
+    for name, params in specs.values():  # fail before any work on an unknown or uninstalled
+        get_method(name, **params)  # method, or a parameter it does not take or cannot use
     if seeds < 1:
         raise ValueError(f"seeds must be at least 1, got {seeds}")
     placements = list(placements)

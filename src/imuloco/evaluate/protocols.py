@@ -22,7 +22,7 @@ from __future__ import annotations
 import zlib
 
 from imuloco.core.motion import MotionDatabase
-from imuloco.errors import UnknownNameError
+from imuloco.errors import InputError, UnknownNameError
 
 PROTOCOL_VERSION = 2
 SPLITS = ("random-clips", "heldout-styles", "heldout-contents", "cross-dataset")
@@ -50,7 +50,7 @@ def folds(db: MotionDatabase, name: str) -> list[tuple[str, MotionDatabase, Moti
         out.append((content, db.subset([i for i, t in enumerate(test) if not t]),
                     db.subset([i for i, t in enumerate(test) if t])))
     if len(out) < 2:
-        raise ValueError(f"heldout-contents needs clips of at least two of the contents "
+        raise InputError(f"heldout-contents needs clips of at least two of the contents "
                          f"{list(HELDOUT_CONTENTS)}; the data has {sorted(present - {None})}")
     return out
 
@@ -68,6 +68,7 @@ def split(db: MotionDatabase, name: str) -> tuple[MotionDatabase, MotionDatabase
     train_idx = [i for i, t in enumerate(test) if not t]
     test_idx = [i for i, t in enumerate(test) if t]
     if not train_idx or not test_idx:
-        raise ValueError(f"split {name!r} leaves an empty training or test set "
-                         f"({len(train_idx)} / {len(test_idx)} clips)")
+        raise InputError(f"split {name!r} leaves an empty training or test set "
+                         f"({len(train_idx)} / {len(test_idx)} clips): give more clips "
+                         "(--limit) or data of more styles")
     return db.subset(train_idx), db.subset(test_idx)

@@ -119,14 +119,21 @@ def get_method(name: str, **params) -> Method:
     """A new, unfitted method by name. A hyperparameter whose default is a bool or a number
     must be one (:class:`~imuloco.errors.InputError` naming it otherwise: ``"True"`` reaching
     torch as a string failed deep inside a training)."""
+    from imuloco.errors import InputError
+
     cls = method_class(name)
     _check_types(name, cls, params)
-    return cls(**params)
+    try:
+        return cls(**params)
+    except ValueError as e:  # a constructor's own check of a value (a choice, a range)
+        why = str(e).removeprefix(f"{name}: ")
+        raise InputError(f"method {name!r}: {why}") from None
 
 
 def _check_types(name: str, cls: type, params: dict[str, Any]) -> None:
     """Raise InputError for a parameter the constructor does not take, or whose value is not
-    of its default's kind (bool; int or float, where an int is a float too)."""
+    of its default's kind (bool; int or float, where an int is a float too; a string), or,
+    for a default of None, of its annotation's (e.g. ``int | None``)."""
     import inspect
     from numbers import Integral, Real
 
@@ -135,6 +142,7 @@ def _check_types(name: str, cls: type, params: dict[str, Any]) -> None:
     from imuloco.errors import InputError
 
     sig = inspect.signature(cls.__init__)
+    hints = _hints(cls.__init__)
     takes_any = any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values())
     for key, value in params.items():
         p = sig.parameters.get(key)
@@ -150,11 +158,49 @@ def _check_types(name: str, cls: type, params: dict[str, Any]) -> None:
             whole = isinstance(default, Integral)
             ok = not flag and isinstance(value, Integral if whole else Real)
             kind = "a whole number" if whole else "a number"
+        elif isinstance(default, str):
+            ok, kind = isinstance(value, str), "a string"
+        elif default is None and key in hints:
+            ok, kind = _of_hint(value, hints[key])
         else:
             continue
         if not ok:
             raise InputError(f"method {name!r}: parameter {key!r} expects {kind}, got "
                              f"{value!r}")
+
+
+def _hints(function) -> dict[str, Any]:
+    """``function``'s resolved annotations; none when they cannot be resolved."""
+    import typing
+
+    try:
+        return typing.get_type_hints(function)
+    except (NameError, TypeError):
+        return {}
+
+
+def _of_hint(value: Any, hint: Any) -> tuple[bool, str]:
+    """Whether ``value`` fits a parameter annotated ``hint`` (bool, int, float, str, or a
+    union of them and None) and how to name what is expected; other hints accept anything."""
+    import types
+    import typing
+    from numbers import Integral, Real
+
+    import numpy as np
+
+    kinds = {bool: "true or false", int: "a whole number", float: "a number", str: "a string"}
+    union = typing.get_origin(hint) in (typing.Union, types.UnionType)
+    options = typing.get_args(hint) if union else (hint,)
+    if any(o not in kinds and o is not type(None) for o in options):
+        return True, ""
+    flag = isinstance(value, (bool, np.bool_))
+    ok = (value is None and type(None) in options
+          or bool in options and flag
+          or int in options and not flag and isinstance(value, Integral)
+          or float in options and not flag and isinstance(value, Real)
+          or str in options and isinstance(value, str))
+    names = [kinds[o] for o in options if o in kinds] + ["None"] * (type(None) in options)
+    return ok, " or ".join(names)
 
 
 @dataclass(frozen=True)

@@ -150,6 +150,8 @@ class Eom2014(Method):
         min_phase_frames: int = 60,   # phases with fewer training frames are dropped
         seed: int = 0,
     ) -> None:
+        if variant not in VARIANTS:
+            raise ValueError(f"eom2014: unknown variant {variant!r}; expected {VARIANTS}")
         self.variant = variant
         self.per_type = per_type
         self.latent_dim = latent_dim
@@ -186,8 +188,6 @@ class Eom2014(Method):
     def learn(self, data: TrainingSet, progress: bool = False) -> None:
         from imuloco.phases import gait_phases
 
-        if self.variant not in VARIANTS:
-            raise ValueError(f"eom2014: unknown variant {self.variant!r}; expected {VARIANTS}")
         t0 = time.perf_counter()
         j = data.skeleton.num_joints
         clips = []

@@ -127,9 +127,6 @@ class Mousas2017(Method):
         self.sigma_scale = sigma_scale
         self.beam = beam
         self.engine = engine
-
-    # ---- learning ---------------------------------------------------------------------------
-    def learn(self, data: TrainingSet, progress: bool = False) -> None:
         if not 0.0 < self.blend <= 1.0:
             raise ValueError(f"mousas2017: blend must be in (0, 1], got {self.blend}")
         if self.K < 1:
@@ -137,6 +134,9 @@ class Mousas2017(Method):
         if self.beam < 0:
             raise ValueError(f"mousas2017: beam must be >= 0 (0: exact), got {self.beam}")
         resolve_engine(self.engine)
+
+    # ---- learning ---------------------------------------------------------------------------
+    def learn(self, data: TrainingSet, progress: bool = False) -> None:
         examples = data.examples
         max_len = max(2, round(self.max_segment_s * data.fps))
         segs: list[Segment] = []
