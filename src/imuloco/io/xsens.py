@@ -15,14 +15,15 @@ then a header naming the outputs, then one line per packet):
 
 Times: ``SampleTimeFine`` when every line has one, unwrapped at 2^32. MTi User Manual (MT0605P,
 sec. 4.12.3): a 4-byte time stamp of 0.1 ms resolution (10 kHz ticks); Xsens DOT User Manual
-(sec. 4.2.5): 1 MHz ticks, wrapping at 0xFFFFFFFF. The tick is the one whose sampling rate is
+(XD0502P, sec. 4.2.5): 1 MHz ticks, wrapping at 0xFFFFFFFF. The tick is the one whose sampling rate is
 nearer the rate the preamble states; without a stated rate 10 kHz, unless a median step over
-2,000 ticks would make that slower than 5 Hz (the DOT samples at most at 120 Hz: 8,333 us).
+2,000 ticks would make that slower than 5 Hz (a DOT's 120 Hz, its fastest, steps 8,333 us).
 Otherwise ``PacketCounter`` (16-bit, wrapping at 65,536, on an MTi or MTw; 32-bit on a DOT)
 over the stated rate; dropped packets leave gaps in either. Neither: refused.
 
 Units are left to :mod:`imuloco.sensors.reallog`'s detection: MT Manager writes ``Acc`` in m/s^2
-and ``Gyr`` in rad/s, the DOT app ``Gyr`` in deg/s (DOT User Manual, sec. 4.2). Other columns
+and ``Gyr`` in rad/s, the DOT app ``Acc`` in m/s^2 and ``Gyr`` in degree/s (DOT User Manual
+XD0502P, sec. 4.2.2, Table 9). Other columns
 (magnetometer, orientation, ``FreeAcc`` without gravity, status) are ignored; a non-numeric cell
 is refused with its line.
 """
@@ -39,7 +40,7 @@ import numpy as np
 from imuloco.errors import FormatError
 from imuloco.io.sensorlog import Stream, _read_table, _sniff, _split, _text_lines
 
-MAX_PREAMBLE = 100  # lines before the header (MT Manager 2022 writes ~15, the DOT app ~12)
+MAX_PREAMBLE = 100  # lines before the header (the exports seen: MT Manager 2022 12, DOT app 11)
 ACC = ("Acc_X", "Acc_Y", "Acc_Z")
 GYR = ("Gyr_X", "Gyr_Y", "Gyr_Z")
 _HEADER_NAMES = {"PacketCounter", "SampleTimeFine", *ACC, *GYR}
