@@ -15,17 +15,16 @@ then a header naming the outputs, then one line per packet):
 
 Times: ``SampleTimeFine`` when every line has one, unwrapped at 2^32. MTi User Manual (MT0605P,
 sec. 4.12.3): a 4-byte time stamp of 0.1 ms resolution (10 kHz ticks); Xsens DOT User Manual
-(XD0502P, sec. 4.2.5): 1 MHz ticks, wrapping at 0xFFFFFFFF. The tick is the one whose sampling rate is
-nearer the rate the preamble states; without a stated rate 10 kHz, unless a median step over
+(XD0502P, sec. 4.2.5): 1 MHz ticks, wrapping at 0xFFFFFFFF. The tick is the one whose sampling rate
+is nearer the rate the preamble states; without a stated rate 10 kHz, unless a median step over
 2,000 ticks would make that slower than 5 Hz (a DOT's 120 Hz, its fastest, steps 8,333 us).
-Otherwise ``PacketCounter`` (16-bit, wrapping at 65,536, on an MTi or MTw; 32-bit on a DOT)
-over the stated rate; dropped packets leave gaps in either. Neither: refused.
+Otherwise ``PacketCounter`` (16-bit, wrapping at 65,536, on an MTi or MTw; 32-bit on a DOT) over
+the stated rate; dropped packets leave gaps in either. Neither: refused.
 
 Units are left to :mod:`imuloco.sensors.reallog`'s detection: MT Manager writes ``Acc`` in m/s^2
 and ``Gyr`` in rad/s, the DOT app ``Acc`` in m/s^2 and ``Gyr`` in degree/s (DOT User Manual
-XD0502P, sec. 4.2.2, Table 9). Other columns
-(magnetometer, orientation, ``FreeAcc`` without gravity, status) are ignored; a non-numeric cell
-is refused with its line.
+XD0502P, sec. 4.2.2, Table 9). Other columns (magnetometer, orientation, ``FreeAcc`` without
+gravity, status) are ignored; a non-numeric cell is refused with its line.
 """
 
 from __future__ import annotations
