@@ -35,6 +35,7 @@ import numpy as np
 
 from imuloco.core.recording import Recording
 from imuloco.errors import FormatError, UnknownNameError
+from imuloco.io.xsens import stated_rate, unwrap_counter
 from imuloco.ops.filters import resample_linear
 
 G = 9.80665  # standard gravity, m/s^2 (mobilise-d-lab stores acceleration in g)
@@ -323,10 +324,7 @@ def _read_ipol_txt(path: Path) -> tuple[float, np.ndarray, np.ndarray]:
     with path.open("rb") as fh:
         first = fh.readline().decode("utf-8", "replace")
         body = fh.readline() and fh.readline()  # the first sample's line, if any
-    try:
-        rate = float(first.split(":")[1].split()[0])
-    except (IndexError, ValueError):
-        rate = float("nan")
+    rate = stated_rate(first) or float("nan")
     if not 1.0 <= rate <= 1000.0:
         raise FormatError(path, 1, f"expected 'Acquisition frequency: 100 Hz' (1-1000 Hz), got "
                           f"{first.strip()[:60]!r}")
@@ -344,7 +342,7 @@ def _read_ipol_txt(path: Path) -> tuple[float, np.ndarray, np.ndarray]:
         row = int(np.flatnonzero(bad)[0])
         raise FormatError(path, row + 3, f"expected a PacketCounter in 0-65535 (Xsens's 16-bit "
                           f"counter) and finite Acc, Gyr, got {data[row, :7].tolist()}")
-    counter = _unwrap_counter(data[:, 0])
+    counter = unwrap_counter(data[:, 0])
     step = np.diff(counter)
     if np.any(step < 0) or np.any(step > IPOL_MAX_GAP):
         row = int(np.flatnonzero((step < 0) | (step > IPOL_MAX_GAP))[0]) + 4  # 1-based
@@ -356,13 +354,6 @@ def _read_ipol_txt(path: Path) -> tuple[float, np.ndarray, np.ndarray]:
     if len(counter) < 2:
         raise FormatError(path, None, "fewer than two samples")
     return rate, counter, data[first, 1:7]
-
-
-def _unwrap_counter(counter: np.ndarray) -> np.ndarray:
-    """Xsens's 16-bit PacketCounter made monotonic across its wrap at 65,536."""
-    step = np.diff(counter)
-    return counter[0] + np.concatenate([[0.0], np.cumsum(np.where(step < -32768, step + 65536,
-                                                                  step))])
 
 
 def read_ipol(path: str | Path) -> Iterator[RealTrial]:

@@ -28,6 +28,9 @@ and resampling to :mod:`imuloco.sensors.reallog`. Supported layouts:
   the platform is read from ``Metadata.csv`` unless given, and guessed with a warning when the
   export has none (:func:`sensorlogger_platform`).
 
+``xsens`` — Xsens text exports (MT Manager, the DOT app, ipol-gait's files), read by
+  :mod:`imuloco.io.xsens` with this module's table reader.
+
 phyphox and Sensor Logger exports are read from the zip the app shares as well as from its
 unzipped folder (:class:`Export`; members are size-checked before they are decompressed).
 """
@@ -56,7 +59,7 @@ from imuloco.io.atomic import atomic_write, check_output
 log = logging.getLogger(__name__)
 
 GENERIC_COLUMNS = ("acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z")
-FORMATS = ("generic", "realworld", "phyphox", "sensorlogger")
+FORMATS = ("generic", "realworld", "phyphox", "sensorlogger", "xsens")
 
 
 @dataclass(eq=False)
@@ -135,18 +138,18 @@ def _split(path: Path, i: int, line: str, delim: str) -> list[str]:
         raise FormatError(path, i, f"malformed CSV line ({exc})") from None
 
 
-def _read_table(path: Path, allow_empty: bool = False, data: BinaryIO | None = None
-                ) -> tuple[list[str], np.ndarray, np.ndarray]:
+def _read_table(path: Path, allow_empty: bool = False, data: BinaryIO | None = None,
+                skip: int = 0) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Header names, values (N, C) float and the 1-based line of each row.
 
-    Skips blank lines and ``#`` comments. Empty cells become NaN when ``allow_empty``; other
-    cells must be finite numbers of magnitude at most :data:`MAX_CELL`. ``data`` reads from an
-    open binary file (a zip member, closed here) instead of ``path``, which then only names
-    it in errors.
+    Skips blank lines and ``#`` comments, and the first ``skip`` lines (a preamble before the
+    header). Empty cells become NaN when ``allow_empty``; other cells must be finite numbers of
+    magnitude at most :data:`MAX_CELL`. ``data`` reads from an open binary file (a zip member,
+    closed here) instead of ``path``, which then only names it in errors.
     """
     path = Path(path)
     try:
-        header, values, rows, start = _parse(path, allow_empty, data)
+        header, values, rows, start = _parse(path, allow_empty, data, skip)
     except (zipfile.BadZipFile, zlib.error, EOFError) as exc:
         raise FormatError(path, None, f"corrupted zip member ({exc})") from None
     except OSError as exc:
@@ -162,12 +165,12 @@ def _read_table(path: Path, allow_empty: bool = False, data: BinaryIO | None = N
 BLOCK_BYTES = 1 << 22  # lines read per block by the fast path: ~60,000 rows of a phone log
 
 
-def _parse(path: Path, allow_empty: bool, data: BinaryIO | None
+def _parse(path: Path, allow_empty: bool, data: BinaryIO | None, skip: int = 0
            ) -> tuple[list[str], array, array, int]:
     with (open(path, "rb") if data is None else data) as f:
         lines = _text_lines(path, f)
-        start, head = next(((i, ln) for i, ln in lines if ln.strip() and not ln.startswith("#")),
-                           (None, ""))
+        start, head = next(((i, ln) for i, ln in lines
+                            if i > skip and ln.strip() and not ln.startswith("#")), (None, ""))
         if start is None:
             raise FormatError(path, None, "empty file: expected a header line")
         delim, decimal_comma = _sniff(head)
@@ -662,6 +665,12 @@ def detect_format(path: str | Path) -> str:
         return "phyphox"
     if h.startswith(_SENSOR_LOGGER_HEADER):
         return "sensorlogger"
+    from imuloco.io.xsens import is_xsens  # built on this module: imported when needed
+
+    if is_xsens(path):
+        return "xsens"
     raise FormatError(path, 1, "unknown sensor log: expected a header starting 'time_s' "
                                "(generic), 'id,attr_time' (RealWorld), '\"Time (s)\"' (phyphox) "
-                               f"or 'time,seconds_elapsed' (Sensor Logger), found {header[:80]!r}")
+                               "or 'time,seconds_elapsed' (Sensor Logger), or an Xsens export's "
+                               "('// Update Rate: ...' lines, then 'PacketCounter ... Acc_X "
+                               f"... Gyr_X ...'), found {header[:80]!r}")

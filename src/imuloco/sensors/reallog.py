@@ -2,7 +2,8 @@
 
 The steps, each reported in a :class:`LogReport`:
 
-1. read the file(s) with :mod:`imuloco.io.sensorlog` (generic, RealWorld, phyphox, Sensor Logger);
+1. read the file(s) with :mod:`imuloco.io.sensorlog` (generic, RealWorld, phyphox, Sensor Logger,
+   Xsens text exports);
 2. per signal, sort the timestamps (stable) and drop repeated ones, keeping the first sample;
 3. detect the units where the format leaves them open (explicit ``acc_unit``/``gyro_unit``
    override): the accelerometer's median magnitude is ~1 in g and ~9.8 in m/s^2 (gravity
@@ -45,6 +46,7 @@ from imuloco.io.sensorlog import (
     read_realworld,
     read_sensor_logger,
 )
+from imuloco.io.xsens import read_xsens
 from imuloco.ops.filters import resample_linear
 from imuloco.sensors.resample import Gap, find_gaps, resample
 
@@ -191,7 +193,7 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
         raise FileNotFoundError(f"{path}: no such file or folder")
     fmt = detect_format(path) if fmt == "auto" else fmt
     export = is_export(path)
-    if gyro_path is not None and fmt in ("generic", "sensorlogger"):
+    if gyro_path is not None and fmt in ("generic", "sensorlogger", "xsens"):
         raise FormatError(gyro_path, None, f"a second file, but a {fmt} log holds both signals "
                                            f"in {path.name}: give one file (many walkers: "
                                            "imuloco batch)")
@@ -206,6 +208,11 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
         return fmt, read_sensor_logger(path if export else path.parent, platform)
     if fmt == "realworld":
         return fmt, read_realworld(*_realworld_pair(path, gyro_path))
+    if fmt == "xsens":
+        if export:
+            raise FormatError(path, None, "an Xsens export is one text file per sensor: give "
+                                          "the file")
+        return fmt, read_xsens(path)
     raise UnknownNameError(f"unknown log format {fmt!r}; expected one of {list(FORMAT_NAMES)}")
 
 
@@ -415,7 +422,8 @@ class LogOptions:
 def read_log(path: str | Path | Sequence[str | Path], placement: str = "right_ankle",
              fmt: str = "auto", *, options: LogOptions | None = None, **kwargs: Any
              ) -> tuple[Recording, LogReport]:
-    """Import a phone's sensor log as a :class:`Recording` in m/s^2 and rad/s.
+    """Import a phone's sensor log or an IMU's (Xsens) export as a :class:`Recording` in m/s^2
+    and rad/s.
 
     Parameters
     ----------
