@@ -1,8 +1,14 @@
-"""Hypothesis strategies shared by the readers' property tests."""
+"""Hypothesis strategies and checks shared by the readers' property tests."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
 from hypothesis import strategies as st
+
+from imuloco.errors import FormatError
 
 
 @st.composite
@@ -25,3 +31,15 @@ def byte_mutations(draw, text: str) -> bytes:
         else:
             del b[i:]
     return bytes(b)
+
+
+def reads_cleanly(reader: Callable, path: Path):
+    """``reader(path)``, which must either refuse the file with a FormatError naming it (then
+    None) or return streams of finite times and values (then them)."""
+    try:
+        streams = reader(path)
+    except FormatError as e:
+        assert e.path == str(path)
+        return None
+    assert all(np.isfinite(s.times).all() and np.isfinite(s.values).all() for s in streams)
+    return streams
