@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from imuloco.errors import FormatError
+from imuloco.errors import FormatError, MissingInputError
 from imuloco.io.atomic import atomic_write
 from imuloco.io.bvh import read_bvh
 
@@ -190,7 +190,7 @@ def load_benchmark(folders: Sequence[str | Path], out: str | Path | None = None,
     for folder in map(Path, folders):
         files = sorted(folder.glob("*.bvh"))
         if not files:
-            raise FileNotFoundError(f"no .bvh files in {folder}")
+            raise MissingInputError(f"no .bvh files in {folder}")
         counts = [numpy_parse(f) for f in files]  # and into the page cache for every way
         frames = sum(counts)
         rec: dict[str, Any] = {"folder": folder.name, "clips": len(files), "frames": frames,
