@@ -295,3 +295,17 @@ def test_a_method_built_directly_is_checked_when_fitted(sample_db):
 
     with pytest.raises(InputError, match=r"method 'knn': parameter 'k' expects value in \[1"):
         KnnPose(k=0).fit(sample_db.subset([0]))
+
+
+def test_calibrate_a_corrupted_confidence_file(tmp_path):
+    (tmp_path / "confidence-x.npz").write_text("junk\n")
+    code, out = run("calibrate", tmp_path)
+    assert code == 1 and "confidence-x.npz" in out and "corrupted" in out, out
+
+
+def test_bench_against_a_revision_git_does_not_know(tmp_path):
+    (tmp_path / "clips").mkdir()
+    (tmp_path / "clips" / "w.bvh").write_bytes(BVH.read_bytes())
+    code, out = run("bench", "--load", tmp_path / "clips", "--against", "no-such-rev",
+                    "--out", tmp_path / "r")
+    assert code == 1 and "--against no-such-rev" in out, out
