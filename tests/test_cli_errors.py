@@ -309,3 +309,14 @@ def test_bench_against_a_revision_git_does_not_know(tmp_path):
     code, out = run("bench", "--load", tmp_path / "clips", "--against", "no-such-rev",
                     "--out", tmp_path / "r")
     assert code == 1 and "--against no-such-rev" in out, out
+
+
+def test_ensemble_never_replaces_a_member(tmp_path):
+    """`-o` naming a member with --force replaced that member by the ensemble."""
+    from imuloco.app.pipeline import shipped_model
+
+    member = tmp_path / "a.npz"
+    member.write_bytes(shipped_model("learned", "right_foot").read_bytes())
+    before = member.read_bytes()
+    code, out = run("ensemble", member, member, "-o", member, "--force")
+    assert code == 1 and "overwrite an input" in out and member.read_bytes() == before

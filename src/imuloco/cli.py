@@ -543,7 +543,7 @@ def ensemble(members: tuple[Path, ...], output: Path, mirrored_path: Path | None
     from imuloco.methods import load_model
     from imuloco.methods.learned.method import ensemble as combine
 
-    check_outputs([output, mirrored_path], force)
+    check_outputs([output, mirrored_path], force, inputs=members)
     try:
         model = combine([load_model(p) for p in members])
     except ImulocoError as e:
