@@ -667,7 +667,8 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
 @click.argument("motion_file", type=_existing_file())
 @placement_option
 @noise_option
-@click.option("--rate", default=100.0, show_default=True, type=_LibraryRange("imuloco.sensors.reallog", "MIN_RATE", "MAX_RATE"),
+@click.option("--rate", default=100.0, show_default=True,
+              type=_LibraryRange("imuloco.sensors.reallog", "MIN_RATE", "MAX_RATE"),
               help="Sampling rate, Hz (as reconstruct reads logs).")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
               help="Seed of the noise draws.")
