@@ -157,3 +157,166 @@ def test_a_model_of_another_placement_names_the_one_to_give(log, tmp_path, sampl
     code, out = run("reconstruct", log, "--model", model.save(tmp_path / "left.npz"),
                     "-o", tmp_path / "x.bvh")
     assert code == 1 and "not 'right_ankle'" in out and "--placement left_ankle" in out, out
+
+
+@pytest.mark.parametrize("command, option, value", [
+    ("simulate", "--rate", "nan"),  # click's FloatRange let NaN through: arange failed
+    ("simulate", "--seed", "-5"),  # numpy's generators take no negative seed
+    ("simulate", "--placement", ","),  # no placement: numpy's stack failed
+    ("render", "--seconds", "nan"),
+    ("render", "--seconds", "-1"),  # an empty video failed in write_video
+    ("reconstruct", "--height", "nan"),
+    ("reconstruct", "--video-seconds", "0"),
+    ("reconstruct", "--piece-seconds", "inf"),
+    ("train", "--limit", "-2"),  # an empty database
+    ("train", "--limit", "0"),  # read every clip
+    ("train", "--seed", "-1"),
+    ("batch", "--jobs", "0"),
+    ("bench", "--db-frames", "1e4"),  # int('1e4') failed
+    ("bench", "--db-frames", "-5"),
+    ("live", "--port", "99999"),  # bind()'s OverflowError
+    ("live", "--speed", "0"),  # a replay that never streams
+    ("live", "--calibrate-seconds", "nan"),
+    ("live", "--calibrate-seconds", "100"),  # the session's own limit, 60 s
+])
+def test_option_values_out_of_range_are_usage_errors(log, tmp_path, command, option, value):
+    """Each value is refused by name when the options are parsed, before any work (each
+    crashed with a traceback, or silently did something else)."""
+    out = tmp_path / "out"
+    rest = {"simulate": [BVH, "-o", out], "render": [BVH, "-o", tmp_path / "x.gif"],
+            "reconstruct": [log, "-o", out, "--method", "mean"],
+            "train": ["--method", "mean", "-o", out], "batch": [log, "--out", out],
+            "bench": ["--method", "mean", "--speed", "--out", out],
+            "live": ["--method", "mean"]}[command]
+    code, text = run(command, *rest, option, value)
+    assert code == 2 and option in text, text
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_video_of_an_unknown_type_is_refused_before_any_work(log, tmp_path):
+    code, out = run("reconstruct", log, "-o", tmp_path / "x.bvh", "--video", tmp_path / "x.txt",
+                    "--method", "mean")
+    assert code == 2 and "--video" in out and ".mp4 or .gif" in out
+    assert not any(tmp_path.iterdir())  # the BVH was written before the video failed
+
+
+def test_a_piece_longer_than_any_recording(log, tmp_path):
+    code, out = run("reconstruct", log, "-o", tmp_path / "x.bvh", "--piece-seconds", "1e308",
+                    "--method", "mean")
+    assert code == 0 and "in 1 piece(s)" in out, out
+
+
+@pytest.fixture(scope="module")
+def one_frame(tmp_path_factory):
+    """The bundled clip cut to its first frame: a valid BVH that `info` reads."""
+    lines = BVH.read_text().splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("Frames:"))
+    path = tmp_path_factory.mktemp("one") / "one.bvh"
+    path.write_text("\n".join([*lines[:at], "Frames: 1", lines[at + 1], lines[at + 2]]) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("command", ["phases", "evaluate", "simulate"])
+def test_a_motion_of_one_frame(one_frame, tmp_path, command):
+    args = {"phases": [one_frame], "evaluate": [BVH, one_frame],
+            "simulate": [one_frame, "-o", tmp_path / "s.csv"]}[command]
+    code, out = run(command, *args)
+    assert code == 1 and "one" in out and "at least 2" in out, out
+    assert run("info", one_frame)[0] == 0
+
+
+def test_an_unknown_placement_is_refused_before_reading_data(tmp_path):
+    code, out = run("train", "--method", "mean", "--placement", "right_ankle,nowhere",
+                    "--data", tmp_path, "-o", tmp_path / "m.npz")
+    assert code == 1 and "unknown sensor placement 'nowhere'" in out, out
+
+
+def test_a_data_folder_without_clips(tmp_path):
+    code, out = run("train", "--method", "mean", "--data", tmp_path, "-o", tmp_path / "m.npz")
+    assert code == 1 and f"no .bvh files in {tmp_path}" in out
+
+
+@pytest.mark.parametrize("spec", ["ridge[window=0]", "knn[k=0]", "ridge[alpha=NaN]"])
+def test_bench_refuses_a_method_parameter_out_of_range_before_any_work(tmp_path, spec):
+    code, out = run("bench", "--method", spec, "--out", tmp_path / "b")
+    name, key = spec.split("[")[0], spec.split("[")[1].split("=")[0]
+    assert code == 1 and f"method {name!r}" in out and repr(key) in out, out
+    assert "loading" not in out and not (tmp_path / "b").exists()
+
+
+def test_train_refuses_a_parameter_out_of_range_or_of_the_wrong_kind(tmp_path):
+    for param, word in (("window=0", "[1, inf)"), ("window=2.5", "whole number")):
+        code, out = run("train", "--method", "ridge", "--param", param, "-o", tmp_path / "m")
+        assert code == 2 and "--param" in out and word in out, out
+    assert not any(tmp_path.iterdir())
+
+
+def test_live_on_a_port_in_use_and_with_a_bad_certificate(log, tmp_path):
+    import socket
+
+    pytest.importorskip("websockets")
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        code, out = run("live", "--method", "mean", "--port", port)
+    assert code == 1 and f"cannot listen on 127.0.0.1:{port}" in out, out
+    code, out = run("live", "--method", "mean", "--cert", log, "--port", "0")
+    assert code == 1 and str(log) in out and "PEM certificate" in out, out
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("ridge[alpha=Infinity]", "finite number"),  # JSON's NaN and Infinity pass every bound
+    ("mousas2017[shrinkage=NaN]", "finite number"),
+    ("tautges2008[periods=3]", "list of finite numbers"),  # tuple(3) failed
+    ("tautges2008[periods=[0]]", "items in (0, inf)"),
+    ("tautges2008[hop=40]", "hop must be at most window"),  # frames without a pose (NaN)
+    ("mousas2017[a_self_phase=0.5]", "must sum to 1"),
+    ("pca-local[stride=0]", "'stride' expects value in [1, inf)"),
+    ("eom2014[hidden=[0]]", "items in [1, inf)"),
+    ("learned[validation=1]", "'validation' expects value in [0, 1)"),
+    ("mean[", "expected NAME[key=value"),  # ran as a method named "mean["
+])
+def test_method_specs_out_of_range_are_refused_by_name(spec, words):
+    """Each of these failed deep inside a fit (numpy, scikit-learn, scipy) or gave NaN."""
+    from imuloco.errors import ImulocoError
+    from imuloco.methods import get_method
+    from imuloco.methods.registry import parse_method_spec
+
+    with pytest.raises(ImulocoError) as caught:
+        name, params = parse_method_spec(spec)
+        get_method(name, **params)
+    assert words in str(caught.value)
+
+
+def test_a_method_built_directly_is_checked_when_fitted(sample_db):
+    from imuloco.errors import InputError
+    from imuloco.methods.baselines import KnnPose
+
+    with pytest.raises(InputError, match=r"method 'knn': parameter 'k' expects value in \[1"):
+        KnnPose(k=0).fit(sample_db.subset([0]))
+
+
+def test_calibrate_a_corrupted_confidence_file(tmp_path):
+    (tmp_path / "confidence-x.npz").write_text("junk\n")
+    code, out = run("calibrate", tmp_path)
+    assert code == 1 and "confidence-x.npz" in out and "corrupted" in out, out
+
+
+def test_bench_against_a_revision_git_does_not_know(tmp_path):
+    (tmp_path / "clips").mkdir()
+    (tmp_path / "clips" / "w.bvh").write_bytes(BVH.read_bytes())
+    code, out = run("bench", "--load", tmp_path / "clips", "--against", "no-such-rev",
+                    "--out", tmp_path / "r")
+    assert code == 1 and "--against no-such-rev" in out, out
+
+
+def test_ensemble_never_replaces_a_member(tmp_path):
+    """`-o` naming a member with --force replaced that member by the ensemble."""
+    from imuloco.app.pipeline import shipped_model
+
+    member = tmp_path / "a.npz"
+    member.write_bytes(shipped_model("learned", "right_foot").read_bytes())
+    before = member.read_bytes()
+    code, out = run("ensemble", member, member, "-o", member, "--force")
+    assert code == 1 and "overwrite an input" in out and member.read_bytes() == before

@@ -73,24 +73,40 @@ class _LogFormat(click.Choice):
         return ("auto", *FORMATS)
 
 
-class _LogRate(click.FloatRange):
-    """A sampling rate in Hz that ``read_log`` accepts (:data:`imuloco.sensors.reallog.MIN_RATE`
-    to ``MAX_RATE``), read on first use as :class:`_LogFormat` reads its choices."""
+class _Range(click.FloatRange):
+    """A finite number in a range: click's FloatRange lets NaN through (it fails every
+    comparison) and inf where a side is open, which then broke deep inside (``int(nan)``)."""
 
-    def __init__(self) -> None:
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> Any:
+        import math
+
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return number
+
+
+class _LibraryRange(_Range):
+    """A finite number between two constants of a library ``module`` (``low`` and ``high``
+    name them), read on first use as :class:`_LogFormat` reads its choices: e.g. a sampling
+    rate ``read_log`` accepts (:data:`imuloco.sensors.reallog.MIN_RATE` to ``MAX_RATE``)."""
+
+    def __init__(self, module: str, low: str, high: str) -> None:
+        self.module, self.low, self.high = module, low, high
         self.min_open = self.max_open = self.clamp = False
 
     @property
     def min(self) -> float:  # type: ignore[override]
-        from imuloco.sensors.reallog import MIN_RATE
+        from importlib import import_module
 
-        return MIN_RATE
+        return getattr(import_module(self.module), self.low)
 
     @property
     def max(self) -> float:  # type: ignore[override]
-        from imuloco.sensors.reallog import MAX_RATE
+        from importlib import import_module
 
-        return MAX_RATE
+        return getattr(import_module(self.module), self.high)
 
 
 def _existing_file(**kw: Any) -> click.Path:
@@ -113,8 +129,21 @@ SPLITS = ("random-clips", "heldout-styles")
 MIRROR_CLIPS = 20  # clips that fit a mirrored model's sensor-axis map (Learned.mirrored)
 NOISES = ("clean", "phone", "imu")
 
+def _placements(ctx: click.Context, param: click.Parameter, value: str) -> str:
+    """``--placement`` as given, once it names at least one preset (``,`` named none and
+    failed in numpy), each known (an unknown one was found only after the data was read)."""
+    from imuloco.sensors.placement import get_placement
+
+    if not _csv(value):
+        raise click.BadParameter(f"expected placement preset(s), got {value!r}")
+    for name in _csv(value):
+        get_placement(name)  # UnknownNameError: the command's one-line error
+    return value
+
+
 force_option = click.option("--force", is_flag=True, help="Replace existing output files.")
 placement_option = click.option("--placement", default="right_ankle", show_default=True,
+                                callback=_placements,
                                 help="Sensor placement preset(s), comma separated.")
 noise_option = click.option("--noise", type=click.Choice(NOISES), default="phone",
                             show_default=True, help="Noise preset of the simulated sensors.")
@@ -125,9 +154,9 @@ DATA_HELP = ("Folder(s) of clips, repeatable or comma separated; several become 
 
 data_options = _options(
     click.option("--data", "data_items", multiple=True, help=DATA_HELP),
-    click.option("--limit", type=int, default=None,
+    click.option("--limit", type=click.IntRange(min=1), default=None,
                  help="Read at most N clips per folder (quick runs)."),
-    click.option("--seed", type=int, default=0, show_default=True),
+    click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True),
 )
 # the model a reconstruction uses (reconstruct, batch, demo, live): imuloco.app.pipeline
 model_options = _options(
@@ -152,7 +181,7 @@ platform_option = click.option(
     help="Phone of a Sensor Logger export [default: from its Metadata.csv, else guessed with "
          "a warning].")
 height_option = click.option(
-    "--height", type=click.FloatRange(0.5, 2.6), default=None, metavar="METRES",
+    "--height", type=_Range(0.5, 2.6), default=None, metavar="METRES",
     help="The wearer's body height: the skeleton and every length and speed in their "
          "proportions [default: the training skeleton's].")
 skeleton_option = click.option(
@@ -255,6 +284,18 @@ def methods() -> None:
 
 def _csv(value: str | None) -> list[str]:
     return [v.strip() for v in (value or "").split(",") if v.strip()]
+
+
+def _whole_numbers(value: str | None, hint: str) -> list[int]:
+    """Comma separated positive whole numbers of the option ``hint``."""
+    try:
+        numbers = [int(v) for v in _csv(value)]
+    except ValueError:
+        numbers = [0]
+    if any(n < 1 for n in numbers):
+        raise click.BadParameter(f"expected positive whole numbers, comma separated, got "
+                                 f"{value!r}", param_hint=hint)
+    return numbers
 
 
 def _folders(values: tuple[str, ...], hint: str = "--data") -> list[Path] | None:
@@ -363,7 +404,7 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
     if speed:
         from imuloco.evaluate.speed import speed_benchmark, speed_table
 
-        frames = [int(v) for v in _csv(db_frames)] or None
+        frames = _whole_numbers(db_frames, "--db-frames") or None
         click.echo(speed_table(speed_benchmark(names, out, data[0] if data else None, frames,
                                                against=against), data[0] if data else None))
         return
@@ -423,21 +464,23 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
     epoch beside it as OUTPUT.history.json and, with matplotlib, OUTPUT.curves.png.
     """
 
-    from imuloco.errors import UnknownNameError
+    from imuloco.errors import InputError, UnknownNameError
     from imuloco.evaluate.bench import data_label, load_data
     from imuloco.evaluate.protocols import split
     from imuloco.io.atomic import check_outputs
-    from imuloco.methods import method_class
+    from imuloco.methods import get_method, method_class
     from imuloco.methods.registry import parse_params
 
     check_outputs([output, mirrored_path], force)
     if mirrored_path is not None and not hasattr(method_class(method_name), "mirrored"):
         raise click.UsageError(f"--mirrored: method {method_name!r} has no mirrored model "
                                "(only learned)")
-    method = method_class(method_name)()
+    cls = method_class(method_name)  # an unknown method is refused as such, not as --param
     try:
-        method.set_params(**parse_params(params, "--param"))
-    except UnknownNameError as e:
+        given = parse_params(params, "--param")
+        cls().set_params(**given)  # names the hyperparameters it has when given another
+        method = get_method(method_name, **given)  # kinds and ranges, as bench checks them
+    except (UnknownNameError, InputError) as e:
         raise click.BadParameter(str(e), param_hint="--param") from None
     data = _folders(data_items)
     db = load_data(data, limit, progress=True, up=up, skip_frames=skip_frames)
@@ -480,7 +523,8 @@ def _save_mirrored(model, db, path: Path) -> None:
 @click.option("--mirrored", "mirrored_path", type=_file(), default=None,
               help="Also write the ensemble of the other side's placements (right <-> left).")
 @click.option("--data", "data_items", multiple=True, help=DATA_HELP)
-@click.option("--limit", type=int, default=None, help="Read at most N clips per folder.")
+@click.option("--limit", type=click.IntRange(min=1), default=None,
+              help="Read at most N clips per folder.")
 @force_option
 @_reading_options
 def ensemble(members: tuple[Path, ...], output: Path, mirrored_path: Path | None,
@@ -499,7 +543,7 @@ def ensemble(members: tuple[Path, ...], output: Path, mirrored_path: Path | None
     from imuloco.methods import load_model
     from imuloco.methods.learned.method import ensemble as combine
 
-    check_outputs([output, mirrored_path], force)
+    check_outputs([output, mirrored_path], force, inputs=members)
     try:
         model = combine([load_model(p) for p in members])
     except ImulocoError as e:
@@ -623,9 +667,11 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
 @click.argument("motion_file", type=_existing_file())
 @placement_option
 @noise_option
-@click.option("--rate", default=100.0, show_default=True, type=_LogRate(),
+@click.option("--rate", default=100.0, show_default=True,
+              type=_LibraryRange("imuloco.sensors.reallog", "MIN_RATE", "MAX_RATE"),
               help="Sampling rate, Hz (as reconstruct reads logs).")
-@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the noise draws.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
+              help="Seed of the noise draws.")
 @click.option("-o", "--output", required=True, type=_file(),
               help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s).")
 @force_option
@@ -657,7 +703,7 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
               help="BVH file to write (on the model's training skeleton, or --skeleton's).")
 @click.option("--video", type=_file(), default=None,
               help="Also render a stick-figure video (.mp4 or .gif).")
-@click.option("--video-seconds", type=float, default=None,
+@click.option("--video-seconds", type=_Range(0, min_open=True), default=None,
               help="Render only the first seconds into --video.")
 @click.option("--html", "html_path", type=_file(), default=None,
               help="Also write the interactive HTML viewer.")
@@ -666,7 +712,7 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @skeleton_option
 @calibrate_option
 @platform_option
-@click.option("--piece-seconds", type=click.FloatRange(10.0), default=None,
+@click.option("--piece-seconds", type=_Range(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html/--skeleton).")
 @height_option
@@ -689,6 +735,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     from imuloco.io.atomic import atomic_write, check_outputs
     from imuloco.io.bvh import write_bvh
 
+    if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
+        raise click.BadParameter(f"{video}: expected a .mp4 or .gif file", param_hint="--video")
     check_outputs([output, video, html_path, report_path], force,
                   inputs=[*recording, *([model_path] if model_path else []),
                           *([skeleton] if skeleton else [])])
@@ -807,7 +855,8 @@ RENDER_TYPES = (".mp4", ".gif", ".html", ".png")
               help="Folder for MOTION.mp4, MOTION.gif and MOTION.html (video, GIF and viewer).")
 @click.option("-o", "--output", "outputs", multiple=True, type=_file(),
               help="File(s) to write: .mp4, .gif, .html or .png (a strip of frames).")
-@click.option("--seconds", type=float, default=None, help="Only the first seconds (videos).")
+@click.option("--seconds", type=_Range(0, min_open=True), default=None,
+              help="Only the first seconds (videos).")
 @click.option("--report", "report_file", type=_existing_file(), default=None,
               help="MOTION's reconstruction report (reconstruct --report, batch's NAME.json): "
                    "the viewer shows its predicted error per second and unreliable segments.")
@@ -864,7 +913,7 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
 @click.option("--out", "out_dir", type=_folder(), required=True,
               help="Folder for NAME.bvh, NAME.json, summary.csv/.json, walkers.parquet and "
                    "strides.parquet.")
-@click.option("-j", "--jobs", type=int, default=None,
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
               help="Dask worker processes of the local cluster [default: one per CPU].")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Run on an existing Dask cluster, e.g. tcp://host:8786 (see the README).")
@@ -924,15 +973,17 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
 @cli.command()
 @click.option("--host", default="127.0.0.1", show_default=True,
               help="Interface to listen on (0.0.0.0 lets a phone on the network connect).")
-@click.option("--port", default=8765, show_default=True, type=int)
+@click.option("--port", default=8765, show_default=True, type=click.IntRange(0, 65535))
 @model_options
 @log_options
-@click.option("--calibrate-seconds", type=float, default=5.0, show_default=True,
+@click.option("--calibrate-seconds", default=5.0, show_default=True,
+              type=_LibraryRange("imuloco.app.live.session", "MIN_CALIBRATE_S",
+                                 "MAX_CALIBRATE_S"),
               help="Seconds of samples to calibrate the phone on the leg (0: none).")
 @click.option("--replay", type=click.Path(exists=True, path_type=Path), default=None,
               help="Stream this recorded log (of --format) at real time instead of waiting "
                    "for a phone.")
-@click.option("--speed", type=float, default=1.0, show_default=True,
+@click.option("--speed", type=_Range(0, min_open=True), default=1.0, show_default=True,
               help="Replay speed factor.")
 @click.option("--loop", is_flag=True, help="Replay the recording over and over.")
 @click.option("--cert", "certfile", type=click.Path(exists=True, dir_okay=False), default=None,

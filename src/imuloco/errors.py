@@ -58,3 +58,8 @@ class NotFittedError(ImulocoError, ValueError, AttributeError):
 
 class OutputExistsError(ImulocoError, FileExistsError):
     """An output file that exists already and was not to be replaced."""
+
+
+class MissingInputError(ImulocoError, FileNotFoundError):
+    """An input file or folder that does not exist, or a folder without what is read from it
+    (a data folder without motion files)."""

@@ -86,7 +86,9 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
     # the grid Method.reconstruct reads: (F, 6 S), ~50 MB for 10 h
     signals = model_frames(rec, fps, method.gaps_missing)
     frames = len(signals)
-    step, warm = max(1, round(piece_s * fps)), max(1, round(warmup_s * fps))
+    # a piece longer than the recording is the whole of it (1e308 s overflowed round())
+    step = max(1, round(min(piece_s * fps, frames)))
+    warm = max(1, round(min(warmup_s * fps, frames)))
     last, start = None, 0
     while start < frames:
         stop = min(frames, start + step)

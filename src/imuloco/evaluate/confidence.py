@@ -22,13 +22,15 @@ general calibration library (scikit-learn's calibrators are for classifiers' pro
 
 from __future__ import annotations
 
+import zipfile
+import zlib
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from imuloco.errors import InputError
+from imuloco.errors import FormatError, InputError
 from imuloco.methods.base import calibrated_error
 
 TOLERANCE = 0.3  # the target: predicted rms error within +-30 % of the actual one
@@ -55,11 +57,16 @@ def load_rows(folders: Iterable[str | Path], method: str | None = None) -> Rows:
         files += found
     parts = []
     for f in files:
-        with np.load(f, allow_pickle=False) as z:
-            missing = [c for c in COLUMNS if c not in z.files]
-            if missing:
-                raise InputError(f"{f}: not a confidence file of imuloco bench (no {missing})")
-            parts.append({k: z[k] for k in z.files})
+        try:
+            with np.load(f, allow_pickle=False) as z:
+                part = {k: z[k] for k in z.files}
+        except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError) as e:
+            raise FormatError(f, None, f"not a confidence file of imuloco bench or corrupted "
+                              f"({type(e).__name__}: {e})") from None
+        missing = [c for c in COLUMNS if c not in part]
+        if missing:
+            raise InputError(f"{f}: not a confidence file of imuloco bench (no {missing})")
+        parts.append(part)
     keys = set.intersection(*(set(p) for p in parts))
     return {k: np.concatenate([p[k] for p in parts]) for k in sorted(keys)}
 

@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from imuloco.errors import FormatError
+from imuloco.errors import FormatError, InputError, MissingInputError
 from imuloco.io.atomic import atomic_write
 from imuloco.io.bvh import read_bvh
 
@@ -92,8 +92,9 @@ def module_at(rev: str, relpath: str, name: str) -> types.ModuleType:
         src = subprocess.run(["git", "-C", str(root), "show", f"{rev}:{relpath}"],
                              capture_output=True, text=True, check=True).stdout
     except (OSError, subprocess.CalledProcessError) as e:
-        raise ValueError(f"--against {rev}: cannot read {relpath} from git in {root} "
-                         f"(a source checkout is needed): {e}") from None
+        why = getattr(e, "stderr", None) or str(e)  # git's own words: unknown revision, ...
+        raise InputError(f"--against {rev}: cannot read {relpath} from git in {root} "
+                         f"(a commit of a source checkout is needed): {why.strip()}") from None
     module = types.ModuleType(name)
     sys.modules[name] = module  # dataclasses look their module up there
     exec(compile(src, f"{rev}:{relpath}", "exec"), module.__dict__)  # noqa: S102 (own code)
@@ -190,7 +191,7 @@ def load_benchmark(folders: Sequence[str | Path], out: str | Path | None = None,
     for folder in map(Path, folders):
         files = sorted(folder.glob("*.bvh"))
         if not files:
-            raise FileNotFoundError(f"no .bvh files in {folder}")
+            raise MissingInputError(f"no .bvh files in {folder}")
         counts = [numpy_parse(f) for f in files]  # and into the page cache for every way
         frames = sum(counts)
         rec: dict[str, Any] = {"folder": folder.name, "clips": len(files), "frames": frames,

@@ -357,6 +357,9 @@ def evaluate_files(ground_truth: str | Path, reconstructed: str | Path,
     from imuloco.io.motionfile import read_motion
 
     gt, rec = read_motion(ground_truth), read_motion(reconstructed)
+    for path, motion in ((ground_truth, gt), (reconstructed, rec)):
+        if motion.num_frames < 2:  # its gait and velocities need two
+            raise InputError(f"{path}: {motion.num_frames} frame; evaluating needs at least 2")
     a, b = gt.skeleton, rec.skeleton
     if a.names != b.names or not np.array_equal(a.parents, b.parents):
         n = min(len(a.names), len(b.names))

@@ -34,7 +34,7 @@ import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
-from imuloco.errors import FormatError
+from imuloco.errors import FormatError, MissingInputError
 from imuloco.io.bvh import MAX_DEPTH, MAX_JOINTS
 from imuloco.io.upaxis import check_skip, check_up, to_y_up
 from imuloco.ops.rotations import IDENTITY, from_euler, qinv, qmul
@@ -384,7 +384,7 @@ def find_asf(amc_path: str | Path) -> Path:
     found = sorted(folder.glob("*.asf")) + sorted(folder.glob("*.ASF"))
     if len(set(found)) == 1:
         return found[0]
-    raise FileNotFoundError(f"{amc_path}: no ASF skeleton found beside it (looked for "
+    raise MissingInputError(f"{amc_path}: no ASF skeleton found beside it (looked for "
                             f"{amc_path.stem}.asf, {amc_path.stem.split('_')[0]}.asf, or a "
                             f"single .asf in {folder}); pass the ASF path explicitly")
 

@@ -28,7 +28,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from imuloco.core.motion import Motion, MotionDatabase
-from imuloco.errors import FormatError
+from imuloco.errors import FormatError, MissingInputError
 from imuloco.io.cache import read_motion_cached
 
 TRIALS_FILE = "trials.csv"
@@ -153,12 +153,12 @@ def load_database(
     """
     folder = Path(folder)
     if not folder.is_dir():
-        raise FileNotFoundError(f"motion folder {folder} does not exist")
+        raise MissingInputError(f"motion folder {folder} does not exist")
     contents, styles = _label_names(folder, "content"), _label_names(folder, "style")
     trials = read_trials(folder)
     files = sorted(folder.glob("*.bvh"))
     if not files:
-        raise FileNotFoundError(f"no .bvh files in {folder}")
+        raise MissingInputError(f"no .bvh files in {folder}")
     chosen = []
     for f in files:
         lab = read_labels(f, contents, styles, trials)

@@ -131,6 +131,10 @@ class Method(ABC):
     # (None: any, it no longer matters): old files that carry it load without it, files with
     # another value are refused (retrain them)
     retired_params: ClassVar[dict[str, Any]] = {}
+    # the values a fit can use of a numeric hyperparameter, as an interval ("[1, inf)",
+    # "(0, 1]"); of a list-valued one, of each of its (at least one) items. Checked by
+    # check_params, so that a window of 0 is refused by name, not by numpy deep in a fit
+    param_ranges: ClassVar[dict[str, str]] = {}
 
     @property
     def pins_feet(self) -> bool:
@@ -157,6 +161,7 @@ class Method(ABC):
     def fit_set(self, data: TrainingSet, progress: bool = False) -> Self:
         """Learn from an already synthesized :class:`~imuloco.methods.training.TrainingSet`
         (:meth:`learn`) and record what the method was fitted on."""
+        self.check_params()
         start = time.perf_counter()
         self.learn(data, progress=progress)
         self.set_setup(data.skeleton, data.fps, data.placements, data.noise)
@@ -260,6 +265,21 @@ class Method(ABC):
             setattr(self, key, value)
         return self
 
+    def check_params(self) -> None:
+        """Raise :class:`~imuloco.errors.InputError` naming the first hyperparameter outside
+        its :attr:`param_ranges` interval (NaN is outside every one)."""
+        from imuloco.errors import InputError
+
+        for key, interval in self.param_ranges.items():
+            value = getattr(self, key)
+            if value is None:  # an optional one left out (e.g. a rank: chosen by the fit)
+                continue
+            items = list(value) if isinstance(value, (list, tuple)) else [value]
+            if not items or not all(_within(v, interval) for v in items):
+                what = "items" if isinstance(value, (list, tuple)) else "value"
+                raise InputError(f"method {self.name!r}: parameter {key!r} expects {what} in "
+                                 f"{interval}, got {value!r}")
+
     def __repr__(self) -> str:
         """``Class(param=value, ...)`` with the hyperparameters that differ from the
         defaults, as scikit-learn prints estimators."""
@@ -288,6 +308,18 @@ class Method(ABC):
 
         self.check_fitted()
         return save_model(self, path, overwrite=overwrite)
+
+
+def _within(value: Any, interval: str) -> bool:
+    """Whether the number ``value`` lies in ``interval``, written ``[low, high)`` and the like
+    (``inf`` for no bound)."""
+    low, high = (float(x) for x in interval[1:-1].split(","))
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return False
+    return ((low <= v if interval[0] == "[" else low < v)
+            and (v <= high if interval[-1] == "]" else v < high))
 
 
 def _same(a: Any, b: Any) -> bool:

@@ -8,7 +8,7 @@ offline reconstruction and their online stream give the same frames.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -111,6 +111,7 @@ class RidgePose(_Windowed):
     penalty (scikit-learn ``Ridge``) on standardized inputs and outputs."""
 
     summary = "ridge regression from a causal window of sensor samples to the pose (2014 Fig. 8)"
+    param_ranges: ClassVar[dict[str, str]] = {"window": "[1, inf)", "alpha": "[0, inf)"}
 
     def __init__(self, window: int = 15, alpha: float = 1.0) -> None:
         self.window = window  # samples per causal window (0.5 s at 30 fps); not in the paper
@@ -146,6 +147,8 @@ class KnnPose(_Windowed):
     Training rows are kept every ``stride`` frames to bound the model's size."""
 
     summary = "k-nearest-neighbour lookup of poses by a causal window of sensor samples"
+    param_ranges: ClassVar[dict[str, str]] = {"window": "[1, inf)", "k": "[1, inf)",
+                                              "stride": "[1, inf)"}
 
     def __init__(self, window: int = 15, k: int = 8, stride: int = 1) -> None:
         self.window = window  # samples per causal window (0.5 s at 30 fps)

@@ -22,7 +22,7 @@ Choices where the papers leave room (noted in the docstrings too):
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy.optimize import leastsq
@@ -102,6 +102,9 @@ class PCALocal(Method):
     """
 
     summary = "local PCA pose prior + acceleration control, per frame (Chai & Hodgins 2005)"
+    param_ranges: ClassVar[dict[str, str]] = {
+        "k": "[1, inf)", "energy": "(0, 1]", "sigma_control": "(0, inf)",
+        "sigma_smooth": "(0, inf)", "max_nfev": "[1, inf)", "stride": "[1, inf)"}
 
     def __init__(self, k: int = 50, energy: float = 0.95, sigma_control: float = 0.01,
                  sigma_smooth: float = 0.05, max_nfev: int = 10, stride: int = 2) -> None:

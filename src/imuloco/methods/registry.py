@@ -118,16 +118,19 @@ def available_methods() -> dict[str, type[Method]]:
 def get_method(name: str, **params) -> Method:
     """A new, unfitted method by name. A hyperparameter whose default is a bool or a number
     must be one (:class:`~imuloco.errors.InputError` naming it otherwise: ``"True"`` reaching
-    torch as a string failed deep inside a training)."""
+    torch as a string failed deep inside a training), a finite one, within the class's
+    :attr:`~imuloco.methods.base.Method.param_ranges`."""
     from imuloco.errors import InputError
 
     cls = method_class(name)
     _check_types(name, cls, params)
     try:
-        return cls(**params)
+        method = cls(**params)
     except ValueError as e:  # a constructor's own check of a value (a choice, a range)
         why = str(e).removeprefix(f"{name}: ")
         raise InputError(f"method {name!r}: {why}") from None
+    method.check_params()
+    return method
 
 
 def _check_types(name: str, cls: type, params: dict[str, Any]) -> None:
@@ -155,9 +158,11 @@ def _check_types(name: str, cls: type, params: dict[str, Any]) -> None:
         if isinstance(default, bool):
             ok, kind = flag, "true or false"
         elif isinstance(default, Real):
-            whole = isinstance(default, Integral)
-            ok = not flag and isinstance(value, Integral if whole else Real)
-            kind = "a whole number" if whole else "a number"
+            ok, kind = _number(value, isinstance(default, Integral))
+        elif isinstance(default, tuple) and default:  # e.g. hidden=(32,), periods=(0.8, 1.0)
+            whole = all(isinstance(d, Integral) for d in default)
+            kind = f"a list of {_number(0, whole)[1].removeprefix('a ')}s"
+            ok = isinstance(value, (list, tuple)) and all(_number(v, whole)[0] for v in value)
         elif isinstance(default, str):
             ok, kind = isinstance(value, str), "a string"
         elif default is None and key in hints:
@@ -167,6 +172,19 @@ def _check_types(name: str, cls: type, params: dict[str, Any]) -> None:
         if not ok:
             raise InputError(f"method {name!r}: parameter {key!r} expects {kind}, got "
                              f"{value!r}")
+
+
+def _number(value: Any, whole: bool) -> tuple[bool, str]:
+    """Whether ``value`` is a finite number (a whole one if ``whole``; never a bool: NaN and
+    inf pass every range check) and how to name what is expected."""
+    import math
+    from numbers import Integral, Real
+
+    import numpy as np
+
+    ok = (not isinstance(value, (bool, np.bool_)) and isinstance(value, Integral if whole else Real)
+          and math.isfinite(value))
+    return ok, "a whole number" if whole else "a finite number"
 
 
 def _hints(function) -> dict[str, Any]:
@@ -304,7 +322,7 @@ def parse_method_spec(spec: str) -> tuple[str, dict[str, Any]]:
     """``"eom2014[variant=mlp-no-hmm;context=7]"`` -> ``("eom2014", {"variant": "mlp-no-hmm",
     "context": 7})``: a method name with hyperparameters (:func:`parse_params`). Lets one
     bench compare variants of a method (e.g. the 2014 paper's ablation)."""
-    name, _, rest = spec.partition("[")
-    if rest and not rest.endswith("]"):
+    name, bracket, rest = spec.partition("[")
+    if bracket and not rest.endswith("]"):  # "mean[" ran as a method named "mean["
         raise UnknownNameError(f"method {spec!r}: expected NAME[key=value;key=value]")
     return name.strip(), parse_params(filter(None, rest[:-1].split(";")), f"method {spec!r}")

@@ -250,8 +250,13 @@ def gait_phases(
     min_back_s : a phase that steps backwards in the cycle must last this long to count.
     **tolerances : contact tolerances, see :func:`imuloco.phases.contacts.part_contacts`.
     """
+    from imuloco.errors import InputError
+
     if reference not in ("left", "right"):
         raise ValueError(f"reference must be 'left' or 'right', got {reference!r}")
+    if motion.num_frames < 2:
+        raise InputError(f"motion {motion.name!r} has {motion.num_frames} frame: gait phases "
+                         "need at least 2")
     leg = motion.skeleton.leg_length()
     fps = motion.fps
     contacts = foot_contacts(motion, **tolerances)

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from imuloco.core.recording import Recording
-from imuloco.errors import FormatError, InputError, UnknownNameError
+from imuloco.errors import FormatError, InputError, MissingInputError, UnknownNameError
 from imuloco.io.sensorlog import (
     FORMATS,
     PLATFORMS,
@@ -190,7 +190,7 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
         path, gyro_path = Path(path[0]), Path(path[1])
     path = Path(path)
     if not path.exists():
-        raise FileNotFoundError(f"{path}: no such file or folder")
+        raise MissingInputError(f"{path}: no such file or folder")
     fmt = detect_format(path) if fmt == "auto" else fmt
     export = is_export(path)
     if gyro_path is not None and fmt in ("generic", "sensorlogger", "xsens"):

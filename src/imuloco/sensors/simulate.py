@@ -121,6 +121,11 @@ def simulate(
     Recording with timestamps (irregular when the noise model jitters or drops samples),
     specific force, angular velocity and the true orientation of every sensor.
     """
+    from imuloco.errors import InputError
+
+    if motion.num_frames < 2 or not placements:
+        raise InputError(f"motion {motion.name!r}: simulating sensors needs at least 2 frames "
+                         f"and one placement, got {motion.num_frames} and {len(placements)}")
     model = get_noise(noise)
     rng = np.random.default_rng(seed)
     times = sample_times(motion.duration, rate, model, rng)

@@ -60,6 +60,7 @@ from websockets.http11 import Request, Response
 from websockets.protocol import State
 
 from imuloco.app.live.session import MAX_GAP_S, LiveSession, TokenBucket, frames_to_json
+from imuloco.errors import FormatError, InputError
 from imuloco.viz.html import inline_stickfigure
 
 log = logging.getLogger(__name__)
@@ -481,8 +482,12 @@ class LiveServer:
         self.loopback = is_loopback(host)
         self.require_token = not self.loopback if self._require is None else self._require
         self.scheme = "https" if ssl else "http"
-        self.server = await serve(self.handler, host, port, process_request=self.process_request,
-                                  ssl=ssl, compression=None, max_size=self.limits.max_bytes)
+        try:
+            self.server = await serve(self.handler, host, port,
+                                      process_request=self.process_request, ssl=ssl,
+                                      compression=None, max_size=self.limits.max_bytes)
+        except OSError as e:  # an unknown host, a port in use or not allowed (--host, --port)
+            raise InputError(f"cannot listen on {host}:{port}: {e.strerror or e}") from None
         return self.server
 
     @property
@@ -499,7 +504,12 @@ class LiveServer:
 def ssl_context(certfile: str | Path, keyfile: str | Path | None = None) -> ssl_module.SSLContext:
     """A TLS server context from a certificate (PEM) and its key."""
     ctx = ssl_module.SSLContext(ssl_module.PROTOCOL_TLS_SERVER)
-    ctx.load_cert_chain(certfile, keyfile)
+    try:
+        ctx.load_cert_chain(certfile, keyfile)
+    except ssl_module.SSLError as e:
+        where = certfile if keyfile is None else f"{certfile} with key {keyfile}"
+        raise FormatError(where, None, f"expected a PEM certificate and its private key "
+                          f"({e.reason or e})") from None
     return ctx
 
 

@@ -34,6 +34,7 @@ MAX_RATE_HZ = 1000.0  # samples beyond this rate (per second of their own clock)
 RATE_BURST = 100  # samples that may come closer together than that before any is dropped
 MAX_GAP_S = 1.0  # a longer pause in the samples is a dropout: the model restarts
 DEAD_RECKON_S = 3.0  # the walker moves on through a dropout up to this long, then holds
+MIN_CALIBRATE_S = 0.0  # none
 MAX_CALIBRATE_S = 60.0  # longest calibration (bounds the calibration buffer)
 
 
@@ -217,7 +218,7 @@ class LiveSession:
             raise InputError(f"method {method.name!r} has no online mode as configured; live "
                              "needs one of the methods `imuloco methods` lists as online "
                              "(a learned model: causal, not bidirectional)")
-        if not 0 <= calibrate_s <= MAX_CALIBRATE_S:
+        if not MIN_CALIBRATE_S <= calibrate_s <= MAX_CALIBRATE_S:
             raise ValueError(f"calibrate_s must be between 0 and {MAX_CALIBRATE_S:g} seconds, "
                              f"got {calibrate_s}")
         self.method = method

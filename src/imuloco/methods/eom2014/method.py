@@ -57,7 +57,7 @@ from __future__ import annotations
 
 import itertools
 import time
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -127,6 +127,12 @@ class Eom2014(Method):
     """Eom, Choi, Noh 2014 (see the module docstring for the pipeline and every choice)."""
 
     summary = "GPLVM + velocity GP, HMM phases, per-phase MLP (Eom et al. 2014)"
+    param_ranges: ClassVar[dict[str, str]] = {
+        "latent_dim": "[1, inf)", "window": "[1, inf)", "levels": "[1, inf)",
+        "n_states": "[1, inf)", "sigma": "[0, inf)", "n_active": "[1, inf)",
+        "max_segment": "[2, inf)", "maxiter": "[0, inf)", "x_prior": "[0, inf)",
+        "hidden": "[1, inf)", "context": "[0, inf)", "smooth_lambda": "[0, 1]",
+        "smooth_iterations": "[0, inf)", "min_phase_frames": "[0, inf)", "seed": "[0, inf)"}
     supports_online = True
 
     def __init__(

@@ -135,6 +135,14 @@ class Learned(Method):
     """
 
     summary = "imuloco's causal GRU: pose, contacts and confidence; feet pinned (torch)"
+    param_ranges: ClassVar[dict[str, str]] = {
+        **dict.fromkeys(("hidden", "layers", "epochs", "batch_size", "window", "members",
+                         "threads"), "[1, inf)"),
+        **dict.fromkeys(("draws", "lag", "seed"), "[0, inf)"),
+        **dict.fromkeys(("noise_scale", "weight_decay", "position_weight", "accel_weight"),
+                        "[0, inf)"),
+        **dict.fromkeys(("speed", "validation", "dropout", "proportions"), "[0, 1)"),
+        "reverse": "[0, 1]", "strap": "[0, 1]", "incline": "[0, 90]", "lr": "(0, inf)"}
     supports_online = True
     # files from before the look-ahead and the heavier acceleration term
     legacy_params: ClassVar[dict[str, Any]] = {"lag": 0, "accel_weight": 30.0,

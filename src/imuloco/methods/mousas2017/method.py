@@ -28,6 +28,10 @@ from imuloco.methods.mousas2017.stream import MousasStream, resolve_engine
 from imuloco.methods.postprocess import pin_feet
 from imuloco.methods.training import TrainingSet
 
+# sec. 5.2's transition probabilities (each group sums to 1): of the phase level, of frames
+A_PHASE = ("a_self_phase", "a_next_phase", "a_exit_phase")
+A_FRAME = ("a_self_frame", "a_next_frame", "a_skip_frame")
+
 
 class Mousas2017(Method):
     """Hierarchical multivariate HMM with reactive interpolation (Mousas 2017).
@@ -85,6 +89,9 @@ class Mousas2017(Method):
     """
 
     summary = "hierarchical multivariate HMM + reactive interpolation (Mousas 2017), online"
+    param_ranges: ClassVar[dict[str, str]] = {
+        **dict.fromkeys(A_PHASE + A_FRAME, "[0, 1]"), "shrinkage": "[0, inf)",
+        "ridge": "[0, inf)", "max_segment_s": "(0, inf)", "sigma_scale": "(0, inf)"}
     supports_online = True
 
     # frames inside a gap of a recording (no sample for more than 0.1 s) reach the model as
@@ -134,6 +141,11 @@ class Mousas2017(Method):
         if self.beam < 0:
             raise ValueError(f"mousas2017: beam must be >= 0 (0: exact), got {self.beam}")
         resolve_engine(self.engine)
+        for group in (A_PHASE, A_FRAME):
+            a = [getattr(self, k) for k in group]
+            if not abs(sum(a) - 1) <= 1e-9:
+                raise ValueError(f"mousas2017: {', '.join(group)} are probabilities that must "
+                                 f"sum to 1, got {a}")
 
     # ---- learning ---------------------------------------------------------------------------
     def learn(self, data: TrainingSet, progress: bool = False) -> None:
@@ -178,8 +190,8 @@ class Mousas2017(Method):
 
     def _build(self, num_joints: int) -> None:
         """Derived structures: both levels' topologies, the pose layout of ``num_joints``."""
-        a_phase = (self.a_self_phase, self.a_next_phase, self.a_exit_phase)
-        a_frame = (self.a_self_frame, self.a_next_frame, self.a_skip_frame)
+        a_phase = tuple(getattr(self, k) for k in A_PHASE)
+        a_frame = tuple(getattr(self, k) for k in A_FRAME)
         self.lower_ = Topology(self.block_phase_, self.block_count_, self.block_length_,
                                self.next_phase_, a_frame, a_phase, dtype=np.float32)
         self.upper_ = Topology(self.block_phase_, np.ones_like(self.block_count_),

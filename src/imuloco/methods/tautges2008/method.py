@@ -31,7 +31,7 @@ Choices where the paper is silent (each also noted where it is made):
 from __future__ import annotations
 
 from collections import defaultdict
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -75,6 +75,11 @@ class Tautges2008(Method):
     """
 
     summary = "multilinear motion model fitted to windows of accelerations (Tautges 2008)"
+    param_ranges: ClassVar[dict[str, str]] = {
+        "frames": "[2, inf)", "repetitions": "[1, inf)", "style_rank": "[1, inf)",
+        "repetition_rank": "[1, inf)", "window": "[2, inf)", "hop": "[1, inf)",
+        "phases": "[1, inf)", "periods": "(0, inf)", "max_iter": "[1, inf)",
+        "bounds_margin": "[0, inf)"}
 
     def __init__(self, frames: int = 32, repetitions: int = 3, style_rank: int | None = None,
                  repetition_rank: int | None = None, window: int = 32, hop: int = 16,
@@ -82,6 +87,8 @@ class Tautges2008(Method):
                  max_iter: int = 15, bounds_margin: float = 0.25, frame: str = "world") -> None:
         if frame not in ("world", "sensor"):
             raise ValueError(f"frame must be 'world' or 'sensor', got {frame!r}")
+        if hop > window:  # frames between two windows would get no pose (NaN)
+            raise ValueError(f"hop must be at most window, got hop {hop} > window {window}")
         self.frames = frames
         self.repetitions = repetitions
         self.style_rank = style_rank
