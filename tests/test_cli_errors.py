@@ -320,3 +320,21 @@ def test_ensemble_never_replaces_a_member(tmp_path):
     before = member.read_bytes()
     code, out = run("ensemble", member, member, "-o", member, "--force")
     assert code == 1 and "overwrite an input" in out and member.read_bytes() == before
+
+
+def test_a_bad_model_or_rig_leaves_no_partial_demo_and_is_refused_first(tmp_path):
+    """``demo`` checks ``--model`` and ``--skeleton`` before writing anything (it wrote
+    ``recording.csv`` first), and ``reconstruct`` reads the rig before the log."""
+    from imuloco.app.pipeline import demo, reconstruct_file
+    from imuloco.errors import ImulocoError
+
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a model")
+    rig = tmp_path / "rig.csv"
+    rig.write_text("time_s,acc_x\n0,1\n")
+    for kw in ({"model": bad}, {"skeleton": rig}):
+        with pytest.raises(ImulocoError):
+            demo(tmp_path / "out", **kw)
+        assert not (tmp_path / "out").exists()
+    with pytest.raises(ImulocoError, match="rig.csv"):  # the rig's error, not the missing log's
+        reconstruct_file(tmp_path / "no-such-log.csv", skeleton=rig)

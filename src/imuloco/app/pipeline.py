@@ -348,6 +348,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     from imuloco.sensors.reallog import read_log
 
     require_extras(placement)  # before reading a long log
+    rig = None if skeleton is None else load_rig(skeleton)  # and a bad rig file before its work
     steps = ["import", "model", "reconstruct", "gait"]
     bar = tqdm(total=len(steps), desc="reconstruct", unit="step", disable=not progress)
     t0 = time.perf_counter()
@@ -390,7 +391,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     )
     if skeleton is not None:
         bar.set_postfix_str(f"retargeting onto {Path(skeleton).name}")
-        motion = onto_rig(motion, load_rig(skeleton))
+        motion = onto_rig(motion, rig)
         motion.name = name
         report.skeleton = {"file": str(skeleton), "joints": motion.skeleton.num_joints}
     bar.update()
@@ -476,22 +477,24 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
              "signals.png", "phases.png", "errors.png", "report.md", "report.json"]
     paths = {n: out / n for n in names}
     check_outputs(paths.values(), overwrite)
-    out.mkdir(parents=True, exist_ok=True)
     bar = tqdm(total=5, desc="demo", unit="step", disable=not progress)
 
-    bar.set_postfix_str("simulating a phone")
     db = load_sample()
     matches = [c for c in db.clips if c.name == clip]
     if not matches:
         raise UnknownNameError(f"no clip {clip!r} in the bundled sample; it has "
                        f"{[c.name for c in db.clips]}")
     gt = matches[0]
-    rec = simulate(gt, ["right_ankle"], rate=100.0, noise="phone", seed=DEMO_SEED)
-    write_generic_csv(rec, paths["recording.csv"], overwrite=overwrite)
-    bar.update()
-
+    # the model and the rig before any file is written: a bad --model or --skeleton leaves
+    # no partial output
     bar.set_postfix_str("model")
     choice = choose_model(method, model, "right_ankle", exclude=[clip], db=db)
+    rig = None if skeleton is None else load_rig(skeleton)
+    bar.update()
+    bar.set_postfix_str("simulating a phone")
+    rec = simulate(gt, ["right_ankle"], rate=100.0, noise="phone", seed=DEMO_SEED)
+    out.mkdir(parents=True, exist_ok=True)
+    write_generic_csv(rec, paths["recording.csv"], overwrite=overwrite)
     bar.update()
     bar.set_postfix_str("reconstructing")
     if choice.source == "shipped":
@@ -504,7 +507,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     gt_cut, rec_cut = gt.slice(0, n), motion.slice(0, n)
     rec_cut.name = "reconstruction"
     conf = recon.confidence.sliced(0, n)
-    write_bvh(rec_cut if skeleton is None else onto_rig(rec_cut, load_rig(skeleton)),
+    write_bvh(rec_cut if rig is None else onto_rig(rec_cut, rig),
               paths["reconstruction.bvh"], unit=unit, overwrite=overwrite)
     bar.update()
 
