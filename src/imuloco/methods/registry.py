@@ -135,12 +135,8 @@ def get_method(name: str, **params) -> Method:
 
 def _check_types(name: str, cls: type, params: dict[str, Any]) -> None:
     """Raise InputError for a parameter the constructor does not take, or whose value is not
-    of its default's kind (bool; int or float, where an int is a float too; a string), or,
-    for a default of None, of its annotation's (e.g. ``int | None``)."""
+    of the kind it expects (:func:`_kinds`)."""
     import inspect
-    from numbers import Integral, Real
-
-    import numpy as np
 
     from imuloco.errors import InputError
 
@@ -154,37 +150,54 @@ def _check_types(name: str, cls: type, params: dict[str, Any]) -> None:
                 continue
             raise InputError(f"method {name!r} has no parameter {key!r}; it takes "
                              f"{[k for k in sig.parameters if k != 'self']}")
-        default, flag = p.default, isinstance(value, (bool, np.bool_))
-        if isinstance(default, bool):
-            ok, kind = flag, "true or false"
-        elif isinstance(default, Real):
-            ok, kind = _number(value, isinstance(default, Integral))
-        elif isinstance(default, tuple) and default:  # e.g. hidden=(32,), periods=(0.8, 1.0)
-            whole = all(isinstance(d, Integral) for d in default)
-            kind = f"a list of {_number(0, whole)[1].removeprefix('a ')}s"
-            ok = isinstance(value, (list, tuple)) and all(_number(v, whole)[0] for v in value)
-        elif isinstance(default, str):
-            ok, kind = isinstance(value, str), "a string"
-        elif default is None and key in hints:
-            ok, kind = _of_hint(value, hints[key])
-        else:
-            continue
-        if not ok:
-            raise InputError(f"method {name!r}: parameter {key!r} expects {kind}, got "
+        kinds = _kinds(p.default, hints.get(key))
+        if kinds and not any(_fits(value, k) for k in kinds):
+            expected = " or ".join(_KIND_NAMES[k] for k in kinds)
+            raise InputError(f"method {name!r}: parameter {key!r} expects {expected}, got "
                              f"{value!r}")
 
 
-def _number(value: Any, whole: bool) -> tuple[bool, str]:
-    """Whether ``value`` is a finite number (a whole one if ``whole``; never a bool: NaN and
-    inf pass every range check) and how to name what is expected."""
+# what a hyperparameter's value may be, and how an error names it; "ints" and "floats" are
+# lists of them (a tuple default, e.g. hidden=(32,), periods=(0.8, 1.0))
+_KIND_NAMES = {bool: "true or false", int: "a whole number", float: "a finite number",
+               str: "a string", type(None): "None", "ints": "a list of whole numbers",
+               "floats": "a list of finite numbers"}
+
+
+def _kinds(default: Any, hint: Any) -> tuple:
+    """The kinds of :data:`_KIND_NAMES` a parameter takes: its default's (bool before int, a
+    bool being an int), or for a default of None its annotation's (``int | None``); none to
+    check when either is another type."""
+    import types
+    import typing
+
+    if default is None:
+        union = typing.get_origin(hint) in (typing.Union, types.UnionType)
+        kinds = typing.get_args(hint) if union else (hint,)
+        return kinds if all(k in _KIND_NAMES for k in kinds) else ()
+    if isinstance(default, tuple) and default:
+        return ("ints" if all(_fits(d, int) for d in default) else "floats",)
+    return next(((k,) for k in (bool, int, float, str) if isinstance(default, k)), ())
+
+
+def _fits(value: Any, kind: Any) -> bool:
+    """Whether ``value`` is of ``kind`` (:data:`_KIND_NAMES`). Numbers must be finite (NaN and
+    inf pass every range check) and never a bool; an int is a float too."""
     import math
     from numbers import Integral, Real
 
     import numpy as np
 
-    ok = (not isinstance(value, (bool, np.bool_)) and isinstance(value, Integral if whole else Real)
-          and math.isfinite(value))
-    return ok, "a whole number" if whole else "a finite number"
+    if kind in ("ints", "floats"):
+        return isinstance(value, (list, tuple)) and all(
+            _fits(v, int if kind == "ints" else float) for v in value)
+    flag = isinstance(value, (bool, np.bool_))
+    if kind is bool:
+        return flag
+    if kind in (int, float):
+        return (not flag and isinstance(value, Integral if kind is int else Real)
+                and math.isfinite(value))
+    return value is None if kind is type(None) else isinstance(value, kind)
 
 
 def _hints(function) -> dict[str, Any]:
@@ -195,30 +208,6 @@ def _hints(function) -> dict[str, Any]:
         return typing.get_type_hints(function)
     except (NameError, TypeError):
         return {}
-
-
-def _of_hint(value: Any, hint: Any) -> tuple[bool, str]:
-    """Whether ``value`` fits a parameter annotated ``hint`` (bool, int, float, str, or a
-    union of them and None) and how to name what is expected; other hints accept anything."""
-    import types
-    import typing
-    from numbers import Integral, Real
-
-    import numpy as np
-
-    kinds = {bool: "true or false", int: "a whole number", float: "a number", str: "a string"}
-    union = typing.get_origin(hint) in (typing.Union, types.UnionType)
-    options = typing.get_args(hint) if union else (hint,)
-    if any(o not in kinds and o is not type(None) for o in options):
-        return True, ""
-    flag = isinstance(value, (bool, np.bool_))
-    ok = (value is None and type(None) in options
-          or bool in options and flag
-          or int in options and not flag and isinstance(value, Integral)
-          or float in options and not flag and isinstance(value, Real)
-          or str in options and isinstance(value, str))
-    names = [kinds[o] for o in options if o in kinds] + ["None"] * (type(None) in options)
-    return ok, " or ".join(names)
 
 
 @dataclass(frozen=True)

@@ -124,17 +124,24 @@ def _swing_runs(energy: np.ndarray, lifted: np.ndarray, rate: float
     return starts[keep], stops[keep]
 
 
+def _fast_swings(gyro_dps: np.ndarray, rate: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ZUPT detector's measure (:func:`_energy`) and the swings' starts and exclusive
+    stops (:func:`_swing_runs`)."""
+    energy = _energy(gyro_dps, rate)
+    return (energy, *_swing_runs(energy, _lifted(gyro_dps, rate), rate))
+
+
 def swings(gyro_dps: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
     """The foot's swings and the stillest moment of each stance around them.
 
-    gyro_dps : ndarray, shape (T, 3), deg/s on a uniform grid at ``rate`` Hz.
+    gyro_dps : ndarray, shape (T, 3), deg/s on a uniform grid at ``rate`` Hz, z up at rest.
 
     Returns ``starts`` (K,), the samples where the swings start, and ``moments`` (K + 1,):
     the minimum of the gyroscope norm's 50 ms window maximum (the ZUPT detector's measure)
     before the first swing, between two swings and after the last one.
     """
-    energy = _energy(gyro_dps, rate)
-    starts, stops = _swing_runs(energy, _lifted(gyro_dps, rate), rate)
+    energy, starts, stops = _fast_swings(gyro_dps, rate)
     return starts, _moments(energy, starts, stops)
 
 
@@ -149,8 +156,12 @@ def slow_swings(gyro_dps: np.ndarray, rate: float, path: np.ndarray
     moves more than MIN_STRIDE_M on the floor (from the stillest moment of the rest before to
     that of the rest after).
     """
-    energy = _energy(gyro_dps, rate)
-    starts, stops = _swing_runs(energy, _lifted(gyro_dps, rate), rate)
+    return _with_slow_swings(*_fast_swings(gyro_dps, rate), path, rate)
+
+
+def _with_slow_swings(energy: np.ndarray, starts: np.ndarray, stops: np.ndarray,
+                      path: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`slow_swings` from :func:`_fast_swings`' output (computed once per track)."""
     moving = energy > ZUPT_GYRO_DPS
     for a, b in zip(starts, stops):
         moving[a:b] = True
@@ -275,7 +286,8 @@ def _track(times_b: bytes, acc_b: bytes, gyro_b: bytes) -> FootTrack:
                 continue
         else:
             raise NoWalking("the foot is never still: no stance, so no walking")
-        starts, rest = swings(data[cols[3:]].to_numpy(), rate)
+        fast = _fast_swings(data[cols[3:]].to_numpy(), rate)
+        starts, rest = fast[1], _moments(*fast)
         if len(starts) < 2:
             raise NoWalking(f"{len(starts)} swing(s) found: no walking (a foot sensor needs at "
                             "least 2 strides)")
@@ -286,7 +298,7 @@ def _track(times_b: bytes, acc_b: bytes, gyro_b: bytes) -> FootTrack:
     ori = kalman.orientation_.to_numpy()[1:]
     # the slow steps are read off the path; the filter needs no second pass, since they lie
     # between rests under the ZUPT threshold, where the norm detector already holds the foot
-    starts, rest = slow_swings(data[cols[3:]].to_numpy(), rate, pos)
+    starts, rest = _with_slow_swings(*fast, pos, rate)
     # the sensor's forward axis: stride displacements seen from the sensor at rest, gravity
     # already along its z (a fixed mounting yaw, the median over strides)
     disp = np.diff(pos[rest], axis=0)
