@@ -70,7 +70,7 @@ def test_user_errors_print_a_plain_message(tmp_path, walk, log_file, args, messa
 
 
 @pytest.mark.parametrize(("param", "message"), [
-    ("windw=3", "no hyperparameter 'windw'"), ("window", "--param: expected key=value")])
+    ("windw=3", "no parameter 'windw'"), ("window", "--param: expected key=value")])
 def test_bad_hyperparameters_are_usage_errors(tmp_path, param, message):
     res = CliRunner().invoke(cli, ["train", "--method", "ridge", "--param", param, "-o",
                                    str(tmp_path / "m.npz")])

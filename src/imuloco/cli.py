@@ -475,11 +475,9 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
     if mirrored_path is not None and not hasattr(method_class(method_name), "mirrored"):
         raise click.UsageError(f"--mirrored: method {method_name!r} has no mirrored model "
                                "(only learned)")
-    cls = method_class(method_name)  # an unknown method is refused as such, not as --param
-    try:
-        given = parse_params(params, "--param")
-        cls().set_params(**given)  # names the hyperparameters it has when given another
-        method = get_method(method_name, **given)  # kinds and ranges, as bench checks them
+    method_class(method_name)  # an unknown method is refused as such, not as --param
+    try:  # unknown names, kinds and ranges, as bench checks them
+        method = get_method(method_name, **parse_params(params, "--param"))
     except (UnknownNameError, InputError) as e:
         raise click.BadParameter(str(e), param_hint="--param") from None
     data = _folders(data_items)
