@@ -20,7 +20,7 @@ network outputs are then post-processed several ways:
   the planted feet held on the floor by leg IK with the root pinning's smoothing, a flat
   foot's direction held too, at the heading it lands with and the model's flat pitch
   (today's ``learned``; a model file from before ``flat_pitch_`` gets the
-  :func:`imuloco.methods.postprocess.flat_foot_pitch` of the fold's training clips, as
+  :func:`imuloco.phases.contacts.flat_foot_pitch` of the fold's training clips, as
   ``fit`` computes it); ``flat feet at their landing pitch``: the direction it lands with;
   ``flat feet turn``: the flat foot's direction left to the motion (``learned`` of the
   thirteenth round); ``smoothing 1``: today's without smoothing;
@@ -46,8 +46,9 @@ from imuloco.io.atomic import atomic_write_text
 from imuloco.methods import get_method, pose
 from imuloco.methods.learned.method import PIN_SMOOTHING, lock, pin
 from imuloco.methods.modelfile import load_model
-from imuloco.methods.postprocess import flat_foot_pitch, lock_feet
+from imuloco.methods.postprocess import lock_feet
 from imuloco.methods.training import TEST_SEED_OFFSET, synthesize
+from imuloco.phases.contacts import flat_foot_pitch
 
 # "flat" stands for the model's flat_pitch_
 LOCKS = {"legs locked (learned's)": {"smoothing": PIN_SMOOTHING, "flat_pitch": "flat"},

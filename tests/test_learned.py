@@ -503,7 +503,7 @@ def test_held_out_clips_default_share_is_the_fits_default(sample_db, monkeypatch
 
 
 def test_a_model_keeps_the_pitch_of_a_flat_foot_it_learned(sample_db, tiny_model, tmp_path):
-    from imuloco.methods.postprocess import flat_foot_pitch
+    from imuloco.phases.contacts import flat_foot_pitch
 
     db = sample_db.subset([0, 4, 12])  # tiny_model's motions
     assert tiny_model.flat_pitch_ == flat_foot_pitch(db.clips)

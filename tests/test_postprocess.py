@@ -279,7 +279,8 @@ def _pitch(m: Motion, name: str) -> np.ndarray:
 
 
 def test_a_flat_foot_is_held_at_the_flat_pitch_with_the_heading_it_lands_with(sliding):
-    from imuloco.methods.postprocess import flat_foot_pitch, lock_feet
+    from imuloco.methods.postprocess import lock_feet
+    from imuloco.phases.contacts import flat_foot_pitch
 
     walk, _, contacts = sliding
     heel, toe = contacts[:, :2], contacts[:, 2:]

@@ -11,11 +11,12 @@ from scipy.spatial.transform import Rotation
 from imuloco.cli import cli
 from imuloco.core.bodymap import PARTS, BodyMapError, resolve_body_map
 from imuloco.core.motion import Motion
-from imuloco.core.retarget import Rig, resampled, retarget
+from imuloco.core.retarget import Rig, foot_pitches, resampled, retarget
 from imuloco.core.skeleton import Skeleton
 from imuloco.io.bvh import write_bvh
 from imuloco.io.database import load_sample
 from imuloco.ops.rotations import geodesic, qinv, qmul, qrot
+from imuloco.phases.contacts import flat_foot_pitch, foot_contacts
 
 # the sample's joints under Mixamo's names (its clavicles are "Shoulder", its chest "Spine1")
 MIXAMO = {"Hips": "Hips", "Spine": "Spine", "Chest": "Spine1", "Neck": "Neck", "Head": "Head",
@@ -166,7 +167,7 @@ def test_skeleton_option_writes_the_motion_on_the_users_rig(clip, tmp_path):
 def test_the_character_creator_rig_of_cmu_iclone(shared_dir, clip):
     """Every part maps on the 101-joint CC rig; a clip goes onto it and back with its
     body-part rotations; a CC clip retargeted onto the Bandai-Namco skeleton keeps its legs."""
-    from imuloco.evaluate.metrics import evaluate_parts
+    from imuloco.evaluate.metrics import evaluate_parts, part_errors
     from imuloco.io.database import load_database
 
     cc = load_database(shared_dir.parent / "cmu-iclone", limit=2, progress=False)
@@ -178,9 +179,40 @@ def test_the_character_creator_rig_of_cmu_iclone(shared_dir, clip):
     back = retarget(on_cc, Rig.measure([clip]), rig)
     assert np.degrees(geodesic(part_globals(back), part_globals(clip))).max() < 1e-6
     walk = resampled(cc.clips[0], clip.fps)
-    onto_bandai = retarget(walk, Rig.measure([clip]))
-    values = evaluate_parts(walk, onto_bandai)  # other proportions: the legs' within 3 cm
-    assert values["lower_cm"] < 3.0 and values["mpjpe_cm"] < 10.0
+    bandai = Rig.measure([clip])
+    onto_bandai = retarget(walk, bandai)
+    err = part_errors(walk, onto_bandai)[0].mean(axis=0)  # other proportions: legs within 3 cm
+    legs = [PARTS.index(f"{s}_{j}") for s in ("left", "right") for j in ("hip", "knee", "ankle")]
+    assert err[legs].max() < 0.03 and evaluate_parts(walk, onto_bandai)["mpjpe_cm"] < 10.0
+    # CC's toe joint sits inside the foot, 13 degrees below its ankle joint when the foot is
+    # flat; Bandai-Namco's at the sole, 40 below: a flat CC foot stands flat on Bandai-Namco
+    assert np.degrees(Rig.measure([walk]).foot_pitch) == pytest.approx(-13, abs=3)
+    assert flat_foot_pitch([onto_bandai]) == pytest.approx(bandai.foot_pitch, abs=np.radians(2))
+
+
+def test_a_flat_foot_stays_flat_on_a_rig_whose_toe_joint_sits_elsewhere(clip):
+    """Rigs put the toe joint at other places on the foot: the ankle-to-toe direction is not
+    copied, the foot's orientation on the floor is."""
+    sk = clip.skeleton
+    c = foot_contacts(clip)
+    glob, pos = clip.fk()
+    offsets = sk.offsets.copy()
+    for s in ("left", "right"):  # each toe joint moved up to 15 degrees below its ankle joint
+        ankle, toe = sk.part(f"{s}_ankle"), sk.part(f"{s}_toe")
+        t = int(np.flatnonzero(c[f"{s}_heel"] & c[f"{s}_toe"])[0])  # a flat foot
+        d = pos[t, toe] - pos[t, ankle]
+        raised = np.array([d[0], np.tan(np.radians(-15.0)) * np.hypot(d[0], d[2]), d[2]])
+        offsets[toe] = qrot(qinv(glob[t, ankle]), raised)
+    high = other_rig(Motion(Skeleton(sk.names, sk.parents, offsets), clip.rotations, clip.root,
+                            clip.fps), scale=1.0)  # and other joint frames: another family
+    rig = Rig.measure([high])
+    assert np.degrees(rig.foot_pitch) == pytest.approx(-15, abs=2)
+    assert np.degrees(Rig.measure([clip]).foot_pitch) == pytest.approx(-40, abs=2)
+    out = retarget(clip, rig)
+    # the foot turns as the source's: its toe joint 25 degrees higher in every frame
+    lift = foot_pitches(out.skeleton, out.positions()) - foot_pitches(sk, pos)
+    assert np.degrees(np.median(np.abs(lift - np.radians(25)))) < 3.0  # copying the direction: 25
+    assert flat_foot_pitch([out]) == pytest.approx(rig.foot_pitch, abs=np.radians(2))
 
 
 def test_batch_refuses_an_unmappable_rig_before_any_work(clip, tmp_path):

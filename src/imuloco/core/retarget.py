@@ -4,7 +4,12 @@ Each canonical part (:data:`imuloco.core.bodymap.PARTS`) keeps its *global* rota
 for how each rig's joint frames sit on the bone (the rest-pose correction): a part's anatomical
 frame (long axis along the segment, z forward, from :func:`imuloco.ops.retarget.segment_frames`)
 is measured in the rig's own poses and expressed in the joint's frame (a :class:`Rig`), and
-``G_target = G_source A_source A_target^-1`` (:func:`imuloco.ops.retarget.transfer`). Joints
+``G_target = G_source A_source A_target^-1`` (:func:`imuloco.ops.retarget.transfer`). A foot's
+frame is pitched up by the rig's own flat-foot pitch (:attr:`Rig.foot_pitch`), so that its long
+axis lies on the floor when the foot stands flat: rigs put their toe joint at other places on
+the foot (Bandai-Namco's at the sole, 40 degrees below the ankle joint; Character Creator's
+inside the foot, 15 below), and copying the ankle-to-toe direction would tip a flat foot's toes
+up or down by the difference. Joints
 that stand for no part (twist, share, finger and face bones, clavicles, extra spine joints)
 take their mean local rotation over the target rig's poses. The root path is the source
 pelvis's scaled by the ratio of leg lengths (target / source), and the result is moved up or
@@ -37,7 +42,7 @@ from imuloco.ops.retarget import (
     segment_frames,
     transfer,
 )
-from imuloco.ops.rotations import normalize, slerp
+from imuloco.ops.rotations import from_rotvec, normalize, qmul, slerp
 
 # part -> (start, end) of the segment that gives its long axis, and whether the frame's second
 # axis is the body's left (feet, whose long axis points forward) rather than its forward.
@@ -86,6 +91,14 @@ def anatomical_frames(skeleton: Skeleton, positions: np.ndarray) -> np.ndarray:
     return np.stack(frames, axis=1)
 
 
+def foot_pitches(skeleton: Skeleton, positions: np.ndarray) -> np.ndarray:
+    """The ankle-to-toe direction's angle against the horizontal (Y up), radians, of both
+    feet in every pose: positions (T, J, 3) -> (T, 2), negative where the toe joint is lower."""
+    d = np.stack([positions[:, skeleton.part(f"{s}_toe")] - positions[:, skeleton.part(
+        f"{s}_ankle")] for s in ("left", "right")], axis=1)
+    return np.arctan2(d[..., 1], np.linalg.norm(d[..., [0, 2]], axis=-1))
+
+
 @dataclass(frozen=True, eq=False)
 class Rig:
     """A skeleton measured in poses it takes, as retargeting needs it.
@@ -96,25 +109,41 @@ class Rig:
     frames : ndarray, shape (P, 4): each part's anatomical frame in its joint's frame.
     neutral : ndarray, shape (J, 4): each joint's mean local rotation over the poses (for
         joints that stand for no part).
+    foot_pitch : radians, the ankle-to-toe direction's angle against the floor when a foot
+        stands flat (negative: the toe joint lower), by which the feet's frames are pitched.
     """
 
     skeleton: Skeleton
     frames: np.ndarray
     neutral: np.ndarray
+    foot_pitch: float = 0.0
 
     @classmethod
     def measure(cls, motions: Sequence[Motion], where: str | None = None) -> Rig:
         """The rig of ``motions`` (clips of one skeleton; at most :data:`MAX_POSES` frames
-        are used, evenly spaced). ``where`` names them in errors."""
+        are used, evenly spaced). ``where`` names them in errors.
+
+        The flat-foot pitch is :func:`imuloco.phases.contacts.flat_foot_pitch` of the
+        motions (feet with heel and toe on the floor); motions without such a frame (one
+        T-pose, sprints) give the median pitch of their poses, which a T-pose stands flat in.
+        """
+        from imuloco.phases.contacts import flat_foot_pitch  # phases build on core: lazily
+
         sk = motions[0].skeleton
         check_mapped(sk, where or motions[0].name or "motion")
         rot = np.concatenate([m.rotations for m in motions])
         step = max(1, len(rot) // MAX_POSES)
         rot = normalize(rot[::step])
         glob, pos = fk(rot, np.zeros((len(rot), 3)), sk.offsets, sk.parents)
+        pitch = flat_foot_pitch(motions)
+        if pitch is None:
+            pitch = float(np.median(foot_pitches(sk, pos)))
         idx = [sk.part(p) for p in PARTS]
         frames = joint_local(glob[:, idx], anatomical_frames(sk, pos))
-        return cls(sk, frames, mean_rotation(rot))
+        feet = [PARTS.index(p) for p in FEET]  # the ankle and toe parts: ankle-to-toe axis
+        frames[feet] = qmul(frames[feet], from_rotvec(np.array([0.0, 0.0, pitch])))  # about
+        # the frame's lateral z axis: its y axis, ankle to toe, turned onto the floor
+        return cls(sk, frames, mean_rotation(rot), pitch)
 
 
 def same_family(a: Skeleton, b: Skeleton) -> bool:

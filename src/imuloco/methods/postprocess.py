@@ -3,8 +3,6 @@ Laplacian smoothing."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-
 import numpy as np
 from scipy.signal import lfilter
 
@@ -93,8 +91,8 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
     turn without one of them sliding, so its direction (ankle to toe) is held as well, with
     the same smoothing, fade-out and bound (:data:`MAX_HOLD_FEET` radians: the toe a foot
     length along its arc): the heading it lands with, at ``flat_pitch`` where that is known
-    (:func:`flat_foot_pitch` of the motions a model learned from; the pitch it lands with is
-    that of a foot still rolling onto the floor). Only the hip, knee and ankle joints turn,
+    (:func:`imuloco.phases.contacts.flat_foot_pitch` of the motions a model learned from; the
+    pitch it lands with is that of a foot still rolling onto the floor). Only the hip, knee and ankle joints turn,
     the foot keeping its orientation (or the held one); a target out of the leg's reach is
     approached as far as the leg stretches.
 
@@ -108,7 +106,8 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
     threshold : a probability above it is a contact.
     hold_flat : hold a flat foot's direction too (False: the foot's orientation is always the
         motion's).
-    flat_pitch : radians, the pitch of a foot flat on the floor (:func:`flat_foot_pitch`);
+    flat_pitch : radians, the pitch of a foot flat on the floor
+        (:func:`imuloco.phases.contacts.flat_foot_pitch`);
         None: a flat foot keeps the pitch it lands with.
     """
     if motion.num_frames < 2:
@@ -147,31 +146,6 @@ def pitched(d: np.ndarray, pitch: float) -> np.ndarray:
     out = np.concatenate([d[..., :1] * scale, length * np.sin(pitch), d[..., 2:] * scale],
                          axis=-1)
     return np.where(flat > 1e-9 * np.maximum(length, 1e-12), out, d)
-
-
-def flat_foot_pitch(motions: Iterable[Motion]) -> float | None:
-    """The pitch of a foot flat on the floor in ``motions``, radians: the median over both feet
-    and every frame whose heel and toe are both in contact
-    (:func:`imuloco.phases.foot_contacts`) of the ankle-to-toe direction's angle against the
-    horizontal (negative: the toe joint below the ankle joint). A property of the rig and its
-    capture (-39.6 degrees on Bandai-Namco's), where a landing foot still rolls onto the
-    floor. None when no frame has a flat foot (a training set of sprints, say: a model then
-    holds a flat foot at the pitch it lands with)."""
-    from imuloco.phases.contacts import foot_contacts
-
-    pitches = []
-    for m in motions:
-        if m.num_frames < 2:
-            continue
-        c = foot_contacts(m)
-        pos = m.positions()
-        for side in ("left", "right"):
-            flat = c[f"{side}_heel"] & c[f"{side}_toe"]
-            d = (pos[flat, m.skeleton.part(f"{side}_toe")]
-                 - pos[flat, m.skeleton.part(f"{side}_ankle")])
-            pitches.append(np.arctan2(d[:, 1], np.linalg.norm(d[:, [0, 2]], axis=-1)))
-    pitches = np.concatenate(pitches) if pitches else np.zeros(0)
-    return float(np.median(pitches)) if pitches.size else None
 
 
 def _quaternion(r: np.ndarray) -> np.ndarray:

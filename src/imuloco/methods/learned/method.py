@@ -37,10 +37,11 @@ from imuloco.methods.base import Method, Reconstruction, Stream, calibrated_erro
 from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Ensemble, Reconstructor, TorchFK
-from imuloco.methods.postprocess import FootLock, FootPinner, flat_foot_pitch, lock_feet, pin_feet
+from imuloco.methods.postprocess import FootLock, FootPinner, lock_feet, pin_feet
 from imuloco.methods.training import VALIDATION_SHARE, Example, TrainingSet, held_out
 from imuloco.ops.kinematics import fk_matrices, joint_positions
 from imuloco.ops.rotations import from_6d, matrices_from_6d, to_6d
+from imuloco.phases.contacts import flat_foot_pitch
 
 HEADING_REFLECTION = np.diag([-1.0, 1.0, 1.0])  # left is +X in the heading frame
 CONTACT_SWAP = [CONTACT_PARTS.index(p.replace("left", "#").replace("right", "left")
@@ -667,7 +668,7 @@ def lock(motion: Motion, contacts: np.ndarray, flat_pitch: float | None = None) 
     """:func:`imuloco.methods.postprocess.lock_feet` with the predicted heel and toe contacts
     (:data:`CONTACT_PARTS` order: left and right heel, then toe), smoothed as the root's
     pinning is; a flat foot held at ``flat_pitch`` (a model's ``flat_pitch_``, the
-    :func:`imuloco.methods.postprocess.flat_foot_pitch` of the motions it learned from; None
+    :func:`imuloco.phases.contacts.flat_foot_pitch` of the motions it learned from; None
     in files from before it: the pitch the foot lands with)."""
     return lock_feet(motion, contacts[:, :2], contacts[:, 2:], PIN_SMOOTHING,
                      flat_pitch=flat_pitch)
