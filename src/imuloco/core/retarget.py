@@ -60,6 +60,7 @@ _SEGMENTS: dict[str, tuple[str, str, bool]] = {
 }
 FEET = ("left_ankle", "left_toe", "right_ankle", "right_toe")
 MAX_POSES = 600  # poses a rig is measured in (evenly spaced over the given clips)
+MAX_PITCH_CLIPS = 20  # clips (evenly spaced) whose flat feet give a rig's foot pitch
 
 
 def check_mapped(skeleton: Skeleton, where: str) -> None:
@@ -124,7 +125,8 @@ class Rig:
         are used, evenly spaced). ``where`` names them in errors.
 
         The flat-foot pitch is :func:`imuloco.phases.contacts.flat_foot_pitch` of the
-        motions (feet with heel and toe on the floor); motions without such a frame (one
+        motions (feet with heel and toe on the floor; of at most :data:`MAX_PITCH_CLIPS`,
+        evenly spaced, as finding contacts takes a while); motions without such a frame (one
         T-pose, sprints) give the median pitch of their poses, which a T-pose stands flat in.
         """
         from imuloco.phases.contacts import flat_foot_pitch  # phases build on core: lazily
@@ -135,7 +137,7 @@ class Rig:
         step = max(1, len(rot) // MAX_POSES)
         rot = normalize(rot[::step])
         glob, pos = fk(rot, np.zeros((len(rot), 3)), sk.offsets, sk.parents)
-        pitch = flat_foot_pitch(motions)
+        pitch = flat_foot_pitch(motions[:: max(1, len(motions) // MAX_PITCH_CLIPS)])
         if pitch is None:
             pitch = float(np.median(foot_pitches(sk, pos)))
         idx = [sk.part(p) for p in PARTS]
