@@ -181,7 +181,8 @@ platform_option = click.option(
     help="Phone of a Sensor Logger export [default: from its Metadata.csv, else guessed with "
          "a warning].")
 height_option = click.option(
-    "--height", type=_Range(0.5, 2.6), default=None, metavar="METRES",
+    "--height", type=_LibraryRange("imuloco.evaluate.gait", "MIN_HEIGHT_M", "MAX_HEIGHT_M"),
+    default=None, metavar="METRES",
     help="The wearer's body height: the skeleton and every length and speed in their "
          "proportions [default: the training skeleton's].")
 skeleton_option = click.option(
