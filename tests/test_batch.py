@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -110,6 +111,29 @@ def test_a_sensor_logger_folder_is_one_walker(fitted, client, tmp_path, monkeypa
     summary = run_batch(found[:2], tmp_path / "out", fitted=fitted, scheduler=client)
     assert [(r["name"], r["status"]) for r in summary["recordings"]] == [
         ("bob", "ok"), ("alice", "ok")]
+
+
+def test_names_keep_a_folders_dots_and_never_collide(tmp_path, monkeypatch):
+    """A folder's whole name is its own (Path.stem dropped what follows a dot: alice.day1 and
+    alice.day2 were dots_alice and dots_alice_2, alone alice; ``.`` had no name and wrote
+    ``.bvh``). ``summary`` is the batch's (summary.csv's report was replaced by the batch's
+    summary.json, then refused as another's on a re-run). Names differing in case alone
+    would be one file where case is ignored (macOS, Windows)."""
+    def at(*names: str) -> list[Path]:
+        return [tmp_path / n for n in names]
+
+    for folder in at("dots/alice.day1", "dots/alice.day2"):
+        folder.mkdir(parents=True)
+    assert output_names(at("dots/alice.day1", "dots/alice.day2", "f/a.b.csv", "f/a.c.csv",
+                           "f/log.csv.zip")) == ["alice.day1", "alice.day2", "a.b", "a.c",
+                                                 "log.csv"]
+    assert output_names(at("dots/alice.day1")) == ["alice.day1"]
+    assert output_names(at("f/summary.csv", "f/walkers.csv")) == ["f_summary", "walkers"]
+    assert output_names(at("a/Alice.csv", "b/alice.csv", "b/bob.csv")) == [
+        "a_Alice", "b_alice", "bob"]
+    assert output_names(at("a/x/log.csv", "b/x/LOG.csv")) == ["x_log", "x_LOG_2"]
+    monkeypatch.chdir(tmp_path / "dots" / "alice.day1")
+    assert output_names([Path("."), Path("log.csv")]) == ["alice.day1", "log"]
 
 
 def test_strides_follow_the_strikes(sample_db):

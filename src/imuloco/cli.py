@@ -942,8 +942,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     finished recordings, redoes walkers whose height changed).
 
     A recording's NAME is its file name without extension (acc_X for a RealWorld pair, the
-    folder's or zip's name for a Sensor Logger export), with its folder's name prepended where
-    names repeat."""
+    folder's or zip's name for a Sensor Logger export), with its folder's name prepended
+    where names repeat (also in case alone) or where it is 'summary'."""
     from imuloco.app.batch import find_recordings, run_batch
 
     paths = find_recordings(recordings, patterns)

@@ -61,6 +61,7 @@ WALKER_FIELDS = (*COLUMNS, "placement", "method", "model", "model_sha256",
 _STRINGS = {"name", "recording", "status", "error", "placement", "method", "model",
             "model_sha256", "walker", "foot"}
 _INTEGERS = {"frames", "steps"}
+RESERVED_NAMES = ("summary",)  # summary.json is the batch's: no recording's NAME.json
 CONNECT_TIMEOUT_S = 30.0  # waiting for a scheduler, then for its first worker
 # no dashboard, and the scheduler's HTTP server (health, metrics) on a free port, not on 8787,
 # which another cluster on the machine may hold
@@ -109,16 +110,23 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
 
 
 def output_names(paths: Sequence[Path]) -> list[str]:
-    """A distinct output name per recording: its stem, with its folder's name (then a number)
-    prepended where stems repeat (``walker1/log.csv``, ``walker2/log.csv``)."""
-    stems = [p.stem for p in paths]
-    names = [f"{p.parent.name}_{p.stem}" if stems.count(p.stem) > 1 else p.stem for p in paths]
-    out, used = [], set()
+    """A distinct output name per recording: its own (a file's stem, a folder's whole name:
+    an export's ``alice.day1``), with its folder's name (then a number) prepended where names
+    repeat (``walker1/log.csv``, ``walker2/log.csv``) or are the batch's own
+    (:data:`RESERVED_NAMES`). Names differ also where the file system ignores case
+    (``a/Alice.csv``, ``b/alice.csv``: ``a_Alice``, ``b_alice``), so no recording's outputs
+    replace another's."""
+    full = [Path(os.path.normpath(p.absolute())) for p in paths]  # "." and bare names named
+    own = [p.name if p.is_dir() else p.stem for p in full]
+    folded = [n.casefold() for n in own]
+    names = [f"{p.parent.name}_{n}" if folded.count(f) > 1 or f in RESERVED_NAMES else n
+             for p, n, f in zip(full, own, folded)]
+    out, used = [], set(RESERVED_NAMES)
     for n in names:
         cand, k = n, 2
-        while cand in used:
+        while cand.casefold() in used:
             cand, k = f"{n}_{k}", k + 1
-        used.add(cand)
+        used.add(cand.casefold())
         out.append(cand)
     return out
 
