@@ -72,10 +72,10 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
                     ) -> list[Path]:
     """The recordings named and matched by glob ``patterns`` (``**`` recurses), sorted within
     each pattern, duplicates dropped, in the order given. A file of an unzipped Sensor Logger
-    export (``study/*/*.csv``) is its folder, which reads the export: one walker named after
-    it. A RealWorld gyroscope file whose ``acc_`` file is among them is dropped too: that
-    file reads the pair, one walker."""
-    from imuloco.io.sensorlog import sensorlogger_members
+    or phyphox export (``study/*/*.csv``, ``study/**/*.csv``: also phyphox's ``meta/``) is
+    its folder, which reads the export: one walker named after it. A RealWorld gyroscope file
+    whose ``acc_`` file is among them is dropped too: that file reads the pair, one walker."""
+    from imuloco.io.sensorlog import export_members
     from imuloco.sensors.reallog import realworld_accelerometer
 
     found: list[Path] = [Path(p) for p in paths]
@@ -84,16 +84,19 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
         if not matches:
             log.warning("no recording matches %r", pattern)
         found += [Path(m) for m in matches]
-    members: dict[Path, set[str]] = {}  # per folder: the files of its Sensor Logger export
+    members: dict[Path, set[str]] = {}  # per folder: the files of its app export
 
     def walker(p: Path) -> Path:
         """The path that reads ``p``'s walker: ``p``, or its export's folder."""
         if p.suffix.lower() != ".csv" or not p.is_file():
             return p
-        folder = Path(os.path.normpath(p.absolute())).parent  # named, also for a bare name
-        if folder not in members:
-            members[folder] = sensorlogger_members(folder)
-        return folder if p.name in members[folder] else p
+        path = Path(os.path.normpath(p.absolute()))  # folders named, also for a bare name
+        for folder in path.parents[:2]:  # an export's table, or a file of its meta/ folder
+            if folder not in members:
+                members[folder] = export_members(folder)
+            if path.relative_to(folder).as_posix() in members[folder]:
+                return folder
+        return p
 
     def key(p: Path) -> str:
         return os.path.normpath(p.absolute())  # not resolve(): two links are two walkers
