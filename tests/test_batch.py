@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -110,6 +111,58 @@ def test_a_sensor_logger_folder_is_one_walker(fitted, client, tmp_path, monkeypa
     summary = run_batch(found[:2], tmp_path / "out", fitted=fitted, scheduler=client)
     assert [(r["name"], r["status"]) for r in summary["recordings"]] == [
         ("bob", "ok"), ("alice", "ok")]
+
+
+def test_a_phyphox_folder_is_one_walker(fitted, client, tmp_path, sample_db):
+    """``--glob 'study/**/*.csv'`` over unzipped phyphox exports matches their tables and
+    ``meta/`` files: the folder reads the export, one walker named after it, dots and all
+    (each file was a walker: Accelerometer.csv failed without a gyroscope, meta/device.csv as
+    no sensor log, ...). Phyphox tables in a folder without ``meta/`` stay recordings of
+    their own: they may be several walkers'."""
+    from tests.test_sensorlog import _phyphox_rows
+
+    study = tmp_path / "study"
+    rec = simulate(next(c for c in sample_db.clips if c.name == WALKERS[0]), ["right_ankle"],
+                   100.0, "phone", seed=5)
+    acc, gyr = _phyphox_rows(rec)
+    for name, meta in (("alice.day1", "device.csv"), ("bob", "time.csv")):
+        (study / name / "meta").mkdir(parents=True)
+        (study / name / "Accelerometer.csv").write_text(acc)
+        (study / name / "Gyroscope.csv").write_text(gyr)
+        (study / name / "meta" / meta).write_text('"property","value"\n"model","x"\n')
+    (study / "loose").mkdir()
+    (study / "loose" / "Accelerometer.csv").write_text(acc)
+    found = find_recordings([], [str(study / "**" / "*.csv")])
+    assert found == [study / "alice.day1", study / "bob", study / "loose" / "Accelerometer.csv"]
+    assert output_names(found) == ["alice.day1", "bob", "Accelerometer"]
+    summary = run_batch(found[:2], tmp_path / "out", fitted=fitted, scheduler=client)
+    assert [(r["name"], r["status"]) for r in summary["recordings"]] == [
+        ("alice.day1", "ok"), ("bob", "ok")]
+    assert sorted(p.name for p in (tmp_path / "out").glob("*.json")) == [
+        "alice.day1.json", "bob.json", "summary.json"]
+
+
+def test_names_keep_a_folders_dots_and_never_collide(tmp_path, monkeypatch):
+    """A folder's whole name is its own (Path.stem dropped what follows a dot: alice.day1 and
+    alice.day2 were dots_alice and dots_alice_2, alone alice; ``.`` had no name and wrote
+    ``.bvh``). ``summary`` is the batch's (summary.csv's report was replaced by the batch's
+    summary.json, then refused as another's on a re-run). Names differing in case alone
+    would be one file where case is ignored (macOS, Windows)."""
+    def at(*names: str) -> list[Path]:
+        return [tmp_path / n for n in names]
+
+    for folder in at("dots/alice.day1", "dots/alice.day2"):
+        folder.mkdir(parents=True)
+    assert output_names(at("dots/alice.day1", "dots/alice.day2", "f/a.b.csv", "f/a.c.csv",
+                           "f/log.csv.zip")) == ["alice.day1", "alice.day2", "a.b", "a.c",
+                                                 "log.csv"]
+    assert output_names(at("dots/alice.day1")) == ["alice.day1"]
+    assert output_names(at("f/summary.csv", "f/walkers.csv")) == ["f_summary", "walkers"]
+    assert output_names(at("a/Alice.csv", "b/alice.csv", "b/bob.csv")) == [
+        "a_Alice", "b_alice", "bob"]
+    assert output_names(at("a/x/log.csv", "b/x/LOG.csv")) == ["x_log", "x_LOG_2"]
+    monkeypatch.chdir(tmp_path / "dots" / "alice.day1")
+    assert output_names([Path("."), Path("log.csv")]) == ["alice.day1", "log"]
 
 
 def test_strides_follow_the_strikes(sample_db):

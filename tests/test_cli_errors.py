@@ -338,3 +338,20 @@ def test_a_bad_model_or_rig_leaves_no_partial_demo_and_is_refused_first(tmp_path
         assert not (tmp_path / "out").exists()
     with pytest.raises(ImulocoError, match="rig.csv"):  # the rig's error, not the missing log's
         reconstruct_file(tmp_path / "no-such-log.csv", skeleton=rig)
+
+
+def test_the_height_range_has_one_source(monkeypatch, tmp_path, two_joint_skeleton):
+    """--height, a walkers file and height_scale take the body heights of
+    :mod:`imuloco.evaluate.gait`: the command line reads them on first use (so that importing
+    it imports no numpy); each had its own copy of 0.5 to 2.6."""
+    from imuloco.app.walkers import HEIGHT_RANGE_M
+    from imuloco.evaluate import gait
+
+    assert HEIGHT_RANGE_M == (gait.MIN_HEIGHT_M, gait.MAX_HEIGHT_M)
+    monkeypatch.setattr(gait, "MAX_HEIGHT_M", 2.0)
+    # options are checked in the order given: a range of its own would pass 2.1 on to the
+    # recording, which does not exist
+    code, out = run("batch", "--height", "2.1", tmp_path / "none.csv", "--out", tmp_path)
+    assert code == 2 and "2.1 is not in the range 0.5<=x<=2.0" in out
+    with pytest.raises(ValueError, match=r"\(0.5 to 2\), got 2.1"):
+        gait.height_scale(two_joint_skeleton, 2.1)

@@ -181,7 +181,8 @@ platform_option = click.option(
     help="Phone of a Sensor Logger export [default: from its Metadata.csv, else guessed with "
          "a warning].")
 height_option = click.option(
-    "--height", type=_Range(0.5, 2.6), default=None, metavar="METRES",
+    "--height", type=_LibraryRange("imuloco.evaluate.gait", "MIN_HEIGHT_M", "MAX_HEIGHT_M"),
+    default=None, metavar="METRES",
     help="The wearer's body height: the skeleton and every length and speed in their "
          "proportions [default: the training skeleton's].")
 skeleton_option = click.option(
@@ -907,7 +908,7 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
 @click.argument("recordings", nargs=-1, type=click.Path(exists=True, path_type=Path))
 @click.option("--glob", "patterns", multiple=True, metavar="PATTERN",
               help="Recordings matching a glob pattern, e.g. 'logs/*.csv' (repeatable); the "
-                   "files of a Sensor Logger export are its folder, one walker.")
+                   "files of a Sensor Logger or phyphox export are its folder, one walker.")
 @click.option("--out", "out_dir", type=_folder(), required=True,
               help="Folder for NAME.bvh, NAME.json, summary.csv/.json, walkers.parquet and "
                    "strides.parquet.")
@@ -941,8 +942,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     finished recordings, redoes walkers whose height changed).
 
     A recording's NAME is its file name without extension (acc_X for a RealWorld pair, the
-    folder's or zip's name for a Sensor Logger export), with its folder's name prepended where
-    names repeat."""
+    folder's or zip's name for a Sensor Logger or phyphox export), with its folder's name
+    prepended where names repeat (also in case alone) or where it is 'summary'."""
     from imuloco.app.batch import find_recordings, run_batch
 
     paths = find_recordings(recordings, patterns)

@@ -61,6 +61,7 @@ WALKER_FIELDS = (*COLUMNS, "placement", "method", "model", "model_sha256",
 _STRINGS = {"name", "recording", "status", "error", "placement", "method", "model",
             "model_sha256", "walker", "foot"}
 _INTEGERS = {"frames", "steps"}
+RESERVED_NAMES = ("summary",)  # summary.json is the batch's: no recording's NAME.json
 CONNECT_TIMEOUT_S = 30.0  # waiting for a scheduler, then for its first worker
 # no dashboard, and the scheduler's HTTP server (health, metrics) on a free port, not on 8787,
 # which another cluster on the machine may hold
@@ -71,10 +72,10 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
                     ) -> list[Path]:
     """The recordings named and matched by glob ``patterns`` (``**`` recurses), sorted within
     each pattern, duplicates dropped, in the order given. A file of an unzipped Sensor Logger
-    export (``study/*/*.csv``) is its folder, which reads the export: one walker named after
-    it. A RealWorld gyroscope file whose ``acc_`` file is among them is dropped too: that
-    file reads the pair, one walker."""
-    from imuloco.io.sensorlog import sensorlogger_members
+    or phyphox export (``study/*/*.csv``, ``study/**/*.csv``: also phyphox's ``meta/``) is
+    its folder, which reads the export: one walker named after it. A RealWorld gyroscope file
+    whose ``acc_`` file is among them is dropped too: that file reads the pair, one walker."""
+    from imuloco.io.sensorlog import export_members
     from imuloco.sensors.reallog import realworld_accelerometer
 
     found: list[Path] = [Path(p) for p in paths]
@@ -83,16 +84,19 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
         if not matches:
             log.warning("no recording matches %r", pattern)
         found += [Path(m) for m in matches]
-    members: dict[Path, set[str]] = {}  # per folder: the files of its Sensor Logger export
+    members: dict[Path, set[str]] = {}  # per folder: the files of its app export
 
     def walker(p: Path) -> Path:
         """The path that reads ``p``'s walker: ``p``, or its export's folder."""
         if p.suffix.lower() != ".csv" or not p.is_file():
             return p
-        folder = Path(os.path.normpath(p.absolute())).parent  # named, also for a bare name
-        if folder not in members:
-            members[folder] = sensorlogger_members(folder)
-        return folder if p.name in members[folder] else p
+        path = Path(os.path.normpath(p.absolute()))  # folders named, also for a bare name
+        for folder in path.parents[:2]:  # an export's table, or a file of its meta/ folder
+            if folder not in members:
+                members[folder] = export_members(folder)
+            if path.relative_to(folder).as_posix() in members[folder]:
+                return folder
+        return p
 
     def key(p: Path) -> str:
         return os.path.normpath(p.absolute())  # not resolve(): two links are two walkers
@@ -109,16 +113,23 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
 
 
 def output_names(paths: Sequence[Path]) -> list[str]:
-    """A distinct output name per recording: its stem, with its folder's name (then a number)
-    prepended where stems repeat (``walker1/log.csv``, ``walker2/log.csv``)."""
-    stems = [p.stem for p in paths]
-    names = [f"{p.parent.name}_{p.stem}" if stems.count(p.stem) > 1 else p.stem for p in paths]
-    out, used = [], set()
+    """A distinct output name per recording: its own (a file's stem, a folder's whole name:
+    an export's ``alice.day1``), with its folder's name (then a number) prepended where names
+    repeat (``walker1/log.csv``, ``walker2/log.csv``) or are the batch's own
+    (:data:`RESERVED_NAMES`). Names differ also where the file system ignores case
+    (``a/Alice.csv``, ``b/alice.csv``: ``a_Alice``, ``b_alice``), so no recording's outputs
+    replace another's."""
+    full = [Path(os.path.normpath(p.absolute())) for p in paths]  # "." and bare names named
+    own = [p.name if p.is_dir() else p.stem for p in full]
+    folded = [n.casefold() for n in own]
+    names = [f"{p.parent.name}_{n}" if folded.count(f) > 1 or f in RESERVED_NAMES else n
+             for p, n, f in zip(full, own, folded)]
+    out, used = [], set(RESERVED_NAMES)
     for n in names:
         cand, k = n, 2
-        while cand in used:
+        while cand.casefold() in used:
             cand, k = f"{n}_{k}", k + 1
-        used.add(cand)
+        used.add(cand.casefold())
         out.append(cand)
     return out
 

@@ -120,6 +120,9 @@ def gait_parameters(motion: Motion, phases: GaitPhases | None = None) -> dict[st
 # height, so hip to ankle is 0.491 of it (Winter 2009, Biomechanics and Motor Control of Human
 # Movement, Fig. 4.1, after Drillis and Contini 1966).
 LEG_TO_HEIGHT = 0.530 - 0.039
+# the body heights taken (height_scale, --height, a walkers file): outside, a number is no
+# standing human's height in metres
+MIN_HEIGHT_M, MAX_HEIGHT_M = 0.5, 2.6
 
 
 def stature(skeleton) -> float:
@@ -129,9 +132,10 @@ def stature(skeleton) -> float:
 
 def height_scale(skeleton, height_m: float) -> float:
     """The factor that scales ``skeleton`` to a body ``height_m`` metres tall (ValueError
-    outside 0.5-2.6 m, which is not a standing human's height in metres)."""
-    if not (np.isfinite(height_m) and 0.5 <= height_m <= 2.6):
-        raise ValueError(f"height must be a body height in metres (0.5 to 2.6), got {height_m}")
+    outside :data:`MIN_HEIGHT_M` to :data:`MAX_HEIGHT_M`)."""
+    if not (np.isfinite(height_m) and MIN_HEIGHT_M <= height_m <= MAX_HEIGHT_M):
+        raise ValueError(f"height must be a body height in metres ({MIN_HEIGHT_M:g} to "
+                         f"{MAX_HEIGHT_M:g}), got {height_m}")
     return height_m / stature(skeleton)
 
 

@@ -526,6 +526,25 @@ def read_phyphox_export(path: str | Path) -> list[Stream]:
     return streams
 
 
+_PHYPHOX_META = ("device.csv", "time.csv")  # phyphox writes meta/ with these into every export
+
+
+def phyphox_members(folder: str | Path) -> set[str]:
+    """The files of an unzipped phyphox export in ``folder`` (its tables, with a ``Time (s)``
+    column, and the files of its ``meta/`` folder as ``meta/NAME``), which the folder reads as
+    one log; none when ``folder`` is no export: one is known by ``meta/device.csv`` or
+    ``meta/time.csv``, as several phyphox tables of a folder may be several walkers'."""
+    folder = Path(folder)
+    meta = folder / "meta"
+    if not any((meta / n).is_file() for n in _PHYPHOX_META):
+        return set()
+    with Export(folder) as ex:
+        if ex.kind() != "phyphox":
+            return set()
+        tables = {n for n in ex.names() if "time (s)" in ex.header(n)}
+    return tables | {f"meta/{p.name}" for p in meta.iterdir() if p.is_file()}
+
+
 # ---------------------------------------------------------------------------------------------
 # Sensor Logger
 
@@ -626,6 +645,13 @@ def sensorlogger_members(folder: str | Path) -> set[str]:
             return set()
         return {n for n in ex.names()
                 if n == "Metadata.csv" or ex.header(n).startswith(_SENSOR_LOGGER_HEADER)}
+
+
+def export_members(folder: str | Path) -> set[str]:
+    """The files of the unzipped app export (Sensor Logger or phyphox) in ``folder``, which
+    the folder reads as one log, as paths relative to it (:func:`sensorlogger_members`,
+    :func:`phyphox_members`); none when ``folder`` is no export."""
+    return sensorlogger_members(folder) or phyphox_members(folder)
 
 
 # ---------------------------------------------------------------------------------------------
