@@ -8,7 +8,7 @@ is measured in the rig's own poses and expressed in the joint's frame (a :class:
 frame is pitched up by the rig's own flat-foot pitch (:attr:`Rig.foot_pitch`), so that its long
 axis lies on the floor when the foot stands flat: rigs put their toe joint at other places on
 the foot (Bandai-Namco's at the sole, 40 degrees below the ankle joint; Character Creator's
-inside the foot, 15 below), and copying the ankle-to-toe direction would tip a flat foot's toes
+inside the foot, 14 below), and copying the ankle-to-toe direction would tip a flat foot's toes
 up or down by the difference. Joints
 that stand for no part (twist, share, finger and face bones, clavicles, extra spine joints)
 take their mean local rotation over the target rig's poses. The root path is the source

@@ -92,9 +92,9 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
     the same smoothing, fade-out and bound (:data:`MAX_HOLD_FEET` radians: the toe a foot
     length along its arc): the heading it lands with, at ``flat_pitch`` where that is known
     (:func:`imuloco.phases.contacts.flat_foot_pitch` of the motions a model learned from; the
-    pitch it lands with is that of a foot still rolling onto the floor). Only the hip, knee and ankle joints turn,
-    the foot keeping its orientation (or the held one); a target out of the leg's reach is
-    approached as far as the leg stretches.
+    pitch it lands with is that of a foot still rolling onto the floor). Only the hip, knee
+    and ankle joints turn, the foot keeping its orientation (or the held one); a target out of
+    the leg's reach is approached as far as the leg stretches.
 
     Parameters
     ----------
