@@ -85,7 +85,8 @@ def main() -> None:
         print(line)
     if args.models is None:
         return
-    print("\n| network: reconstruction / truth | as recorded | 6 Hz | 10 Hz |\n|---|---:|---:|---:|")
+    print("\n| network: reconstruction / truth | as recorded | 6 Hz | 10 Hz |\n"
+          "|---|---:|---:|---:|")
     print(reconstructions("cross-dataset", fold_model("xd", lab, 0, args.models, {}), cmu30),
           flush=True)
     for fold, train, test in folds(lab, "heldout-contents"):
