@@ -236,7 +236,8 @@ def test_a_data_folder_without_clips(tmp_path):
     assert code == 1 and f"no .bvh files in {tmp_path}" in out
 
 
-@pytest.mark.parametrize("spec", ["ridge[window=0]", "knn[k=0]", "ridge[alpha=NaN]"])
+@pytest.mark.parametrize("spec", ["ridge[window=0]", "knn[k=0]", "ridge[alpha=NaN]",
+                                  "mousas2017[sigma_scale=1e300]"])  # OverflowError in a fit
 def test_bench_refuses_a_method_parameter_out_of_range_before_any_work(tmp_path, spec):
     code, out = run("bench", "--method", spec, "--out", tmp_path / "b")
     name, key = spec.split("[")[0], spec.split("[")[1].split("=")[0]
@@ -245,7 +246,7 @@ def test_bench_refuses_a_method_parameter_out_of_range_before_any_work(tmp_path,
 
 
 def test_train_refuses_a_parameter_out_of_range_or_of_the_wrong_kind(tmp_path):
-    for param, word in (("window=0", "[1, inf)"), ("window=2.5", "whole number")):
+    for param, word in (("window=0", "[1, 1000]"), ("window=2.5", "whole number")):
         code, out = run("train", "--method", "ridge", "--param", param, "-o", tmp_path / "m")
         assert code == 2 and "--param" in out and word in out, out
     assert not any(tmp_path.iterdir())
@@ -273,9 +274,21 @@ def test_live_on_a_port_in_use_and_with_a_bad_certificate(log, tmp_path):
     ("tautges2008[hop=40]", "hop must be at most window"),  # frames without a pose (NaN)
     ("mousas2017[a_self_phase=0.5]", "must sum to 1"),
     ("pca-local[stride=0]", "'stride' expects value in [1, inf)"),
-    ("eom2014[hidden=[0]]", "items in [1, inf)"),
+    ("eom2014[hidden=[0]]", "items in [1, 4096]"),
     ("learned[validation=1]", "'validation' expects value in [0, 1)"),
     ("mean[", "expected NAME[key=value"),  # ran as a method named "mean["
+    # upper bounds: each of these ran out of memory, overflowed or ran for ever in a fit
+    ("ridge[window=100000]", "'window' expects value in [1, 1000]"),  # 1.1 GiB a clip
+    ("knn[window=1000000000]", "'window' expects value in [1, 1000]"),
+    ("eom2014[sigma=1e300]", "'sigma' expects value in [0, 1000]"),  # scipy's kernel
+    ("eom2014[smooth_iterations=1000000000]", "[0, 10000]"),
+    ("eom2014[context=1000000000]", "'context' expects value in [0, 300]"),
+    ("mousas2017[sigma_scale=1e300]", "'sigma_scale' expects value in [1e-6, 1e6]"),
+    ("learned[threads=1000000000]", "'threads' expects value in [1, 1024]"),  # OpenMP abort
+    ("learned[weight_decay=1e300]", "'weight_decay' expects value in [0, 1]"),
+    ("learned[lr=1e300]", "'lr' expects value in (0, 1]"),
+    ("tautges2008[phases=1000000000]", "'phases' expects value in [1, 360]"),
+    ("pca-local[k=1000000000]", "'k' expects value in [1, 1000]"),
 ])
 def test_method_specs_out_of_range_are_refused_by_name(spec, words):
     """Each of these failed deep inside a fit (numpy, scikit-learn, scipy) or gave NaN."""
@@ -287,6 +300,41 @@ def test_method_specs_out_of_range_are_refused_by_name(spec, words):
         name, params = parse_method_spec(spec)
         get_method(name, **params)
     assert words in str(caught.value)
+
+
+@pytest.mark.parametrize("spec", [
+    "ridge[window=3]", "eom2014[variant=mlp-no-hmm;context=7]", "learned[lag=15]",
+    "learned[members=4;epochs=5;strap=0.5;incline=15;threads=2]", "mousas2017[beam=4096]",
+    "learned[hidden=8;layers=1;epochs=1;draws=0;window=40;threads=1]", "learned[accel_weight=30]"])
+def test_the_variants_of_the_results_stay_within_the_bounds(spec):
+    """The upper bounds lie far beyond every value the docs and results use (and the
+    defaults: get_method checks them too)."""
+    from imuloco.methods import get_method
+    from imuloco.methods.registry import available_methods, parse_method_spec
+
+    name, params = parse_method_spec(spec)
+    get_method(name, **params)
+    for name in available_methods():
+        get_method(name)
+
+
+def test_a_diverged_training_is_an_error_naming_its_rates(sample_db, monkeypatch):
+    """Weights gone NaN (a learning rate or weights too large for the data) reached
+    scikit-learn's LedoitWolf as a ValueError about missing values."""
+    pytest.importorskip("torch")
+    from imuloco.errors import InputError
+    from imuloco.methods import get_method
+    from imuloco.methods.learned import train
+
+    def diverging(net, *args, **kwargs):
+        for w in net.parameters():
+            w.data.fill_(float("nan"))
+        return []
+
+    monkeypatch.setattr(train, "train", diverging)
+    method = get_method("learned", hidden=8, layers=1, epochs=1, draws=0, window=40, threads=1)
+    with pytest.raises(InputError, match=r"training diverged .* with lr=0.004"):
+        method.fit(sample_db.subset([0, 1]))
 
 
 def test_a_method_built_directly_is_checked_when_fitted(sample_db):

@@ -73,6 +73,20 @@ def test_gyro_norm_independent_of_fixed_rotation(sample_db):
                                atol=1e-9)
 
 
+def test_jitter_holds_up_to_its_rate_and_scales_with_the_period_above():
+    """The phone's 2 ms jitter is unchanged up to JITTER_RATE (every simulation behind the
+    results) and the same fraction of the period above it (2 ms at 10 kHz is 20 periods)."""
+    from imuloco.sensors.noise import JITTER_RATE, sample_times
+
+    model = replace(NOISE_PRESETS["phone"], drop_rate=0.0)
+    for rate in (50.0, JITTER_RATE, 1000.0, 10_000.0):
+        times = sample_times(20.0, rate, model, np.random.default_rng(0))
+        assert len(times) == round(20 * rate) + 1
+        spread = np.std(times[1:-1] - np.arange(1, len(times) - 1) / rate)
+        expected = model.jitter_s * min(1.0, JITTER_RATE / rate)
+        assert spread == pytest.approx(expected, rel=0.05), rate
+
+
 def test_noise_is_seeded_and_bounded(sample_db):
     motion = sample_db.clips[0]
     a = simulate(motion, ["right_ankle"], noise="phone", seed=3)

@@ -158,6 +158,16 @@ def test_bad_exports_are_refused_with_file_and_line(tmp_path):
     assert e.line == 8 and "PacketCounter: expected a whole number" in e.message
 
 
+def test_a_stated_rate_beyond_a_float_is_refused_with_the_header_line(tmp_path):
+    """A rate line of 400 digits is inf Hz: choosing SampleTimeFine's tick took log(0) and
+    raised "ValueError: math domain error" (found by ``imuloco bench --fuzz --readers xsens``)."""
+    huge = "// Update Rate: 1" + "0" * 400 + "Hz\n"
+    for stf in (True, False):
+        e = _refused(tmp_path / "mt.txt", _mt_manager(stf).replace("// Update Rate: 100.0Hz\n",
+                                                                   huge))
+        assert e.line == 6 and "rate stated above the header is no finite number" in e.message
+
+
 @pytest.mark.parametrize("text", ["", "\n\n", "// Update Rate: 100.0Hz\n" * 500,
                                   "x" * 100_000 + "\n", "\xff\xfe\x00"])
 def test_empty_endless_or_binary_files_are_refused_quickly(tmp_path, text):

@@ -2,7 +2,8 @@
 
 ``imuloco bench --fuzz N`` runs :func:`run_fuzz`: for each reader (BVH, ASF/AMC, sensor-log
 tables, :func:`~imuloco.sensors.reallog.read_log`, model files, the real-data folders of
-:func:`~imuloco.io.realimu.read_trials`: :mod:`imuloco.evaluate.fuzz_real`) it builds small
+:func:`~imuloco.io.realimu.read_trials`: :mod:`imuloco.evaluate.fuzz_real`, Xsens text exports
+read by ``read_log``: :mod:`imuloco.evaluate.fuzz_xsens`) it builds small
 valid files from the bundled sample (:func:`seed_files`), derives N inputs from them by random
 mutation (bytes, lines, cells) and by the structured attacks of issue 18 (a timestamp jumping by days, rows a
 nanosecond apart, cells of 1e308, ``Frame Time`` of 1000 s, 20,000 nested joints, ASF units of
@@ -50,11 +51,13 @@ from pathlib import Path
 import numpy as np
 
 from imuloco.evaluate.fuzz_real import read_real, real_attack, real_garbage, real_seeds
+from imuloco.evaluate.fuzz_xsens import xsens_attack, xsens_seeds
 
-READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "real")
+READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "real", "xsens")
 READER_TITLES = {"bvh": "BVH", "asf": "ASF/AMC", "sensorlog": "sensor-log tables",
                  "read_log": "`read_log`", "model": "model files",
-                 "real": "real-data folders (`read_trials`)"}
+                 "real": "real-data folders (`read_trials`)",
+                 "xsens": "Xsens exports (`read_log`)"}
 OUTCOMES = ("clean", "accepted", "wrong exception type", "hang", "garbage accepted")
 MEMORY_LIMIT = 4 << 30  # bytes of address space per worker
 
@@ -108,6 +111,7 @@ def seed_files(work: Path) -> dict[str, list[Files]]:
         "read_log": [{"log.csv": generic}, {"phyphox.csv": phyphox}, {"export.zip": sl_zip}],
         "model": models,
         "real": real_seeds(),
+        "xsens": xsens_seeds(rec.acc[:, 0], rec.gyro[:, 0]),
     }
 
 
@@ -418,7 +422,8 @@ def _npy(arr: np.ndarray) -> bytes:
 
 
 ATTACKS = {"bvh": _bvh_attack, "asf": _asf_attack, "sensorlog": _table_attack,
-           "read_log": _table_attack, "model": _model_attack, "real": real_attack}
+           "read_log": _table_attack, "model": _model_attack, "real": real_attack,
+           "xsens": xsens_attack}
 
 
 def cases(reader: str, seeds: list[Files], n: int, seed: int = 0) -> Iterator[Case]:
@@ -461,7 +466,7 @@ def read_case(reader: str, paths: list[Path]) -> object:
             (paths[0].parent / "Gyroscope.csv").write_bytes(paths[0].read_bytes())
             return read_sensor_logger(paths[0].parent, "android")
         return (read_phyphox if name.startswith("phyphox") else read_generic_csv)(paths[0])
-    if reader == "read_log":
+    if reader in ("read_log", "xsens"):
         from imuloco.sensors.reallog import read_log
 
         return read_log(paths[0])
@@ -493,7 +498,7 @@ def garbage(reader: str, result: object) -> str | None:
             if len(s.times) < 1:
                 return "empty stream"
         return None
-    if reader == "read_log":
+    if reader in ("read_log", "xsens"):
         rec, report = result
         if not np.isfinite(rec.channels()).all() or not np.isfinite(rec.times).all():
             return "non-finite recording"

@@ -333,8 +333,17 @@ def write_generic_csv(rec, path: str | Path, overwrite: bool = False) -> Path:
     data = np.concatenate([rec.times[:, None], rec.channels()], axis=1)
     with atomic_write(path, "w") as f:
         np.savetxt(f, data, delimiter=",", header=",".join(["time_s"] + cols), comments="",
-                   fmt=["%.6f"] + ["%.9g"] * (data.shape[1] - 1))
+                   fmt=[f"%.{_time_decimals(rec.times)}f"] + ["%.9g"] * (data.shape[1] - 1))
     return path
+
+
+def _time_decimals(times: np.ndarray) -> int:
+    """Decimals of written timestamps: 6 (microseconds), or up to 9 where fewer would write
+    two increasing timestamps as equal (a jittered log of several kHz)."""
+    for decimals in range(6, 9):
+        if np.all(np.diff(np.char.mod(f"%.{decimals}f", times).astype(float)) > 0):
+            return decimals
+    return 9
 
 
 # ---------------------------------------------------------------------------------------------

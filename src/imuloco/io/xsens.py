@@ -97,6 +97,9 @@ def read_xsens(path: str | Path) -> list[Stream]:
         raise FormatError(path, None, f"expected an Xsens header (PacketCounter, SampleTimeFine, "
                                       f"Acc_X..., Gyr_X...) within the first {MAX_PREAMBLE} lines")
     line, rate = found
+    if rate is not None and not math.isfinite(rate):  # hundreds of digits overflow a float
+        raise FormatError(path, line, "the rate stated above the header is no finite number of "
+                                      "Hz")
     header, data, lines = _read_table(path, allow_empty=True, skip=line - 1)
     missing = [c for c in ACC + GYR if c not in header]
     if missing:

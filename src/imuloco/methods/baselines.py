@@ -63,6 +63,11 @@ class MeanPose(Method):
         self.mean_ = arrays["mean"]
 
 
+# samples per causal window: 1000 is 33 s at 30 fps (8 s at 120), many strides; a row holds
+# window x 6 S features (window=1e5 asked 1.1 GiB per sample clip and ran out of memory)
+WINDOW_RANGE = "[1, 1000]"
+
+
 def _training_arrays(examples: Sequence[Example], window: int) -> tuple[np.ndarray, np.ndarray]:
     """Causal windows of every clip's signals (N, window * 6S) and its pose vectors (N, D)."""
     x = np.concatenate([windows(e.signals, window) for e in examples])
@@ -111,7 +116,7 @@ class RidgePose(_Windowed):
     penalty (scikit-learn ``Ridge``) on standardized inputs and outputs."""
 
     summary = "ridge regression from a causal window of sensor samples to the pose (2014 Fig. 8)"
-    param_ranges: ClassVar[dict[str, str]] = {"window": "[1, inf)", "alpha": "[0, inf)"}
+    param_ranges: ClassVar[dict[str, str]] = {"window": WINDOW_RANGE, "alpha": "[0, inf)"}
 
     def __init__(self, window: int = 15, alpha: float = 1.0) -> None:
         self.window = window  # samples per causal window (0.5 s at 30 fps); not in the paper
@@ -147,7 +152,7 @@ class KnnPose(_Windowed):
     Training rows are kept every ``stride`` frames to bound the model's size."""
 
     summary = "k-nearest-neighbour lookup of poses by a causal window of sensor samples"
-    param_ranges: ClassVar[dict[str, str]] = {"window": "[1, inf)", "k": "[1, inf)",
+    param_ranges: ClassVar[dict[str, str]] = {"window": WINDOW_RANGE, "k": "[1, inf)",
                                               "stride": "[1, inf)"}
 
     def __init__(self, window: int = 15, k: int = 8, stride: int = 1) -> None:

@@ -8,7 +8,8 @@ Levels (per recording unless noted), with their sources:
   dps/sqrt(Hz) over 50 Hz, plus quantisation); constant biases of 0.1 m/s^2 and 0.01 rad/s (1
   sigma; typical post-factory-calibration offsets of +-40 mg and +-1 deg/s); the phone strapped up
   to 10 degrees off and a few cm (up to 3) from the intended place; timestamp jitter of 2 ms rms
-  around a nominal 100 Hz (Android sensor events are not evenly spaced); 0.5 % of samples dropped
+  around a nominal 100 Hz (Android sensor events are not evenly spaced; at higher rates it
+  shrinks with the period, :data:`JITTER_RATE`); 0.5 % of samples dropped
   in bursts; saturation at +-16 g and +-2000 deg/s (the largest full-scale ranges of such parts).
 ``imu`` — a dedicated research IMU (Xsens MTi / Movella DOT class): 0.005 m/s^2 and 0.001 rad/s
   white noise, biases of 0.02 m/s^2 and 0.002 rad/s, 2 degrees and 1 cm placement error,
@@ -25,6 +26,11 @@ import numpy as np
 from imuloco.errors import UnknownNameError
 
 G = 9.81
+# the rate at which a preset's jitter_s holds; above it the jitter is that fraction of the
+# sample period (2 ms at 100 Hz: 20 us at 10 kHz), so that a simulated log stays a log of its
+# rate (2 ms at 10 kHz reordered whole periods: median step 71 us, a rate the reader refuses).
+# Every rate up to it (the simulations behind all results are at 100 Hz or less) is unchanged.
+JITTER_RATE = 100.0
 
 
 @dataclass(frozen=True)
@@ -74,10 +80,12 @@ def random_misplacement(model: NoiseModel, rng: np.random.Generator) -> tuple[np
 
 def sample_times(duration: float, rate: float, model: NoiseModel,
                  rng: np.random.Generator) -> np.ndarray:
-    """Sample instants in [0, duration]: nominal ``rate`` with jitter and dropped bursts."""
+    """Sample instants in [0, duration]: nominal ``rate`` with jitter (``jitter_s`` up to
+    :data:`JITTER_RATE`, the same fraction of the period above it) and dropped bursts."""
     t = np.arange(0.0, duration + 1e-9, 1.0 / rate)
     if model.jitter_s > 0:
-        t = t + rng.normal(0.0, model.jitter_s, len(t))
+        jitter = model.jitter_s * min(1.0, JITTER_RATE / rate)
+        t = t + rng.normal(0.0, jitter, len(t))
         t = np.sort(np.clip(t, 0.0, duration))
     if model.drop_rate > 0:
         # bursts of 1-5 samples starting at random so that on average drop_rate are lost

@@ -127,12 +127,19 @@ class Eom2014(Method):
     """Eom, Choi, Noh 2014 (see the module docstring for the pipeline and every choice)."""
 
     summary = "GPLVM + velocity GP, HMM phases, per-phase MLP (Eom et al. 2014)"
+    # upper bounds far beyond any useful value, where a larger one only exhausted memory or
+    # time: latent_dim 100 (the paper's is 5; a latent space as wide as the pose vectors, 6 J +
+    # 4, reduces nothing), levels and n_states 100 (3 and 4 by default), sigma 1000 frames (the
+    # filter then flattens any clip: 33 s at 30 fps; 1e300 overflowed scipy's kernel), maxiter
+    # 10^4 (L-BFGS stops long before), MLP widths 4096 (32), context 300 frames each side
+    # (10 s at 30 fps; the inputs grow 12 S per frame of it), smooth_iterations 10^4 (a
+    # Laplacian of width sqrt(10^4 lambda), 70 frames at the default lambda)
     param_ranges: ClassVar[dict[str, str]] = {
-        "latent_dim": "[1, inf)", "window": "[1, inf)", "levels": "[1, inf)",
-        "n_states": "[1, inf)", "sigma": "[0, inf)", "n_active": "[1, inf)",
-        "max_segment": "[2, inf)", "maxiter": "[0, inf)", "x_prior": "[0, inf)",
-        "hidden": "[1, inf)", "context": "[0, inf)", "smooth_lambda": "[0, 1]",
-        "smooth_iterations": "[0, inf)", "min_phase_frames": "[0, inf)", "seed": "[0, inf)"}
+        "latent_dim": "[1, 100]", "window": "[1, inf)", "levels": "[1, 100]",
+        "n_states": "[1, 100]", "sigma": "[0, 1000]", "n_active": "[1, inf)",
+        "max_segment": "[2, inf)", "maxiter": "[0, 10000]", "x_prior": "[0, inf)",
+        "hidden": "[1, 4096]", "context": "[0, 300]", "smooth_lambda": "[0, 1]",
+        "smooth_iterations": "[0, 10000]", "min_phase_frames": "[0, inf)", "seed": "[0, inf)"}
     supports_online = True
 
     def __init__(

@@ -20,6 +20,7 @@ disagree on a frame is one more score for its predicted error (``spread_m``).
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -129,21 +130,28 @@ class Learned(Method):
         them did not (docs/results/learned/experiments.md, ninth round); their disagreement
         (``spread_m``) tells where the mean errs (fourteenth round). Costs ``members`` times
         the training and the reconstruction.
-    threads : torch CPU threads while fitting (None: torch's default). Use 1 on a machine
-        shared with other jobs: torch's thread pool stalls when its cores are taken (a batch
-        took 10x longer with 2 threads than with 1 on a loaded 2-core machine).
+    threads : torch CPU threads while fitting, at most the machine's cores (None: torch's
+        default). Use 1 on a machine shared with other jobs: torch's thread pool stalls when
+        its cores are taken (a batch took 10x longer with 2 threads than with 1 on a loaded
+        2-core machine).
     seed : seeds augmentation, initialization and batching.
     """
 
     summary = "imuloco's causal GRU: pose, contacts and confidence; feet pinned (torch)"
+    # upper bounds far beyond any useful value, where a larger one only exhausted memory or
+    # time or overflowed: hidden 4096 (192 by default), layers 64 (2), epochs 10^4 (20),
+    # members 64 (4 in the results), threads 1024 (more than a machine's cores; 1e9 aborted
+    # OpenMP), draws 100 (2: the training set 101 times over), lag 1000 frames (8; 33 s of
+    # look-ahead), the loss weights 10^6 (10 and 150; 1e300 is inf in float32), weight_decay
+    # 1 (1e-4: AdamW then shrinks each weight by lr a step), lr 1 (4e-3)
     param_ranges: ClassVar[dict[str, str]] = {
-        **dict.fromkeys(("hidden", "layers", "epochs", "batch_size", "window", "members",
-                         "threads"), "[1, inf)"),
-        **dict.fromkeys(("draws", "lag", "seed"), "[0, inf)"),
-        **dict.fromkeys(("noise_scale", "weight_decay", "position_weight", "accel_weight"),
-                        "[0, inf)"),
+        **dict.fromkeys(("batch_size", "window"), "[1, inf)"),
+        "hidden": "[1, 4096]", "layers": "[1, 64]", "epochs": "[1, 10000]",
+        "members": "[1, 64]", "threads": "[1, 1024]", "draws": "[0, 100]", "lag": "[0, 1000]",
+        "seed": "[0, inf)", "noise_scale": "[0, inf)", "weight_decay": "[0, 1]",
+        **dict.fromkeys(("position_weight", "accel_weight"), "[0, 1e6]"),
         **dict.fromkeys(("speed", "validation", "dropout", "proportions"), "[0, 1)"),
-        "reverse": "[0, 1]", "strap": "[0, 1]", "incline": "[0, 90]", "lr": "(0, inf)"}
+        "reverse": "[0, 1]", "strap": "[0, 1]", "incline": "[0, 90]", "lr": "(0, 1]"}
     supports_online = True
     # files from before the look-ahead and the heavier acceleration term
     legacy_params: ClassVar[dict[str, Any]] = {"lag": 0, "accel_weight": 30.0,
@@ -190,8 +198,9 @@ class Learned(Method):
 
     # ---- learning ---------------------------------------------------------------------------
     def learn(self, data: TrainingSet, progress: bool = False) -> None:
-        if self.threads:
-            torch.set_num_threads(int(self.threads))
+        if self.threads:  # at most one a core: more only contend (1024 on 2 cores: a fit
+            # of one epoch on 4 sample clips took over 120 s instead of 5)
+            torch.set_num_threads(min(int(self.threads), os.cpu_count() or 1))
         if self.members > 1:
             one = {**self.get_params(), "members": 1}
             combined = ensemble([Learned(**{**one, "seed": self.seed + k}).fit_set(data, progress)
@@ -234,6 +243,11 @@ class Learned(Method):
                                                     accel=self.accel_weight), self.seed,
                                      progress, self.weight_decay)
         self.net_.eval()
+        if not all(bool(torch.isfinite(w).all()) for w in self.net_.parameters()):
+            raise InputError(f"method 'learned': the training diverged (weights became NaN or "
+                             f"inf) with lr={self.lr}, weight_decay={self.weight_decay}, "
+                             f"position_weight={self.position_weight}, accel_weight="
+                             f"{self.accel_weight}: lower them")
         self._fit_novelty(train_set, val_set, data.fps)
         self.calibration_ = None
         self.flat_pitch_ = flat_foot_pitch(e.motion for e in data.examples)

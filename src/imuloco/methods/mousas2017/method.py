@@ -91,7 +91,10 @@ class Mousas2017(Method):
     summary = "hierarchical multivariate HMM + reactive interpolation (Mousas 2017), online"
     param_ranges: ClassVar[dict[str, str]] = {
         **dict.fromkeys(A_PHASE + A_FRAME, "[0, 1]"), "shrinkage": "[0, inf)",
-        "ridge": "[0, inf)", "max_segment_s": "(0, inf)", "sigma_scale": "(0, inf)"}
+        "ridge": "[0, inf)", "max_segment_s": "(0, inf)",
+        # emission deviations 10^-6 to 10^6 times the y-marginal's: the likelihoods are then
+        # one spike or flat in float64 (1e300 overflowed squaring it)
+        "sigma_scale": "[1e-6, 1e6]"}
     supports_online = True
 
     # frames inside a gap of a recording (no sample for more than 0.1 s) reach the model as

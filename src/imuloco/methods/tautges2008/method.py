@@ -76,9 +76,11 @@ class Tautges2008(Method):
 
     summary = "multilinear motion model fitted to windows of accelerations (Tautges 2008)"
     param_ranges: ClassVar[dict[str, str]] = {
-        "frames": "[2, inf)", "repetitions": "[1, inf)", "style_rank": "[1, inf)",
+        # frames 1000 per cycle (the paper's 70 at 120 Hz; 1000 is over 8 s of a cycle at
+        # 120 Hz), phases 360 (12; a start every degree of the cycle): beyond, memory ran out
+        "frames": "[2, 1000]", "repetitions": "[1, inf)", "style_rank": "[1, inf)",
         "repetition_rank": "[1, inf)", "window": "[2, inf)", "hop": "[1, inf)",
-        "phases": "[1, inf)", "periods": "(0, inf)", "max_iter": "[1, inf)",
+        "phases": "[1, 360]", "periods": "(0, inf)", "max_iter": "[1, inf)",
         "bounds_margin": "[0, inf)"}
 
     def __init__(self, frames: int = 32, repetitions: int = 3, style_rank: int | None = None,
