@@ -340,8 +340,12 @@ def write_generic_csv(rec, path: str | Path, overwrite: bool = False) -> Path:
 def _time_decimals(times: np.ndarray) -> int:
     """Decimals of written timestamps: 6 (microseconds), or up to 9 where fewer would write
     two increasing timestamps as equal (a jittered log of several kHz)."""
+    steps = np.diff(times)
     for decimals in range(6, 9):
-        if np.all(np.diff(np.char.mod(f"%.{decimals}f", times).astype(float)) > 0):
+        # steps over one unit of the last decimal cannot round to equal times (the quick test);
+        # shorter ones are checked as written
+        if np.all(steps > 1.001 * 10.0**-decimals) or np.all(
+                np.diff(np.char.mod(f"%.{decimals}f", times).astype(float)) > 0):
             return decimals
     return 9
 
