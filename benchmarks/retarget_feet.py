@@ -27,9 +27,7 @@ from pathlib import Path
 import numpy as np
 from foot_lock import fold_model
 
-from imuloco.core.motion import MotionDatabase
-from imuloco.core.retarget import resampled
-from imuloco.evaluate.bench import load_data, measure, truth_on_training_rig
+from imuloco.evaluate.bench import load_cross_dataset, measure
 from imuloco.evaluate.metrics import evaluate_parts
 from imuloco.methods.training import TEST_SEED_OFFSET, synthesize
 from imuloco.phases.contacts import flat_foot_pitch
@@ -43,12 +41,9 @@ def main() -> None:
     ap.add_argument("--models", type=Path, help="a folder of xd-seedN.npz networks")
     ap.add_argument("--seeds", default="0,1,2", help="the networks' seeds")
     args = ap.parse_args()
-    train = load_data([args.data / "bandai-namco-2", args.data / "bandai-namco-1"], limit=30,
-                      progress=False)
-    test = load_data([args.data / "cmu-iclone"], limit=30, progress=False)
-    test = MotionDatabase([resampled(c, float(train.clips[0].fps)) for c in test.clips],
-                          test.labels)
-    truths = truth_on_training_rig(train, test)
+    train, test, truths = load_cross_dataset(
+        [args.data / "bandai-namco-2", args.data / "bandai-namco-1"], [args.data / "cmu-iclone"],
+        limit=30)
     moved = [truths[lab["name"]] for lab in test.labels]
     for label, clips in (("Bandai-Namco", train.clips), ("cmu-iclone on its own rig", test.clips),
                          ("cmu-iclone retargeted onto Bandai-Namco", moved)):

@@ -33,8 +33,7 @@ import torch
 
 from imuloco.core.bodymap import UPPER_PARTS
 from imuloco.core.motion import Motion, MotionDatabase
-from imuloco.core.retarget import resampled
-from imuloco.evaluate.bench import load_data, truth_on_training_rig
+from imuloco.evaluate.bench import load_cross_dataset, load_data
 from imuloco.evaluate.metrics import body_halves, heading_of, local_positions
 from imuloco.evaluate.protocols import folds
 from imuloco.ops.heading import to_heading_frame
@@ -47,10 +46,8 @@ def split(data: Path, name: str) -> tuple[MotionDatabase, MotionDatabase]:
     if name == "heldout-styles":
         ((_, train, test),) = folds(load_data([data / "bandai-namco-2"], progress=False), name)
         return train, test
-    train = load_data([data / "bandai-namco-2", data / "bandai-namco-1"], progress=False)
-    cmu = load_data([data / "cmu-iclone"], progress=False)
-    cmu = MotionDatabase([resampled(c, float(train.clips[0].fps)) for c in cmu.clips], cmu.labels)
-    truth = truth_on_training_rig(train, cmu)
+    train, cmu, truth = load_cross_dataset([data / "bandai-namco-2", data / "bandai-namco-1"],
+                                           [data / "cmu-iclone"])
     return train, MotionDatabase([truth[lab["name"]] for lab in cmu.labels], cmu.labels)
 
 
@@ -83,7 +80,9 @@ def window(a: np.ndarray, start: int) -> np.ndarray:
 
 
 def train_oracle(train: list[tuple[np.ndarray, np.ndarray]], epochs: int, seed: int):
-    """The oracle fitted on (inputs, targets) clips; returns it and the standardizations."""
+    """The oracle fitted on (inputs, targets) clips; returns it and the standardizations.
+    A loop of its own: ``learned``'s trainer (:mod:`imuloco.methods.learned.train`) learns
+    from simulated sensor signals and decodes rotations, not from poses to positions."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     x_all, y_all = (np.concatenate(a) for a in zip(*train))

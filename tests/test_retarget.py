@@ -11,12 +11,12 @@ from scipy.spatial.transform import Rotation
 from imuloco.cli import cli
 from imuloco.core.bodymap import PARTS, BodyMapError, resolve_body_map
 from imuloco.core.motion import Motion
-from imuloco.core.retarget import Rig, foot_pitches, resampled, retarget
+from imuloco.core.retarget import Rig, resampled, retarget
 from imuloco.core.skeleton import Skeleton
 from imuloco.io.bvh import write_bvh
 from imuloco.io.database import load_sample
 from imuloco.ops.rotations import geodesic, qinv, qmul, qrot
-from imuloco.phases.contacts import flat_foot_pitch, foot_contacts
+from imuloco.phases.contacts import flat_foot_pitch, foot_contacts, foot_pitches
 
 # the sample's joints under Mixamo's names (its clavicles are "Shoulder", its chest "Spine1")
 MIXAMO = {"Hips": "Hips", "Spine": "Spine", "Chest": "Spine1", "Neck": "Neck", "Head": "Head",

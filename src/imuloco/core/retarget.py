@@ -60,7 +60,8 @@ _SEGMENTS: dict[str, tuple[str, str, bool]] = {
 }
 FEET = ("left_ankle", "left_toe", "right_ankle", "right_toe")
 MAX_POSES = 600  # poses a rig is measured in (evenly spaced over the given clips)
-MAX_PITCH_CLIPS = 20  # clips (evenly spaced) whose flat feet give a rig's foot pitch
+MAX_PITCH_CLIPS = 20  # clips (evenly spaced) whose flat feet give a rig's foot pitch,
+MAX_PITCH_FRAMES = 3000  # and frames of each (100 s at 30 fps; every shared clip is shorter)
 
 
 def check_mapped(skeleton: Skeleton, where: str) -> None:
@@ -92,14 +93,6 @@ def anatomical_frames(skeleton: Skeleton, positions: np.ndarray) -> np.ndarray:
     return np.stack(frames, axis=1)
 
 
-def foot_pitches(skeleton: Skeleton, positions: np.ndarray) -> np.ndarray:
-    """The ankle-to-toe direction's angle against the horizontal (Y up), radians, of both
-    feet in every pose: positions (T, J, 3) -> (T, 2), negative where the toe joint is lower."""
-    d = np.stack([positions[:, skeleton.part(f"{s}_toe")] - positions[:, skeleton.part(
-        f"{s}_ankle")] for s in ("left", "right")], axis=1)
-    return np.arctan2(d[..., 1], np.linalg.norm(d[..., [0, 2]], axis=-1))
-
-
 @dataclass(frozen=True, eq=False)
 class Rig:
     """A skeleton measured in poses it takes, as retargeting needs it.
@@ -125,11 +118,14 @@ class Rig:
         are used, evenly spaced). ``where`` names them in errors.
 
         The flat-foot pitch is :func:`imuloco.phases.contacts.flat_foot_pitch` of the
-        motions (feet with heel and toe on the floor; of at most :data:`MAX_PITCH_CLIPS`,
-        evenly spaced, as finding contacts takes a while); motions without such a frame (one
-        T-pose, sprints) give the median pitch of their poses, which a T-pose stands flat in.
+        motions (feet with heel and toe on the floor) over the first
+        :data:`MAX_PITCH_FRAMES` of at most :data:`MAX_PITCH_CLIPS`, evenly spaced: finding
+        contacts took 6 s on a 640 s reconstruction, which ``reconstruct --skeleton``
+        measures. Motions without such a frame (one T-pose, sprints) give the median pitch
+        of their poses, which a T-pose stands flat in.
         """
-        from imuloco.phases.contacts import flat_foot_pitch  # phases build on core: lazily
+        # phases build on core: imported here
+        from imuloco.phases.contacts import flat_foot_pitch, foot_pitches
 
         sk = motions[0].skeleton
         check_mapped(sk, where or motions[0].name or "motion")
@@ -137,7 +133,8 @@ class Rig:
         step = max(1, len(rot) // MAX_POSES)
         rot = normalize(rot[::step])
         glob, pos = fk(rot, np.zeros((len(rot), 3)), sk.offsets, sk.parents)
-        pitch = flat_foot_pitch(motions[:: max(1, len(motions) // MAX_PITCH_CLIPS)])
+        pitch = flat_foot_pitch(m.slice(0, MAX_PITCH_FRAMES)
+                                for m in motions[:: max(1, len(motions) // MAX_PITCH_CLIPS)])
         if pitch is None:
             pitch = float(np.median(foot_pitches(sk, pos)))
         idx = [sk.part(p) for p in PARTS]

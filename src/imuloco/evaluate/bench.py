@@ -103,6 +103,21 @@ def load_data(data: DataArg, limit: int | None = None, progress: bool = False,
                           skip_frames=skip_frames)
 
 
+def load_cross_dataset(train: DataArg, test: DataArg, limit: int | None = None,
+                       progress: bool = False, up: str = "auto", skip_frames: int = 0
+                       ) -> tuple[MotionDatabase, MotionDatabase, dict[str, Motion]]:
+    """``cross-dataset``'s clips (:func:`load_data`'s arguments): the training database, the
+    test clips resampled to its frame rate, and each test clip's ground truth on the training
+    skeleton (:func:`truth_on_training_rig`)."""
+    from imuloco.core.retarget import resampled
+
+    train_db = load_data(train, limit, progress, up, skip_frames)
+    fps = float(train_db.clips[0].fps)
+    test_db = load_data(test, limit, progress, up, skip_frames)
+    test_db = MotionDatabase([resampled(c, fps) for c in test_db.clips], test_db.labels)
+    return train_db, test_db, truth_on_training_rig(train_db, test_db)
+
+
 def data_label(data: DataArg) -> str:
     """How records name their data: folder names joined by ``+``, or ``sample``."""
     return "+".join(f.name for f in data_folders(data)) or "sample"
@@ -273,7 +288,6 @@ def run_bench(
     up, skip_frames : how motion files are read (see :func:`imuloco.io.bvh.read_bvh`).
     only_folds : run only these folds of ``heldout-contents`` (left-out contents).
     """
-    from imuloco.core.retarget import resampled
     from imuloco.methods import get_method
     from imuloco.methods.registry import parse_method_spec
 
@@ -287,12 +301,9 @@ def run_bench(
         if not data_folders(train) or len(data_folders(test)) != 1:
             raise UnknownNameError("cross-dataset needs training folder(s) and one test folder "
                            "(--train DIR[,DIR] --test DIR)")
-        train_db = load_data(train, limit, progress, up, skip_frames)
-        fps = float(train_db.clips[0].fps)
-        test_db = load_data(test, limit, progress, up, skip_frames)
-        test_db = MotionDatabase([resampled(c, fps) for c in test_db.clips], test_db.labels)
+        train_db, test_db, truths = load_cross_dataset(train, test, limit, progress, up,
+                                                       skip_frames)
         protocol = [("all", train_db, test_db)]
-        truths = truth_on_training_rig(train_db, test_db)
         label = f"{data_label(train)} -> {data_label(test)}"
     else:
         if train is not None or test is not None:

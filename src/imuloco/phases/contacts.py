@@ -222,11 +222,17 @@ def flat_foot_pitch(motions: Iterable[Motion]) -> float | None:
         if m.num_frames < 2:
             continue
         c = foot_contacts(m)
-        pos = m.positions()
-        for side in ("left", "right"):
-            flat = c[f"{side}_heel"] & c[f"{side}_toe"]
-            d = (pos[flat, m.skeleton.part(f"{side}_toe")]
-                 - pos[flat, m.skeleton.part(f"{side}_ankle")])
-            pitches.append(np.arctan2(d[:, 1], np.linalg.norm(d[:, [0, 2]], axis=-1)))
+        both = foot_pitches(m.skeleton, m.positions())
+        for k, side in enumerate(FEET):
+            pitches.append(both[c[f"{side}_heel"] & c[f"{side}_toe"], k])
     pitches = np.concatenate(pitches) if pitches else np.zeros(0)
     return float(np.median(pitches)) if pitches.size else None
+
+
+def foot_pitches(skeleton, positions: np.ndarray) -> np.ndarray:
+    """The ankle-to-toe direction's angle against the horizontal (Y up), radians, of the
+    :data:`FEET` in every pose: joint positions (T, J, 3) of ``skeleton`` -> (T, 2), negative
+    where the toe joint is lower."""
+    d = np.stack([positions[:, skeleton.part(f"{s}_toe")]
+                  - positions[:, skeleton.part(f"{s}_ankle")] for s in FEET], axis=1)
+    return np.arctan2(d[..., 1], np.linalg.norm(d[..., [0, 2]], axis=-1))
