@@ -252,6 +252,11 @@ def test_rerun_skips_complete_outputs_and_force_redoes(logs, fitted, client, tmp
     # another model's outputs are never replaced without --force
     with pytest.raises(OutputExistsError, match="--force"):
         run_batch(paths, tmp_path, method="mean", scheduler=client)
+    # a model fitted on the fly to the same state resumes (its training's time differs)
+    means = run_batch(paths, tmp_path / "mean", method="mean", scheduler=client)
+    again = run_batch(paths, tmp_path / "mean", method="mean", scheduler=client)
+    assert (means["done"], again["done"], again["skipped"]) == (3, 0, 3)
+    assert again["model_sha256"] == means["model_sha256"]
     # another height's are redone (they were skipped as complete, their lengths in the other
     # proportions)
     tall = run_batch(paths, tmp_path, fitted=fitted, scheduler=client, height_m=1.9)

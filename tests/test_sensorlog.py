@@ -15,7 +15,7 @@ from imuloco.core.recording import Recording
 from imuloco.errors import FormatError
 from imuloco.io.sensorlog import detect_format, write_generic_csv
 from imuloco.sensors.calibration import still_mask
-from imuloco.sensors.reallog import read_log
+from imuloco.sensors.reallog import read_log, recording_name
 from imuloco.sensors.simulate import simulate
 
 
@@ -424,6 +424,17 @@ def test_zipped_sensor_logger_export_reads_as_its_folder(walk_rec, tmp_path):
     np.testing.assert_array_equal(a.acc, b.acc)
     assert rb.platform == "ios (Metadata.csv)"
     assert str(zipped / "Walk-2024/TotalAcceleration.csv") in rb.files
+
+
+def test_a_recording_is_named_by_its_file_or_whole_folder(tmp_path, monkeypatch):
+    """``reconstruct`` and ``batch`` name a log by its stem, an export folder in full (it was
+    titled ``alice`` by its stem, and ``.`` had no name)."""
+    (tmp_path / "alice.day1").mkdir()
+    (tmp_path / "bob.log.csv").write_text("")
+    assert recording_name(tmp_path / "alice.day1") == "alice.day1"
+    assert recording_name(str(tmp_path / "bob.log.csv")) == "bob.log"
+    monkeypatch.chdir(tmp_path / "alice.day1")
+    assert recording_name(".") == "alice.day1"
 
 
 def test_zipped_phyphox_export(walk_rec, tmp_path):

@@ -119,8 +119,10 @@ def output_names(paths: Sequence[Path]) -> list[str]:
     (:data:`RESERVED_NAMES`). Names differ also where the file system ignores case
     (``a/Alice.csv``, ``b/alice.csv``: ``a_Alice``, ``b_alice``), so no recording's outputs
     replace another's."""
+    from imuloco.sensors.reallog import recording_name
+
     full = [Path(os.path.normpath(p.absolute())) for p in paths]  # "." and bare names named
-    own = [p.name if p.is_dir() else p.stem for p in full]
+    own = [recording_name(p) for p in full]
     folded = [n.casefold() for n in own]
     names = [f"{p.parent.name}_{n}" if folded.count(f) > 1 or f in RESERVED_NAMES else n
              for p, n, f in zip(full, own, folded)]
@@ -355,6 +357,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     from tqdm.auto import tqdm
 
     from imuloco.app.pipeline import choose_method, require_extras
+    from imuloco.methods.modelfile import save_model
 
     require_extras(placement)  # on this machine, before starting any worker
     paths = [Path(p) for p in recordings]
@@ -377,7 +380,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     else:
         note = f"given fitted method {fitted.name!r}"
     with tempfile.TemporaryDirectory(prefix="imuloco-batch-") as tmp:
-        blob = fitted.save(Path(tmp) / "model.npz").read_bytes()
+        # without its training's time: a model fitted on the fly (``--method mean``) resumes
+        fitted.check_fitted()
+        blob = save_model(fitted, Path(tmp) / "model.npz", timing=False).read_bytes()
     sha = hashlib.sha256(blob).hexdigest()
     model_seconds = time.perf_counter() - t0
 

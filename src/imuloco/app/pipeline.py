@@ -345,7 +345,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     )
     from imuloco.evaluate.sensorgait import gait_report
     from imuloco.evaluate.strides import with_confidence
-    from imuloco.sensors.reallog import read_log
+    from imuloco.sensors.reallog import read_log, recording_name
 
     require_extras(placement)  # before reading a long log
     rig = None if skeleton is None else load_rig(skeleton)  # and a bad rig file before its work
@@ -370,9 +370,9 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     if height is not None:
         k = height_scale(motion.skeleton, height)
         motion, confidence = to_height(motion, height), confidence.scaled(k)  # lengths
-    name = Path(recording_path if isinstance(recording_path, (str, Path))
-                else recording_path[0]).stem
-    motion.name = name
+    report_name = recording_name(recording_path if isinstance(recording_path, (str, Path))
+                                 else recording_path[0])
+    motion.name = report_name
     bar.update()
     bar.set_postfix_str("gait")
     k = rec.placements.index(fitted.placements_[0])
@@ -392,7 +392,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     if skeleton is not None:
         bar.set_postfix_str(f"retargeting onto {Path(skeleton).name}")
         motion = onto_rig(motion, rig)
-        motion.name = name
+        motion.name = report_name
         report.skeleton = {"file": str(skeleton), "joints": motion.skeleton.num_joints}
     bar.update()
     bar.close()

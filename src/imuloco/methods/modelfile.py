@@ -31,18 +31,27 @@ if TYPE_CHECKING:
 FORMAT_VERSION = 1
 
 
-def save_model(method: Method, path: str | Path, overwrite: bool = False) -> Path:
-    """Write the fitted ``method`` to one ``.npz`` file at ``path`` and return the path."""
+# ``protocol_`` entries that say when and how long a model was trained, not what it computes
+TIMING_KEYS = ("train_seconds", "trained_at")
+
+
+def save_model(method: Method, path: str | Path, overwrite: bool = False,
+               timing: bool = True) -> Path:
+    """Write the fitted ``method`` to one ``.npz`` file at ``path`` and return the path.
+    ``timing=False`` leaves :data:`TIMING_KEYS` out, so that a model fitted again to the same
+    state is the same bytes (``batch`` resumes by the model file's hash)."""
     path = Path(path)
     check_output(path, overwrite)
     arrays, values = method.get_state()
     sk = method.skeleton_
+    protocol = {k: v for k, v in getattr(method, "protocol_", {}).items()
+                if timing or k not in TIMING_KEYS}
     header = {
         "format_version": FORMAT_VERSION, "method": method.name, "params": method.get_params(),
         "placements": method.placements_, "noise": method.noise_, "fps": method.fps_,
         "skeleton": {"names": sk.names, "body_map": sk.body_map,
                      "end_sites": {str(k): v.tolist() for k, v in sk.end_sites.items()}},
-        "protocol": getattr(method, "protocol_", {}), "values": values,
+        "protocol": protocol, "values": values,
     }
     blob = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
     with atomic_write(path) as f:

@@ -25,6 +25,7 @@ they are an error instead of being bridged by the interpolation.
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -229,6 +230,13 @@ def _rw_kind(path: Path) -> tuple[str | None, str]:
             if low.startswith(p):
                 return kind, path.name[len(p):]
     return None, path.name
+
+
+def recording_name(path: str | Path) -> str:
+    """A recording's own name: a file's stem, an export folder's whole name (``alice.day1``;
+    ``.`` is named after the folder it stands for)."""
+    full = Path(os.path.normpath(Path(path).absolute()))
+    return full.name if full.is_dir() else full.stem
 
 
 def realworld_accelerometer(path: str | Path) -> Path | None:
