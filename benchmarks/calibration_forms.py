@@ -88,16 +88,11 @@ def smoothed(rows: Rows, seconds: float) -> Rows:
 def retargeting_floor(rows: Rows, data: Path) -> np.ndarray:
     """Per ``cross-dataset`` row (N,), metres: the rms part error of the test clip's ground
     truth retargeted onto the training skeleton, as bench's protocol moves and scores it."""
-    from imuloco.core.retarget import resampled
-    from imuloco.evaluate.bench import load_data, truth_on_training_rig
+    from imuloco.evaluate.bench import load_cross_dataset
     from imuloco.evaluate.metrics import part_errors
-    from imuloco.io.database import MotionDatabase
 
-    train = load_data([data / "bandai-namco-2", data / "bandai-namco-1"], limit=30)
-    fps = float(train.clips[0].fps)
-    test = load_data([data / "cmu-iclone"], limit=30)
-    test = MotionDatabase([resampled(c, fps) for c in test.clips], test.labels)
-    moved = truth_on_training_rig(train, test)
+    _, test, moved = load_cross_dataset([data / "bandai-namco-2", data / "bandai-namco-1"],
+                                        [data / "cmu-iclone"], limit=30)
     floor = {lab["name"]: np.sqrt((part_errors(gt, moved[lab["name"]])[0][:, 1:] ** 2)
                                   .mean(axis=1))
              for lab, gt in zip(test.labels, test.clips)}

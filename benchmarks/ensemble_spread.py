@@ -40,9 +40,8 @@ from foot_lock import fold_model
 from scipy.stats import spearmanr
 
 from imuloco.core.motion import MotionDatabase
-from imuloco.core.retarget import resampled
 from imuloco.evaluate import confidence as conf
-from imuloco.evaluate.bench import load_data, measure, truth_on_training_rig
+from imuloco.evaluate.bench import cross_dataset_test, load_data, measure
 from imuloco.evaluate.protocols import folds
 from imuloco.io.atomic import atomic_write, atomic_write_text, check_output
 from imuloco.methods.base import calibrated_error
@@ -132,11 +131,9 @@ def main() -> None:
                  for f, tr, te in folds(db, "heldout-contents")]
         save_rows(held_dir, {k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
     if cross_dir in missing:
-        test = load_data([args.data / "cmu-iclone"], limit=30, progress=True)
-        fps = float(db.clips[0].fps)
-        test = MotionDatabase([resampled(c, fps) for c in test.clips], test.labels)
-        save_rows(cross_dir, rows_of("xd", db, test, args.models, seeds,
-                                     truth_on_training_rig(db, test)))
+        test, truths = cross_dataset_test(db, [args.data / "cmu-iclone"], limit=30,
+                                          progress=True)
+        save_rows(cross_dir, rows_of("xd", db, test, args.models, seeds, truths))
     held, cross = conf.load_rows([held_dir]), conf.load_rows([cross_dir])
     preds_h, preds_x = {"uncalibrated sigma": held["score_sigma_m"]}, {
         "uncalibrated sigma": cross["score_sigma_m"]}

@@ -106,16 +106,24 @@ def load_data(data: DataArg, limit: int | None = None, progress: bool = False,
 def load_cross_dataset(train: DataArg, test: DataArg, limit: int | None = None,
                        progress: bool = False, up: str = "auto", skip_frames: int = 0
                        ) -> tuple[MotionDatabase, MotionDatabase, dict[str, Motion]]:
-    """``cross-dataset``'s clips (:func:`load_data`'s arguments): the training database, the
-    test clips resampled to its frame rate, and each test clip's ground truth on the training
-    skeleton (:func:`truth_on_training_rig`)."""
+    """``cross-dataset``'s clips (:func:`load_data`'s arguments): the training database, then
+    :func:`cross_dataset_test`'s test clips and truths."""
+    train_db = load_data(train, limit, progress, up, skip_frames)
+    return train_db, *cross_dataset_test(train_db, test, limit, progress, up, skip_frames)
+
+
+def cross_dataset_test(train_db: MotionDatabase, test: DataArg, limit: int | None = None,
+                       progress: bool = False, up: str = "auto", skip_frames: int = 0
+                       ) -> tuple[MotionDatabase, dict[str, Motion]]:
+    """``cross-dataset``'s test clips for an already loaded training database: resampled to
+    its frame rate, and each one's ground truth on its skeleton
+    (:func:`truth_on_training_rig`)."""
     from imuloco.core.retarget import resampled
 
-    train_db = load_data(train, limit, progress, up, skip_frames)
     fps = float(train_db.clips[0].fps)
     test_db = load_data(test, limit, progress, up, skip_frames)
     test_db = MotionDatabase([resampled(c, fps) for c in test_db.clips], test_db.labels)
-    return train_db, test_db, truth_on_training_rig(train_db, test_db)
+    return test_db, truth_on_training_rig(train_db, test_db)
 
 
 def data_label(data: DataArg) -> str:
