@@ -13,7 +13,8 @@ added to the method's), fold by fold: each fold's model is trained once (saved u
 ``--models``, reused when present), and its test clips are reconstructed once; the same
 network outputs are then post-processed several ways:
 
-- ``raw``: the decoded pose, nothing pinned;
+- ``raw``: the decoded pose (the root's height averaged as the model's ``height_smooth``
+  says; none in files from before it), nothing pinned;
 - ``root pinned``: :func:`imuloco.methods.learned.method.pin`, the root moved so that feet in
   contact do not slide (all ``learned`` did before ``lock_feet``);
 - ``root pinned, legs locked (learned's)``: then :func:`imuloco.methods.learned.method.lock`,
@@ -78,9 +79,9 @@ def fold_model(fold: str, train, seed: int, models: Path, params: dict):
 
 def variants(method, signals: np.ndarray):
     """The post-processings of one test clip's network outputs."""
-    out = method.predict(signals)
+    out, vectors = method.pose_vectors(signals)  # as learned decodes them
     c = out.contacts
-    raw = pose.decode(out.vectors, method.skeleton_, method.fps_)
+    raw = pose.decode(vectors, method.skeleton_, method.fps_)
     pinned = pin(raw, c)
     flat = method.flat_pitch_
     locked = {f"root pinned, {k}": lock_feet(pinned, c[:, :2], c[:, 2:], **{

@@ -128,14 +128,14 @@ def measure(method, examples, **lock_kw) -> dict[str, list]:
     """The samples and counts of one fold's test clips."""
     acc: dict[str, list] = defaultdict(list)
     for ex in examples:
-        out = method.predict(ex.signals)
+        out, vectors = method.pose_vectors(ex.signals)  # as learned decodes them
         c = out.contacts
-        pinned = pin(pose.decode(out.vectors, method.skeleton_, method.fps_), c)
+        pinned = pin(pose.decode(vectors, method.skeleton_, method.fps_), c)
         kw = {"flat_pitch": method.flat_pitch_, **lock_kw}
         rec, trace = traced_lock(pinned, c, **kw)
         g = metrics.gt_contacts(ex.motion)
         truth = np.stack([g[k] for k in GT_KEYS], axis=1)
-        oracle = traced_lock(pin(pose.decode(out.vectors, method.skeleton_, method.fps_),
+        oracle = traced_lock(pin(pose.decode(vectors, method.skeleton_, method.fps_),
                                  truth.astype(float)), truth.astype(float), **kw)[0]
         v = {"rec": speeds(rec), "gt": speeds(ex.motion), "oracle": speeds(oracle)}
         for k, (side, col, kind) in enumerate(PARTS):

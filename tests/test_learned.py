@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 
@@ -15,6 +16,7 @@ from imuloco.errors import InputError
 from imuloco.methods import get_method, load_model
 from imuloco.methods.learned.method import ensemble
 from imuloco.methods.learned.model import Ensemble, Reconstructor, TorchFK, rotation_from_6d
+from imuloco.methods.pose import height_index
 from imuloco.methods.training import synthesize
 from imuloco.ops.heading import heading_from_hips
 from imuloco.ops.kinematics import fk
@@ -104,8 +106,8 @@ def test_stream_equals_offline(tiny_model, test_signals):
 
 @pytest.fixture(scope="module")
 def lag_model(sample_db):
-    return get_method("learned", **TINY, lag=3).fit(sample_db.subset([0, 12]), ["right_ankle"],
-                                                    "phone", seed=0)
+    return get_method("learned", **TINY, lag=3, height_smooth=0.0).fit(
+        sample_db.subset([0, 12]), ["right_ankle"], "phone", seed=0)
 
 
 def test_lag_looks_ahead_exactly_lag_frames(lag_model, test_signals):
@@ -128,6 +130,32 @@ def test_lag_stream_is_late_by_lag_frames(lag_model, test_signals):
         np.testing.assert_allclose(rot, first[0][0])
         np.testing.assert_allclose(root[[0, 2]], 0.0)
     assert_stream_equals_offline(lag_model, test_signals)
+
+
+def test_the_height_is_smoothed_over_its_radius_and_streams_as_offline(lag_model,
+                                                                         test_signals):
+    """``height_smooth`` (set after training) averages the root's height over a centred
+    window, and nothing else: frame t's height moves with frame t + lag + radius's signals,
+    not later ones; the stream waits the radius more and still gives the offline frames."""
+    smoothed = copy.deepcopy(lag_model)
+    smoothed.height_smooth = 1.0  # radius 3
+    (_, sharp), (_, even) = (m.pose_vectors(test_signals) for m in (lag_model, smoothed))
+    h = height_index(lag_model.skeleton_)
+    jerk = [np.abs(np.diff(v[:, h], 3)).mean() for v in (sharp, even)]
+    assert jerk[1] < 0.7 * jerk[0]
+    np.testing.assert_array_equal(np.delete(even, h, axis=1), np.delete(sharp, h, axis=1))
+    base = smoothed.reconstruct_signals(test_signals)
+    for t in (20, 50):
+        changed = test_signals.copy()
+        changed[t + 7:] += 5.0
+        np.testing.assert_allclose(smoothed.reconstruct_signals(changed).root[: t + 1],
+                                   base.root[: t + 1], atol=1e-6)
+        changed = test_signals.copy()
+        changed[t + 6] += 5.0
+        assert abs(smoothed.reconstruct_signals(changed).root[t, 1] - base.root[t, 1]) > 1e-5
+    assert smoothed.stream().delay_frames == 6
+    assert_stream_equals_offline(smoothed, test_signals)
+    assert_stream_equals_offline(smoothed, test_signals[:4])  # shorter than the window
 
 
 def rewrite_params(model, path: Path, **params) -> Path:
@@ -231,6 +259,8 @@ def test_onnx_export(tiny_model, tiny_ensemble, sample_db, test_signals, tmp_pat
         assert h.shape == (model.members * model.layers, 1, model.hidden)
         lag = int(meta["lag"])
         assert lag == model.lag == 8
+        np.testing.assert_allclose(json.loads(meta["height_weights"]), model.height_weights,
+                                   atol=1e-9)
         fed = np.concatenate([test_signals, np.repeat(test_signals[-1:], lag, axis=0)])
         pose_, contacts, sigma, _, novelty, spread = sess.run(
             None, {"signals": fed[None].astype(np.float32), "h": h})

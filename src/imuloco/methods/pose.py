@@ -36,6 +36,11 @@ def pose_dim(skeleton: Skeleton) -> int:
     return 6 * skeleton.num_joints + 4
 
 
+def height_index(skeleton: Skeleton) -> int:
+    """The column of the root's height in a pose vector."""
+    return 6 * skeleton.num_joints
+
+
 def encode(motion: Motion) -> np.ndarray:
     """Pose vectors (T, 6J+4) of a motion (see the module docstring)."""
     theta = np.unwrap(heading(motion))
@@ -76,5 +81,5 @@ def decode(vectors: np.ndarray, skeleton: Skeleton, fps: float,
     root[1:, [0, 2]] = np.cumsum(vel[1:, [0, 2]], axis=0) / fps
     if start is not None:
         root[:, [0, 2]] += np.asarray(start, dtype=np.float64)[[0, 2]]
-    root[:, 1] = vectors[:, 6 * j]
+    root[:, 1] = vectors[:, height_index(skeleton)]
     return Motion(skeleton, continuous(rot, axis=0), root, fps, name)

@@ -1,5 +1,5 @@
 """Post-processing shared by the methods: feet pinned during contact (offline and online),
-Laplacian smoothing."""
+Laplacian smoothing, a centred Gaussian window over frames (offline and online)."""
 
 from __future__ import annotations
 
@@ -414,3 +414,37 @@ def laplacian_smooth(x: np.ndarray, lam: float = 0.5, iterations: int = 3) -> np
     for _ in range(iterations if len(x) >= 3 else 0):
         x[1:-1] += lam * (0.5 * (x[:-2] + x[2:]) - x[1:-1])
     return x
+
+
+def gaussian_weights(sigma: float) -> np.ndarray:
+    """A centred Gaussian window of ``sigma`` frames, normalized to sum 1, shape (2 r + 1,)
+    over scipy.ndimage's radius ``r = int(3 sigma + 0.5)``; ``[1.]`` for ``sigma`` 0."""
+    from scipy.signal.windows import gaussian
+
+    if not 0.0 <= sigma < np.inf:
+        raise ValueError(f"gaussian_weights: sigma must be finite and >= 0, got {sigma}")
+    r = int(3.0 * sigma + 0.5)
+    w = gaussian(2 * r + 1, sigma) if r else np.ones(1)
+    return w / w.sum()
+
+
+def window_average(x: np.ndarray, weights: np.ndarray, ahead: int) -> np.ndarray:
+    """Each frame of ``x`` (T + ``ahead``, ...) replaced by the ``weights``-weighted average of
+    the frames around it (``weights`` (2 r + 1,), centred), for its first T frames: the last
+    ``ahead`` rows are frames past the end, read only as neighbours (a stream's outputs on
+    its held last sample, :class:`imuloco.methods.learned.method.LearnedStream`). Frames
+    before the first are the first; frames past the end beyond ``ahead``, the last.
+
+    A stream gives the same from a window of its last 2 r + 1 frames, so the average is a
+    product with the window, not scipy.ndimage's filter (its edges differ)."""
+    r = len(weights) // 2
+    x = np.asarray(x, dtype=np.float64)
+    if r == 0:
+        return x[: len(x) - ahead].copy()
+    if not 0 <= ahead <= r or len(x) <= ahead:
+        raise ValueError(f"window_average: {ahead} frames past the end of {len(x)}, "
+                         f"radius {r}")
+    padded = np.concatenate([np.repeat(x[:1], r, axis=0), x,
+                             np.repeat(x[-1:], r - ahead, axis=0)])
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * r + 1, axis=0)
+    return windows @ weights

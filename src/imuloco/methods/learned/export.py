@@ -23,7 +23,11 @@ Output frame k is the pose of input frame k - ``lag`` (metadata: the model's loo
 frames; 0 for a model without). T may be 1 (online, one frame per call carrying ``h``) or a
 whole recording. Decoding pose vectors into joint rotations and the root path is left to the
 host (a few lines: Gram-Schmidt per joint and an integration of the velocity), as is foot
-pinning.
+pinning, and the average of the root's height (the pose vector's column 6 J) over the
+metadata's ``height_weights`` (a centred window,
+:attr:`imuloco.methods.learned.method.Learned.height_weights`: frame k's height is the
+weighted heights of frames k - r to k + r, frames before the first being the first; ``[1.0]``
+for none).
 """
 
 from __future__ import annotations
@@ -157,6 +161,7 @@ def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Pa
                 "offsets_m": json.dumps(np.asarray(sk.offsets).round(6).tolist()),
                 "contacts": json.dumps(list(CONTACT_PARTS)), "lag": str(model.lookahead),
                 "h_shape": json.dumps(list(h.shape)),
+                "height_weights": json.dumps(model.height_weights.round(9).tolist()),
                 "channels": "per sensor acc x,y,z (m/s^2) then gyro x,y,z (rad/s), sensor "
                             "frame"}
         if model.novelty_mean_ is not None:

@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import json
 import os
+from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -38,7 +39,14 @@ from imuloco.methods.base import Method, Reconstruction, Stream, calibrated_erro
 from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Ensemble, Reconstructor, TorchFK
-from imuloco.methods.postprocess import FootLock, FootPinner, lock_feet, pin_feet
+from imuloco.methods.postprocess import (
+    FootLock,
+    FootPinner,
+    gaussian_weights,
+    lock_feet,
+    pin_feet,
+    window_average,
+)
 from imuloco.methods.training import VALIDATION_SHARE, Example, TrainingSet, held_out
 from imuloco.ops.kinematics import fk_matrices, joint_positions
 from imuloco.ops.rotations import from_6d, matrices_from_6d, to_6d
@@ -68,6 +76,11 @@ class Prediction:
     sigma: np.ndarray
     novelty: np.ndarray
     spread: np.ndarray | None = None
+
+    def first(self, n: int) -> Prediction:
+        """The first ``n`` frames."""
+        return Prediction(self.vectors[:n], self.contacts[:n], self.sigma[:n],
+                          self.novelty[:n], None if self.spread is None else self.spread[:n])
 
     def scores(self) -> dict[str, np.ndarray]:
         """The uncalibrated per-frame scores a calibration maps, by name (:data:`SCORES`)."""
@@ -105,6 +118,15 @@ class Learned(Method):
         frames late (:attr:`LearnedStream.delay_frames`; 8 frames = 267 ms at 30 fps). On
         held-out styles (every third clip) lag 8 gave 3.29 cm against 3.52 with none (the
         lower body 2.98 vs 3.37) and less jitter and skate; lag 4 3.35, 11 3.25, 15 3.48.
+    height_smooth : the root's height averaged over a centred Gaussian window of
+        ``height_smooth`` frames (:func:`imuloco.methods.postprocess.gaussian_weights`; 0:
+        none); a stream's poses come the window's radius, ``int(3 height_smooth + 0.5)``
+        frames, later still (3 frames = 100 ms at 30 fps). The network predicts the height
+        frame by frame: on held-out styles it jerked 52 % more than the ground truth's and took
+        the whole body's jitter 24 % over the ground truth's. 1.0 brought that to 7 % over;
+        MPJPE and foot skate do not change (docs/results/learned/experiments.md, issue 16's
+        jitter). Applied after training: a model file's value may be changed without
+        training again.
     proportions : augmented draws are simulated on bodies of other proportions (height up to
         +-``proportions``, legs, arms and trunk a further +-half of it;
         :func:`imuloco.methods.learned.train.proportioned`), targets on the training skeleton.
@@ -148,6 +170,7 @@ class Learned(Method):
         **dict.fromkeys(("batch_size", "window"), "[1, inf)"),
         "hidden": "[1, 4096]", "layers": "[1, 64]", "epochs": "[1, 10000]",
         "members": "[1, 64]", "threads": "[1, 1024]", "draws": "[0, 100]", "lag": "[0, 1000]",
+        "height_smooth": "[0, 100]",
         "seed": "[0, inf)", "noise_scale": "[0, inf)", "weight_decay": "[0, 1]",
         **dict.fromkeys(("position_weight", "accel_weight"), "[0, 1e6]"),
         **dict.fromkeys(("speed", "validation", "dropout", "proportions"), "[0, 1)"),
@@ -157,7 +180,7 @@ class Learned(Method):
     legacy_params: ClassVar[dict[str, Any]] = {"lag": 0, "accel_weight": 30.0,
                                                "proportions": 0.0, "bidirectional": False,
                                                "reverse": 0.0, "strap": 0.0, "members": 1,
-                                               "incline": 0.0}
+                                               "incline": 0.0, "height_smooth": 0.0}
     # inputs centred by a causal running mean (``features="centered"``, time constant ``tau``)
     # measured worse (4.06 vs 3.94 cm, docs/results/learned/experiments.md) and were removed
     retired_params: ClassVar[dict[str, Any]] = {"features": "raw", "tau": None}
@@ -168,6 +191,7 @@ class Learned(Method):
                  validation: float = VALIDATION_SHARE, dropout: float = 0.0,
                  weight_decay: float = 1e-4, position_weight: float = 10.0,
                  accel_weight: float = 150.0, lag: int = 8,
+                 height_smooth: float = 1.0,
                  proportions: float = 0.1, reverse: float = 0.3, strap: float = 0.0,
                  incline: float = 0.0, bidirectional: bool = False, members: int = 1,
                  threads: int | None = None, seed: int = 0) -> None:
@@ -187,6 +211,7 @@ class Learned(Method):
         self.position_weight = position_weight
         self.accel_weight = accel_weight
         self.lag = lag
+        self.height_smooth = height_smooth
         self.proportions = proportions
         self.reverse = reverse
         self.strap = strap
@@ -280,6 +305,11 @@ class Learned(Method):
     def lookahead(self) -> int:
         """The look-ahead in use: ``lag``, none for a bidirectional model."""
         return 0 if self.bidirectional else int(self.lag)
+
+    @property
+    def height_weights(self) -> np.ndarray:
+        """The window the root's height is averaged over (:attr:`height_smooth`)."""
+        return gaussian_weights(float(self.height_smooth))
 
     def _looking_ahead(self, e: Example) -> Example:
         """Training inputs: row t holds the signals of frame t + ``lookahead`` (the last frame's
@@ -406,14 +436,18 @@ class Learned(Method):
             members.numpy().astype(np.float64) * self.y_std_ + self.y_mean_, self.skeleton_)
         return Prediction(vectors, contacts, sigma, novelty, spread)
 
-    def predict(self, signals: np.ndarray) -> Prediction:
-        """Network outputs for signals (T, 6 S) at the model rate, run from a zero state."""
+    def predict(self, signals: np.ndarray, ahead: int = 0) -> Prediction:
+        """Network outputs for signals (T, 6 S) at the model rate, run from a zero state; and
+        for ``ahead`` frames past the end, the last sample held (as a stream is fed to give
+        its last frames; a network reading both ways: must be 0)."""
         signals = np.asarray(signals)
         if signals.ndim != 2 or signals.shape[1] != self.channels_:
             raise ValueError(f"learned: expected signals (T, {self.channels_}) for "
                              f"placements {self.placements_}, got {signals.shape}")
+        if ahead and self.bidirectional:
+            raise ValueError("learned: a network reading both ways has no frames past the end")
         k = self.lookahead
-        signals = _hold_last(signals, k)  # as a stream would be fed to get every frame
+        signals = _hold_last(signals, k + ahead)  # as a stream would be fed to get every frame
         with torch.no_grad():
             feats, _ = self.net_.encode(self._inputs(signals)[None])
             p, logit, logvar, members = self._heads(feats)
@@ -424,9 +458,22 @@ class Learned(Method):
     def reconstruct_signals(self, signals: np.ndarray) -> Motion:
         return self.reconstruct_signals_full(signals).motion
 
+    def pose_vectors(self, signals: np.ndarray) -> tuple[Prediction, np.ndarray]:
+        """:meth:`predict`'s outputs for ``signals`` (T, 6 S), and the pose vectors
+        (T, 6 J + 4) to decode: the root's height averaged over :attr:`height_weights`, which
+        read the frames past the end as a stream does (its last sample held)."""
+        w = self.height_weights
+        ahead = 0 if self.bidirectional else len(w) // 2
+        full = self.predict(signals, ahead)
+        out = full.first(len(signals))
+        vectors = out.vectors.copy()
+        h = pose.height_index(self.skeleton_)
+        vectors[:, h] = window_average(full.vectors[:, h], w, ahead)
+        return out, vectors
+
     def reconstruct_signals_full(self, signals: np.ndarray) -> Reconstruction:
-        out = self.predict(signals)
-        motion = lock(pin(pose.decode(out.vectors, self.skeleton_, self.fps_), out.contacts),
+        out, vectors = self.pose_vectors(signals)
+        motion = lock(pin(pose.decode(vectors, self.skeleton_, self.fps_), out.contacts),
                       out.contacts, self.flat_pitch_)
         err, flag, note = self.confidence(out)
         return Reconstruction(motion, err, flag, note, out.scores())
@@ -691,13 +738,19 @@ def lock(motion: Motion, contacts: np.ndarray, flat_pitch: float | None = None) 
 class LearnedStream(Stream):
     """One frame in, one pose out: the GRU state, the pose integrator and the foot pinning
     carried from frame to frame (bounded state), giving :meth:`Learned.reconstruct_signals`'s
-    frames ``delay_frames`` (the model's ``lag``) steps late; the steps before that return
-    the model's mean pose at the origin. After each step, ``contacts`` (4,) and ``sigma``
-    (metres) hold the returned frame's contact probabilities and confidence."""
+    frames ``delay_frames`` steps late (the model's ``lag``, then the radius of its
+    :attr:`Learned.height_weights`: a frame's height waits for its window); the steps before
+    that return the model's mean pose at the origin. After each step, ``contacts`` (4,) and
+    ``sigma`` (metres) hold the returned frame's contact probabilities and confidence."""
 
     def __init__(self, model: Learned) -> None:
         self.model = model
-        self.delay_frames = model.lookahead
+        self.weights = model.height_weights
+        radius = len(self.weights) // 2
+        self.delay_frames = model.lookahead + radius
+        self.heights: deque[float] = deque(maxlen=2 * radius + 1)  # the root's, raw
+        self.waiting: deque[Prediction] = deque(maxlen=radius + 1)  # the window's centre on
+        self.height_index = pose.height_index(model.skeleton_)
         self.seen = 0
         mean = model.y_mean_[None]
         self.rest = PoseIntegrator(model.skeleton_, model.fps_).step(
@@ -723,11 +776,22 @@ class LearnedStream(Stream):
         nov = m._novelty(feats[0].numpy().astype(np.float64), self.novelty)
         self.novelty = float(nov[-1])
         self.seen += 1
-        if self.seen <= self.delay_frames:  # frame 0 is not due yet
+        if self.seen <= m.lookahead:  # frame 0 is not read yet
             return self.rest[0].copy(), self.rest[1].copy()
         # the novelty of the frame read, not of the (delayed) frame returned: it lags the
         # offline result's by the look-ahead, within the smoothing's time constant
         out = m._outputs(p[0], logit[0], logvar[0], nov, None if members is None else members[0])
+        h = self.height_index
+        if not self.heights:  # frames before the first are the first (window_average's edge)
+            self.heights.extend([out.vectors[0, h]] * (self.heights.maxlen // 2))
+        self.heights.append(out.vectors[0, h])
+        self.waiting.append(out)
+        if len(self.heights) < self.heights.maxlen:  # frame 0's window is not read yet
+            return self.rest[0].copy(), self.rest[1].copy()
+        out = self.waiting[0]
+        vectors = out.vectors.copy()
+        vectors[0, h] = np.dot(self.weights, self.heights)
+        out = replace(out, vectors=vectors)
         self.contacts, self.sigma = out.contacts[0], float(out.sigma[0])
         err, flag, _ = m.confidence(out)
         self.error_m = float(err[0])
