@@ -122,11 +122,11 @@ class Learned(Method):
         ``height_smooth`` frames (:func:`imuloco.methods.postprocess.gaussian_weights`; 0:
         none); a stream's poses come the window's radius, ``int(3 height_smooth + 0.5)``
         frames, later still (3 frames = 100 ms at 30 fps). The network predicts the height
-        frame by frame: on held-out styles it jerked 52 % more than the ground truth's and took
-        the whole body's jitter 24 % over the ground truth's. 1.0 brought that to 7 % over;
-        MPJPE and foot skate do not change (docs/results/learned/experiments.md, issue 16's
-        jitter). Applied after training: a model file's value may be changed without
-        training again.
+        frame by frame: on held-out styles it jerked 34-57 % more than the ground truth's, and
+        the whole body's jitter was 23-29 % over the ground truth's; 1.0 brings that to 7-13 %
+        (seeds 0-2), and MPJPE and foot skate do not change (docs/results/learned/
+        experiments.md, issue 16's jitter). Applied after training: a model file's value may
+        be changed without training again.
     proportions : augmented draws are simulated on bodies of other proportions (height up to
         +-``proportions``, legs, arms and trunk a further +-half of it;
         :func:`imuloco.methods.learned.train.proportioned`), targets on the training skeleton.
