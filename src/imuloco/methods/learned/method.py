@@ -1,8 +1,9 @@
 """``learned``: imuloco's own causal recurrent reconstructor (see :mod:`.model`).
 
-Signals are standardized and fed to a GRU frame by frame; its pose vectors are decoded with
-:func:`imuloco.methods.pose.decode` (root path integrated from the predicted velocity and yaw
-rate), then the feet predicted in contact are pinned (:func:`imuloco.methods.postprocess.
+Signals are standardized and fed to a GRU frame by frame; the root's predicted height is
+averaged over a few frames either side (``height_smooth``), and the pose vectors are decoded
+with :func:`imuloco.methods.pose.decode` (root path integrated from the predicted velocity and
+yaw rate), then the feet predicted in contact are pinned (:func:`imuloco.methods.postprocess.
 pin_feet`, heels at the ankle joints and toes at the toe joints: the root moves) and held
 where they landed on the floor (:func:`imuloco.methods.postprocess.lock_feet`: the legs bend),
 which removes foot skating.
