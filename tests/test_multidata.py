@@ -14,7 +14,12 @@ from imuloco.core.retarget import resampled
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
 from imuloco.evaluate.bench import run_bench
-from imuloco.evaluate.metrics import METRIC_KEYS, RETARGETED_KEYS, evaluate_parts
+from imuloco.evaluate.metrics import (
+    METRIC_KEYS,
+    RETARGETED_KEYS,
+    evaluate_parts,
+    evaluate_parts_curves,
+)
 from imuloco.evaluate.protocols import folds
 from imuloco.io.bvh import write_bvh
 from imuloco.io.database import (
@@ -131,6 +136,18 @@ def test_evaluate_parts_also_scores_against_the_retargeted_truth(sample):
     assert perfect["mpjpe_cm"] > 0.5  # the other body's proportions: a floor above zero
     assert perfect["mpjpe_retargeted_cm"] < 1e-6
     assert perfect["upper_retargeted_cm"] < 1e-6 and perfect["lower_retargeted_cm"] < 1e-6
+
+
+def test_evaluate_parts_curves_are_the_rms_errors_its_metrics_average(sample):
+    c = sample.clips[0]
+    other = other_rig(c, 1.3)
+    moved = Motion(c.skeleton, c.rotations[::-1].copy(), c.root, c.fps)  # another motion
+    values, actual, against = evaluate_parts_curves(other, moved, retargeted=c)
+    assert values == evaluate_parts(other, moved, retargeted=c)
+    assert actual.shape == (c.num_frames,)
+    assert actual.mean() * 100 == pytest.approx(values["rmse_cm"], rel=1e-12)
+    assert actual == pytest.approx(1.3 * against, rel=1e-6)  # the larger body's scale
+    assert evaluate_parts_curves(other, moved)[2] is None
 
 
 def test_cross_dataset_confidence_rows_also_hold_the_error_against_the_retargeted_truth(sample):

@@ -221,14 +221,11 @@ def measure(method, test: list[Example], progress: bool = False, name: str = "",
         rec_s += time.perf_counter() - t0
         rec = full.motion
         frames += gt.num_frames
-        retargeted = None
+        retargeted = None  # the error against the truth on the training skeleton, per frame
         if gt.skeleton.names != rec.skeleton.names:
             cross = True
             truth = (truths or {}).get(ex.labels["name"])
-            values = metrics.evaluate_parts(gt, rec, truth)
-            actual = np.sqrt((metrics.part_errors(gt, rec)[0][:, 1:] ** 2).mean(axis=1))
-            if truth is not None:  # the same against the truth on the training skeleton
-                retargeted = np.sqrt((metrics.part_errors(truth, rec)[0][:, 1:] ** 2).mean(1))
+            values, actual, retargeted = metrics.evaluate_parts_curves(gt, rec, truth)
         else:
             rec = metrics.align_heading(rec, gt, 0)
             values = metrics.evaluate(gt, rec)

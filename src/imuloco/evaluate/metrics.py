@@ -431,6 +431,14 @@ def evaluate_parts(gt: Motion, rec: Motion, retargeted: Motion | None = None
     motion) adds :data:`RETARGETED_KEYS`, the same part errors against it, whose floor is
     zero: the reconstruction's own error, without the rigs' differences.
     """
+    return evaluate_parts_curves(gt, rec, retargeted)[0]
+
+
+def evaluate_parts_curves(gt: Motion, rec: Motion, retargeted: Motion | None = None
+                          ) -> tuple[dict[str, float | None], np.ndarray, np.ndarray | None]:
+    """:func:`evaluate_parts`, with the per-frame rms part error (T,), metres, over the parts
+    but the pelvis, against ``gt`` and against ``retargeted`` (None without it): the curves
+    the metrics average, each pair's part errors computed once."""
     from imuloco.core.bodymap import LOWER_PARTS, PARTS, UPPER_PARTS
 
     parts = list(PARTS)
@@ -441,20 +449,24 @@ def evaluate_parts(gt: Motion, rec: Motion, retargeted: Motion | None = None
     contacts = gt_contacts(gt)
     feet = [k[p] for p in FOOT_PARTS]
 
-    def rms(idx: list[int]) -> float:
-        return float(np.sqrt((err[:, idx] ** 2).mean(axis=1)).mean() * CM)
+    def curve(e: np.ndarray, idx: list[int]) -> np.ndarray:
+        return np.sqrt((e[:, idx] ** 2).mean(axis=1))
 
     def means(e: np.ndarray) -> tuple[float, float, float]:
         return tuple(float(e[:, i].mean() * CM) for i in (body, upper, lower))
 
     short = gt.num_frames < 4
-    against = (dict.fromkeys(RETARGETED_KEYS) if retargeted is None else
-               dict(zip(RETARGETED_KEYS, means(part_errors(retargeted, rec)[0]))))
+    actual, against, actual_retargeted = curve(err, body), dict.fromkeys(RETARGETED_KEYS), None
+    if retargeted is not None:
+        err_retargeted = part_errors(retargeted, rec)[0]
+        against = dict(zip(RETARGETED_KEYS, means(err_retargeted)))
+        actual_retargeted = curve(err_retargeted, body)
     mpjpe_cm, upper_cm, lower_cm = means(err)
-    return {
-        "mpjpe_cm": mpjpe_cm, "rmse_cm": rms(body),
+    values = {
+        "mpjpe_cm": mpjpe_cm, "rmse_cm": float(actual.mean() * CM),
         "upper_cm": upper_cm, "lower_cm": lower_cm,
-        "upper_rmse_cm": rms(upper), "lower_rmse_cm": rms(lower),
+        "upper_rmse_cm": float(curve(err, upper).mean() * CM),
+        "lower_rmse_cm": float(curve(err, lower).mean() * CM),
         "angle_deg": None, "dpv": None,
         "jitter": 0.0 if short else float(jerk(pr, gt.fps).mean()),
         "jitter_gt": 0.0 if short else float(jerk(pg, gt.fps).mean()),
@@ -464,3 +476,4 @@ def evaluate_parts(gt: Motion, rec: Motion, retargeted: Motion | None = None
         "path_err_cm": path_error_of(pg[:, k["pelvis"]], hg, pr[:, k["pelvis"]], hr, gt.fps),
         **against,
     }
+    return values, actual, actual_retargeted
