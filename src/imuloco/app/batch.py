@@ -411,7 +411,10 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
         workers = len(client.scheduler_info(n_workers=-1)["workers"])
         futures, jobs_of = [], {}
         if todo:
-            shared = client.scatter(blob, broadcast=True)
+            # a key of its own (hash=False): scattered under its content's hash, a model run
+            # again on the same cluster took the key the last run was releasing, and its
+            # recordings failed with "lost data" (seen in test_batch's re-runs, 2 in ~20)
+            shared = client.scatter(blob, broadcast=True, hash=False)
             job = uuid.uuid4().hex[:8]
             for n, r in todo:
                 fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
