@@ -220,6 +220,10 @@ def test_batch_writes_outputs_tables_and_error_rows(logs, fitted, client, tmp_pa
     assert w[0]["placement"] == "right_ankle" and len(w[0]["model_sha256"]) == 64
     assert w[0]["height_m"] is None and w[3]["frames"] is None
     assert w[0]["mean_error_m"] is None and w[0]["unreliable_fraction"] is None  # ridge
+    swings = [r["signal_swing_deg"] for r in w[:3]]  # a shin phone's, when it has a cadence
+    assert [s is None for s in swings] == [r["signal_cadence_spm"] is None for r in w[:3]]
+    assert any(swings) and all(40 < s < 100 for s in swings if s is not None)
+    assert all(r["right_shank_swing_deg"] > 0 for r in w[:3] if r["signal_swing_deg"])
     strides = pq.read_table(tmp_path / "strides.parquet")
     assert strides.column_names == ["walker", *STRIDE_FIELDS]
     reported = sum(len(json.loads((tmp_path / f"{r['name']}.json").read_text())["strides"])

@@ -16,7 +16,9 @@ from imuloco.evaluate.gait import (
     gait_parameters,
     knee_flexion,
     plausibility,
+    shank_swing,
     signal_cadence,
+    signal_swing,
 )
 from imuloco.io.bvh import read_bvh
 from imuloco.io.sensorlog import write_generic_csv
@@ -94,6 +96,38 @@ def test_signal_cadence_ignores_the_phone_orientation(walks):
     assert signal_cadence(turned) == pytest.approx(signal_cadence(rec), abs=1.0)
 
 
+def test_signal_swing_is_the_shanks(walks):
+    """A shin sensor's raw gyroscope gives how far its shank turns in a stride, as the
+    motion's own shank pitch does, in any phone orientation (the principal axis)."""
+    q = from_rotvec(np.array([0.4, -2.0, 1.1]))
+    for clip in walks.clips:
+        if clip.duration < 5:
+            continue
+        rec = simulate(clip, ["right_ankle"], rate=50.0, noise="phone", seed=2)
+        swing = signal_swing(rec)
+        assert 40 < swing < 100  # a walking shank's 60-80 degrees
+        assert swing == pytest.approx(shank_swing(clip, "right"), rel=0.05)
+        turned = Recording(rec.times, qrot(q, rec.acc), qrot(q, rec.gyro), rec.placements)
+        assert signal_swing(turned) == pytest.approx(swing, rel=1e-6)
+
+
+def test_signal_swing_of_a_pure_swing_despite_a_gyroscope_bias():
+    """A sensor turning 2 x 30 degrees about one axis at 0.9 strides/s (with the second
+    harmonic a leg's rate has) reads 60 degrees; a constant bias of 0.05 rad/s, which would
+    add 3 degrees a second to the angle, is left out."""
+    t = np.arange(0.0, 30.0, 0.01)
+    w = 2 * np.pi * 0.9
+    rate = np.radians(30.0) * w * np.cos(w * t) + 0.3 * np.sin(2 * w * t) + 0.05
+    axis = np.array([0.3, -0.8, 0.52]) / np.linalg.norm([0.3, -0.8, 0.52])
+    gyro = rate[:, None, None] * axis
+    rec = Recording(t, np.zeros_like(gyro) + [0.0, 9.81, 0.0], gyro, ["right_ankle"])
+    angle = np.degrees(np.ptp(np.radians(30.0) * np.sin(w * t)
+                              - 0.3 / (2 * w) * np.cos(2 * w * t)))
+    assert signal_swing(rec) == pytest.approx(angle, rel=0.03)
+    assert math.isnan(signal_swing(Recording(t[:300], rec.acc[:300], rec.gyro[:300],
+                                             ["right_ankle"])))  # 3 s: no cadence
+
+
 def test_plausibility_of_captured_motion(walks):
     for clip in walks.clips:
         p = plausibility(clip)
@@ -101,6 +135,9 @@ def test_plausibility_of_captured_motion(walks):
         assert p["knee_out_of_range_pct"] == 0 and p["hip_out_of_range_pct"] == 0
         assert 40 < p["knee_max_deg"] < 90  # swing-phase knee flexion of walking ~60-70
         assert p["foot_skate_cm_s"] < 12  # captured feet hardly slide
+        if clip.duration >= 5:  # both shanks swing alike in a walk
+            assert p["left_shank_swing_deg"] == pytest.approx(p["right_shank_swing_deg"],
+                                                              rel=0.15)
         k = knee_flexion(clip, "left")
         assert k.shape == (clip.num_frames,) and np.all(k >= 0)
 
@@ -143,6 +180,7 @@ def test_reconstruct_file_gives_a_walk_on_the_training_skeleton(log_file, fitted
     assert p["finite"] == 1.0 and p["knee_out_of_range_pct"] == 0
     gt_cadence = gait_phases(demo_clip).cadence_spm
     assert report["signal_cadence_spm"] == pytest.approx(gt_cadence, rel=0.08)
+    assert report["signal_swing_deg"] == pytest.approx(shank_swing(demo_clip), rel=0.05)
     # the reconstruction walks at the captured rhythm (strike counts of jittery baselines
     # are inflated by spurious contacts: only checked to exist)
     assert report["gait"]["cadence_rhythm_spm"] == pytest.approx(gt_cadence, rel=0.1)

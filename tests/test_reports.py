@@ -14,7 +14,8 @@ from imuloco.sensors.simulate import simulate
 # the report's keys as `imuloco reconstruct --report` and batch's NAME.json have written them
 REPORT_KEYS = ["recording", "calibration", "feet_pinned_by", "method", "model", "placement",
                "motion", "height_m", "gait", "gait_source", "gait_note", "strides",
-               "signal_cadence_spm", "plausibility", "confidence", "seconds"]
+               "signal_cadence_spm", "signal_swing_deg", "plausibility", "confidence",
+               "seconds"]
 RECORDING_KEYS = ["files", "format", "duration_s", "source_rate_hz", "samples", "unsorted",
                   "duplicates", "acc_unit", "gyro_unit", "gaps", "time_unit", "platform"]
 

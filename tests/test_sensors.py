@@ -166,3 +166,12 @@ def test_a_strapped_recording_stays_consistent_with_its_orientation(sample_db):
     assert np.median(np.linalg.norm(rate - mid, axis=1)) < 0.05
     # and it rolls: more rotation about the shank's long axis than the rigid sensor's
     assert rec.gyro[:, 0, 1].std() > 1.2 * rigid.gyro[:, 0, 1].std()
+
+
+def test_shank_placements_are_known():
+    """The shank's swing is read from sensors on a shank only (a report's signal swing)."""
+    from imuloco.sensors.placement import PRESETS
+
+    shank = {name for name, p in PRESETS.items() if p.on_shank}
+    assert {"right_ankle", "left_ankle"} <= shank
+    assert not shank & {"right_foot", "left_foot", "lower_back"}

@@ -783,6 +783,11 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                f"{_num(g['cadence_spm'], 1)} from {int(g['steps'] or 0)} steps; "
                f"speed {_num(g['speed_mps'], 2)} m/s"
                + _confidence_text(report["confidence"]))
+    if report.signal_swing_deg is not None:  # a shank sensor: how far its leg should swing
+        p = report.plausibility
+        click.echo(f"shank swing a stride: right {_num(p['right_shank_swing_deg'], 0)} deg, "
+                   f"left {_num(p['left_shank_swing_deg'], 0)} "
+                   f"(raw signal: {_num(report.signal_swing_deg, 0)})")
     _echo_gait_source(report.gait_source, report.gait_note)
     click.echo("wrote " + ", ".join(str(p) for p in written))
 

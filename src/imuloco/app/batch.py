@@ -9,7 +9,8 @@ machines these live on a shared file system). Per recording a worker writes ``NA
 checks, plus ``strides`` and ``batch``: recording, model hash, placement, height); then this
 process writes ``summary.csv`` and ``summary.json`` (one row per walker: cadence, speed, step
 and stride length, ..., height), ``walkers.parquet`` (the same rows with placement and model,
-:data:`WALKER_FIELDS`, with the method's mean predicted error and flagged share) and
+:data:`WALKER_FIELDS`, with the method's mean predicted error and flagged share and a shank
+sensor's swings) and
 ``strides.parquet`` (one row per stride, ``walker`` then
 :data:`imuloco.evaluate.strides.STRIDE_FIELDS`). A walkers file
 (:mod:`imuloco.app.walkers`) gives each walker a height and the study's own columns.
@@ -56,8 +57,11 @@ COLUMNS = ("name", "recording", "status", "frames", "duration_s", *GAIT_COLUMNS,
            "signal_cadence_spm", "seconds", "error", "height_m")  # summary.csv
 # + the method's confidence over the recording (metres of predicted rms joint position error,
 # share of frames flagged; None for methods without one)
+# and how far each reconstructed shank swings in a stride, and a shank sensor's signal (degrees;
+# None for other sensors' signals and in reports of older versions)
+SWING_FIELDS = ("signal_swing_deg", "left_shank_swing_deg", "right_shank_swing_deg")
 WALKER_FIELDS = (*COLUMNS, "placement", "method", "model", "model_sha256",
-                 "mean_error_m", "unreliable_fraction")
+                 "mean_error_m", "unreliable_fraction", *SWING_FIELDS)
 _STRINGS = {"name", "recording", "status", "error", "placement", "method", "model",
             "model_sha256", "walker", "foot"}
 _INTEGERS = {"frames", "steps"}
@@ -202,7 +206,9 @@ def walker_rows(name: str, report: dict[str, Any]) -> tuple[dict, list[dict]]:
            "error": "", "height_m": batch["height_m"], "placement": batch["placement"],
            "model_sha256": batch["model_sha256"],
            "mean_error_m": confidence.get("mean_error_m"),
-           "unreliable_fraction": confidence.get("unreliable_fraction")}
+           "unreliable_fraction": confidence.get("unreliable_fraction"),
+           "signal_swing_deg": report.get("signal_swing_deg"),
+           **{k: report["plausibility"].get(k) for k in SWING_FIELDS[1:]}}
     return row, [{"walker": name, **s} for s in report["strides"]]
 
 

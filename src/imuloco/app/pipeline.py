@@ -170,6 +170,9 @@ class ReconstructionReport:
         sensor's reconstructed motion's own gait, None otherwise).
     plausibility : :func:`imuloco.evaluate.gait.plausibility`, as JSON.
     signal_cadence_spm : the cadence of the raw signal (Welch), steps per minute.
+    signal_swing_deg : for a sensor on the shank, the degrees the raw signal turns through in
+        a stride (:func:`imuloco.evaluate.gait.signal_swing`), against which ``plausibility``'s
+        ``{side}_shank_swing_deg`` reads the reconstruction's legs; None for other sensors.
     skeleton : the user's rig the motion was retargeted onto (``None``: the model's).
     seconds : wall time of the whole reconstruction.
     confidence : the method's per-frame predicted error and unreliable flags
@@ -191,6 +194,7 @@ class ReconstructionReport:
     strides: list[dict[str, Any]]
     signal_cadence_spm: float | None
     plausibility: dict[str, Any]
+    signal_swing_deg: float | None = None
     skeleton: dict[str, Any] | None = None
     seconds: float = 0.0
     confidence: Confidence | None = None
@@ -210,7 +214,8 @@ class ReconstructionReport:
                    model=self.model.description, placement=self.placement, motion=self.motion,
                    height_m=self.height_m, gait=self.gait, gait_source=self.gait_source,
                    gait_note=self.gait_note, strides=self.strides,
-                   signal_cadence_spm=self.signal_cadence_spm, plausibility=self.plausibility)
+                   signal_cadence_spm=self.signal_cadence_spm,
+                   signal_swing_deg=self.signal_swing_deg, plausibility=self.plausibility)
         if self.motion_gait is not None:
             out["motion_gait"] = self.motion_gait
         if self.skeleton is not None:
@@ -340,11 +345,13 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         height_scale,
         plausibility,
         signal_cadence,
+        signal_swing,
         to_height,
         to_json,
     )
     from imuloco.evaluate.sensorgait import gait_report
     from imuloco.evaluate.strides import with_confidence
+    from imuloco.sensors.placement import get_placement
     from imuloco.sensors.reallog import read_log, recording_name
 
     require_extras(placement)  # before reading a long log
@@ -387,6 +394,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         height_m=height,
         **gait,
         signal_cadence_spm=to_json({"v": signal_cadence(rec, k)})["v"],
+        signal_swing_deg=(to_json({"v": signal_swing(rec, k)})["v"]
+                          if get_placement(rec.placements[k]).on_shank else None),
         plausibility=to_json(plausibility(motion)), confidence=confidence,
     )
     if skeleton is not None:
@@ -461,7 +470,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     """
     from tqdm.auto import tqdm
 
-    from imuloco.evaluate.gait import gait_parameters, to_json
+    from imuloco.evaluate.gait import gait_parameters, plausibility, to_json
     from imuloco.evaluate.metrics import evaluate
     from imuloco.io.atomic import atomic_write, check_outputs
     from imuloco.io.bvh import write_bvh
@@ -527,6 +536,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     report["metrics"] = to_json(evaluate(gt_cut, rec_cut))
     report["confidence_check"] = confidence_check(gt_cut, rec_cut, conf)
     report["gait_ground_truth"] = to_json(gait_parameters(gt_cut))
+    report["plausibility_ground_truth"] = to_json(plausibility(gt_cut))
     report["files"] = names
     report["seconds"] = round(time.perf_counter() - t0, 2)
     with atomic_write(paths["report.json"], "w") as f:
@@ -650,6 +660,9 @@ def demo_markdown(report: dict[str, Any]) -> str:
         *[f"| {k} | {_fmt(report['gait_ground_truth'][k])} | {_fmt(v)} |"
           for k, v in report["gait"].items()],
         f"| cadence of the raw signal (Welch) | | {_fmt(report['signal_cadence_spm'])} |",
+        *[f"| {k} | {_fmt(report['plausibility_ground_truth'][k])} | "
+          f"{_fmt(v)} |" for k, v in report["plausibility"].items() if k.endswith("_swing_deg")],
+        f"| shank swing of the raw signal (deg) | | {_fmt(report['signal_swing_deg'])} |",
         "",
         *confidence_markdown(report),
         "## Files",

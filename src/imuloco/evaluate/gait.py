@@ -37,6 +37,7 @@ from imuloco.phases.events import forward_difference, heading_angle
 from imuloco.phases.gait import GaitPhases
 
 FEET = ("left", "right")
+SIGNAL_RATE_HZ = 50.0  # a raw signal's grid for its cadence and swing
 
 
 def _median(values: list[float] | np.ndarray) -> float:
@@ -181,6 +182,21 @@ def hip_angle(motion: Motion, side: str = "right") -> np.ndarray:
     return _angle_deg(p[:, 3] - p[:, 2], p[:, 1] - p[:, 0])
 
 
+def _swing_rate(rec, sensor: int) -> np.ndarray:
+    """The angular velocity (rad/s, T) of a leg-worn sensor about its principal axis (the
+    leg's swing axis: the first right singular vector of the centred gyroscope samples), on a
+    uniform grid at :data:`SIGNAL_RATE_HZ`; empty for a recording under two samples of it."""
+    from imuloco.ops.filters import resample_linear
+
+    t = np.arange(rec.times[0], rec.times[-1], 1.0 / SIGNAL_RATE_HZ)
+    if len(t) < 2:
+        return np.zeros(0)
+    gyro = resample_linear(rec.times, rec.gyro[:, sensor], t)
+    gyro = gyro - gyro.mean(axis=0)
+    _, _, vt = np.linalg.svd(gyro, full_matrices=False)
+    return gyro @ vt[0]
+
+
 def signal_cadence(rec, sensor: int = 0, stride_hz: tuple[float, float] = (0.5, 1.8)) -> float:
     """Cadence (steps/min) from the raw signal of a leg-worn sensor, independent of any
     reconstruction.
@@ -197,16 +213,61 @@ def signal_cadence(rec, sensor: int = 0, stride_hz: tuple[float, float] = (0.5, 
     rec : Recording (any sampling; resampled to 50 Hz internally).
     sensor : index of the sensor; it must ride on a leg (one swing per stride).
     """
-    from imuloco.ops.filters import resample_linear
+    return _rate_cadence(_swing_rate(rec, sensor), stride_hz)
 
-    rate = 50.0
-    t = np.arange(rec.times[0], rec.times[-1], 1.0 / rate)
-    if len(t) < 2:
+
+def _rate_cadence(rate: np.ndarray, stride_hz: tuple[float, float]) -> float:
+    """:func:`signal_cadence` of a swing rate from :func:`_swing_rate`."""
+    if len(rate) < 2:
         return math.nan
-    gyro = resample_linear(rec.times, rec.gyro[:, sensor], t)
-    gyro = gyro - gyro.mean(axis=0)
-    _, _, vt = np.linalg.svd(gyro, full_matrices=False)
-    return _stride_cadence(gyro @ vt[0], rate, stride_hz, harmonics=(1, 2))
+    return _stride_cadence(rate, SIGNAL_RATE_HZ, stride_hz, harmonics=(1, 2))
+
+
+def signal_swing(rec, sensor: int = 0, stride_hz: tuple[float, float] = (0.5, 1.8)) -> float:
+    """Degrees a leg-worn sensor turns through in one stride about the leg's swing axis, from
+    its raw gyroscope, independent of any reconstruction: the rate about the principal axis
+    (as :func:`signal_cadence` reads it) integrated, then :func:`_stride_range` at the
+    signal's own stride frequency. A sensor on the shank gives the shank's swing, which
+    :func:`shank_swing` measures on a motion: on virtual walks the two agree
+    (``benchmarks/shin_stride.py``). NaN under two strides."""
+    rate = _swing_rate(rec, sensor)
+    cadence = _rate_cadence(rate, stride_hz)
+    if not math.isfinite(cadence):
+        return math.nan
+    angle = np.cumsum(rate) / SIGNAL_RATE_HZ
+    return math.degrees(_stride_range(angle, SIGNAL_RATE_HZ, cadence / 120.0))
+
+
+def shank_swing(motion: Motion, side: str = "right",
+                stride_hz: tuple[float, float] = (0.5, 1.8)) -> float:
+    """Degrees the shank (knee to ankle) turns through in one stride in the sagittal plane
+    (its pitch against the vertical along the heading, :func:`_stride_range` at the motion's
+    rhythm, :func:`motion_cadence`): what :func:`signal_swing` reads from a shank sensor.
+    NaN under two strides."""
+    cadence = motion_cadence(motion, stride_hz)
+    if not math.isfinite(cadence):
+        return math.nan
+    p = motion.part_positions(["left_hip", "right_hip", f"{side}_knee", f"{side}_ankle"])
+    theta = heading_angle(p[:, 0], p[:, 1], 0.1 * motion.fps)
+    shank = p[:, 3] - p[:, 2]
+    ahead = shank[:, 0] * np.sin(theta) + shank[:, 2] * np.cos(theta)
+    pitch = np.arctan2(ahead, -shank[:, 1])
+    return math.degrees(_stride_range(pitch, motion.fps, cadence / 120.0))
+
+
+def _stride_range(angle: np.ndarray, rate: float, stride_f: float) -> float:
+    """The median peak-to-peak of ``angle`` (T,) over consecutive windows of one stride
+    (``stride_f`` Hz), after a zero-phase high-pass at 0.4 ``stride_f`` (2nd-order
+    Butterworth): it removes a gyroscope bias's drift and slow changes of posture and keeps
+    the stride's fundamental within 3 %. NaN under two strides."""
+    from scipy.signal import butter, sosfiltfilt
+
+    n = round(rate / stride_f)
+    if len(angle) < 2 * n or n < 2:
+        return math.nan
+    sos = butter(2, 0.4 * stride_f / (rate / 2.0), "highpass", output="sos")
+    x = sosfiltfilt(sos, angle)
+    return float(np.median([np.ptp(x[i:i + n]) for i in range(0, len(x) - n + 1, n)]))
 
 
 def _stride_cadence(x: np.ndarray, rate: float, stride_hz: tuple[float, float],
@@ -258,7 +319,10 @@ def plausibility(motion: Motion) -> dict[str, float]:
     ``hip_max_deg`` (limit :data:`HIP_LIMITS_DEG`), ``knee_out_of_range_pct`` and
     ``hip_out_of_range_pct`` (frames outside the limits), ``foot_skate_cm_s`` (mean horizontal
     speed of feet while the reconstruction's own contacts say they are down, see
-    :func:`imuloco.evaluate.metrics.foot_skate`) and ``contact_pct`` (frames with a foot down).
+    :func:`imuloco.evaluate.metrics.foot_skate`), ``contact_pct`` (frames with a foot down)
+    and ``left_shank_swing_deg`` / ``right_shank_swing_deg`` (:func:`shank_swing`: in a
+    walk both shanks swing alike, and a shank sensor's own swing, :func:`signal_swing`, says
+    how far its leg's should).
     """
     from imuloco.evaluate.metrics import foot_skate
     from imuloco.phases import foot_contacts
@@ -277,4 +341,5 @@ def plausibility(motion: Motion) -> dict[str, float]:
         "hip_max_deg": float(hip.max()), "hip_out_of_range_pct": out(hip, HIP_LIMITS_DEG),
         "foot_skate_cm_s": foot_skate(motion, motion, contacts),
         "contact_pct": 100.0 * float(np.mean(down)),
+        **{f"{side}_shank_swing_deg": shank_swing(motion, side) for side in FEET},
     }

@@ -43,6 +43,11 @@ class Placement:
     surface: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rotation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
 
+    @property
+    def on_shank(self) -> bool:
+        """Whether the sensor rides on a shank (knee to ankle), whose swing it reads."""
+        return self.segment.endswith("_knee") and (self.toward or "").endswith("_ankle")
+
     def perturbed(self, rotation: np.ndarray, offset: np.ndarray) -> Placement:
         """The same placement with an extra misalignment rotation and offset (metres, in the
         anatomical frame), as when a phone is strapped slightly off."""
