@@ -43,22 +43,26 @@ def walks(data: Path, name: str):
             yield clip
 
 
-def virtual_rows(data: Path, seed: int, model) -> dict[str, np.ndarray]:
+def virtual_rows(data: Path, seed: int, model, tilt: float = 0.0,
+                 sets: tuple[str, ...] = SETS) -> dict[str, np.ndarray]:
     """Per set, rows (clips, 8): the signal's swing, the truth's right shank swing, the
     truth's stride over its leg length, then the model's stride over the model skeleton's
     leg length, its right and left shank swing, the truth's left shank swing and the
-    signal's :func:`inclination`."""
+    signal's :func:`inclination`; the sensor turned ``tilt`` degrees about its x axis
+    (:func:`imuloco.methods.learned.train.inclined`, as a calibration that far off would)."""
     from imuloco.core.retarget import resampled
     from imuloco.evaluate.gait import gait_parameters, shank_swing, signal_swing
+    from imuloco.methods.learned.train import inclined
     from imuloco.sensors.simulate import simulate
 
     out = {}
     leg_model = model.skeleton_.leg_length()
-    for name in SETS:
+    for name in sets:
         rows = []
         for clip in walks(data, name):
             clip = resampled(clip, 30.0)
             rec = simulate(clip, ["right_ankle"], rate=50.0, noise="phone", seed=seed)
+            rec = inclined(rec, np.array([tilt]))
             rec_motion = model.reconstruct(rec)
             rows.append([signal_swing(rec), shank_swing(clip, "right"),
                          gait_parameters(clip)["stride_length_m"] / clip.skeleton.leg_length(),
@@ -103,6 +107,9 @@ def main() -> None:
     ap.add_argument("--models", default="shipped",
                     help="right-ankle model files for the real walk, comma-separated "
                          "('shipped': the shipped one, also measured on the virtual walks)")
+    ap.add_argument("--tilts", default="-12,12",
+                    help="degrees the virtual sensors of the other sets are also turned by, as "
+                         "a calibration that far off would (-12: the real walk's inclination)")
     ap.add_argument("-o", "--output", type=Path, help="also write the tables to this file")
     args = ap.parse_args()
     logging.getLogger("imuloco").setLevel(logging.ERROR)  # the real log's gap warnings
@@ -126,6 +133,9 @@ def main() -> None:
     lines = [(f"Virtual walks (right ankle, `phone` noise, 50 Hz, seed {args.seed}); median "
              "[10th, 90th percentile]:"), "", "| " + " | ".join(head) + " |",
              "|---|" + "---:|" * (len(head) - 1)]
+    for tilt in (float(t) for t in args.tilts.split(",") if t):
+        turned = virtual_rows(args.data, args.seed, model, tilt, SETS[1:])
+        rows.update({f"{name}, turned {tilt:+g} deg": r for name, r in turned.items()})
     for name, r in rows.items():
         cells = (name, str(len(r)), q(r[:, 0]), q(r[:, 7]), q(r[:, 0] / r[:, 1]), q(r[:, 2]),
                  q((slope * r[:, 0] + icpt) / r[:, 2]), q(r[:, 3] / r[:, 2]),
