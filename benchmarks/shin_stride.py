@@ -12,7 +12,8 @@ length, linear in the swing) is fitted on ``bandai-namco-2``'s walks and read on
 the shipped ``learned_right_ankle.npz`` reconstructs from it (both calibration branches;
 its stride and both shanks' swing), beside the same model on the virtual walks (which it
 trained on: in-sample). The real walk has no reference: this is a consistency check, and the
-law is fitted on virtual walks only, never on the real one. ``--models`` adds other
+law is fitted on virtual walks only, never on the real one. Last, the real walk with its
+signals' amplitude scaled (what the model's stride follows). ``--models`` adds other
 right-ankle model files to the real walk's table (earlier shipped weights are in git:
 ``git show REV:src/imuloco/data/models/learned_right_ankle.npz > FILE``).
 
@@ -26,7 +27,7 @@ import logging
 from pathlib import Path
 
 import numpy as np
-from shin_novelty import real_walk
+from shin_novelty import changed, dynamics, real_walk
 
 SETS = ("bandai-namco-2", "bandai-namco-1", "cmu-iclone")
 MIN_SECONDS = 4.0  # a signal's cadence needs two of the slowest strides (signal_cadence)
@@ -100,6 +101,26 @@ def real_rows(data: Path, model) -> list[tuple[str, dict[str, float]]]:
     return out
 
 
+def scaled_rows(data: Path, model, seconds: float = 240.0) -> list[str]:
+    """The real walk's first ``seconds`` (after 10 s) with its signals' amplitude scaled: the
+    acceleration's dynamics (:func:`shin_novelty.dynamics`) and the whole gyroscope. Table
+    rows: the model's stride and both shanks' swing."""
+    from imuloco.evaluate.gait import gait_parameters, shank_swing
+
+    real = real_walk(data, seconds)
+    changes = {"as recorded": real}
+    for k in (0.7, 1.4, 2.0):
+        changes[f"acceleration dynamics x {k}"] = changed(real, lambda r, k=k: dynamics(r, k))
+    for k in (0.8, 1.2):
+        changes[f"gyroscope x {k}"] = changed(real, gyro=lambda r, k=k: r.gyro * k)
+    lines = []
+    for name, rec in changes.items():
+        m = model.reconstruct(rec)
+        lines.append(f"| {name} | {gait_parameters(m)['stride_length_m']:.2f} | "
+                     f"{shank_swing(m, 'right'):.0f} / {shank_swing(m, 'left'):.0f} |")
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=Path("../shared/data"))
@@ -161,6 +182,10 @@ def main() -> None:
                      f"{v['right swing']:.1f} / {v['left swing']:.1f}",
                      "{:.0f} / {:.0f}".format(*v["stance L / R"]))
             lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", ("The shipped model on the real walk's first 240 s (after 10 s, default branch) "
+              "with its signals' amplitude scaled:"), "",
+              "| change | model's stride m | model's right / left swing deg |",
+              "|---|---:|---:|", *scaled_rows(args.data, model)]
     text = "\n".join(lines) + "\n"
     print(text)
     if args.output:
