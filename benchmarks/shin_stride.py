@@ -7,15 +7,16 @@ A shin sensor's gyroscope says, with no model, how far its shank turns in a stri
 noise, 50 Hz as the real phone) that swing is compared with the ground truth's shank
 (:func:`imuloco.evaluate.gait.shank_swing`), and a stride-from-swing law (stride over leg
 length, linear in the swing) is fitted on ``bandai-namco-2``'s walks and read on
-``bandai-namco-1``'s and ``cmu-iclone``'s (other styles, other people). Then the real
-``realworld-shin`` walk: its swing, the stride the law gives on the model skeleton, and what
-the shipped ``learned_right_ankle.npz`` reconstructs from it (both calibration branches;
-its stride and both shanks' swing), beside the same model on the virtual walks (which it
-trained on: in-sample). The real walk has no reference: this is a consistency check, and the
-law is fitted on virtual walks only, never on the real one. Last, the real walk with its
-signals' amplitude scaled (what the model's stride follows). ``--models`` adds other
-right-ankle model files to the real walk's table (earlier shipped weights are in git:
-``git show REV:src/imuloco/data/models/learned_right_ankle.npz > FILE``).
+``bandai-namco-1``'s and ``cmu-iclone``'s (other styles, other people). Those two sets are
+also read turned (``--tilts``) and with damped accelerations (``--damped``), as the real
+phone differs. Then the real ``realworld-shin`` walk: its swing, the stride the law gives on
+the model skeleton, and what the shipped ``learned_right_ankle.npz`` reconstructs from it
+(both calibration branches; its stride and both shanks' swing), beside the same model on the
+virtual walks (which it trained on: in-sample). Last, the real walk with its signals'
+amplitude scaled (what the model's stride follows). The real walk has no reference: this is
+a consistency check, and the law is fitted on virtual walks only, never on the real one.
+``--models`` adds other right-ankle model files to the real walk's table (earlier shipped
+weights are in git: ``git show REV:src/imuloco/data/models/learned_right_ankle.npz > F``).
 
     python benchmarks/shin_stride.py --models shipped,A.npz,B.npz
 """
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -44,16 +46,14 @@ def walks(data: Path, name: str):
             yield clip
 
 
-def virtual_rows(data: Path, seed: int, model, tilt: float = 0.0,
+def virtual_rows(data: Path, seed: int, model, change: Callable | None = None,
                  sets: tuple[str, ...] = SETS) -> dict[str, np.ndarray]:
     """Per set, rows (clips, 8): the signal's swing, the truth's right shank swing, the
     truth's stride over its leg length, then the model's stride over the model skeleton's
     leg length, its right and left shank swing, the truth's left shank swing and the
-    signal's :func:`inclination`; the sensor turned ``tilt`` degrees about its x axis
-    (:func:`imuloco.methods.learned.train.inclined`, as a calibration that far off would)."""
+    signal's :func:`inclination`; each recording first mapped by ``change``."""
     from imuloco.core.retarget import resampled
     from imuloco.evaluate.gait import gait_parameters, shank_swing, signal_swing
-    from imuloco.methods.learned.train import inclined
     from imuloco.sensors.simulate import simulate
 
     out = {}
@@ -63,7 +63,7 @@ def virtual_rows(data: Path, seed: int, model, tilt: float = 0.0,
         for clip in walks(data, name):
             clip = resampled(clip, 30.0)
             rec = simulate(clip, ["right_ankle"], rate=50.0, noise="phone", seed=seed)
-            rec = inclined(rec, np.array([tilt]))
+            rec = rec if change is None else change(rec)
             rec_motion = model.reconstruct(rec)
             rows.append([signal_swing(rec), shank_swing(clip, "right"),
                          gait_parameters(clip)["stride_length_m"] / clip.skeleton.leg_length(),
@@ -131,6 +131,9 @@ def main() -> None:
     ap.add_argument("--tilts", default="-12,12",
                     help="degrees the virtual sensors of the other sets are also turned by, as "
                          "a calibration that far off would (-12: the real walk's inclination)")
+    ap.add_argument("--damped", default="0.5",
+                    help="factors the other sets' virtual accelerations' dynamics are also "
+                         "scaled by (a real phone's carry about half the virtual ones')")
     ap.add_argument("-o", "--output", type=Path, help="also write the tables to this file")
     args = ap.parse_args()
     logging.getLogger("imuloco").setLevel(logging.ERROR)  # the real log's gap warnings
@@ -154,9 +157,16 @@ def main() -> None:
     lines = [(f"Virtual walks (right ankle, `phone` noise, 50 Hz, seed {args.seed}); median "
              "[10th, 90th percentile]:"), "", "| " + " | ".join(head) + " |",
              "|---|" + "---:|" * (len(head) - 1)]
-    for tilt in (float(t) for t in args.tilts.split(",") if t):
-        turned = virtual_rows(args.data, args.seed, model, tilt, SETS[1:])
-        rows.update({f"{name}, turned {tilt:+g} deg": r for name, r in turned.items()})
+    from imuloco.methods.learned.train import inclined
+
+    changes = {**{f"turned {t:+g} deg": lambda r, t=t: inclined(r, np.array([t]))
+                  for t in (float(x) for x in args.tilts.split(",") if x)},
+               **{f"acceleration dynamics x {k:g}": lambda r, k=k: changed(r, lambda q:
+                                                                         dynamics(q, k))
+                  for k in (float(x) for x in args.damped.split(",") if x)}}
+    for label, change in changes.items():
+        rows.update({f"{name}, {label}": r for name, r in
+                     virtual_rows(args.data, args.seed, model, change, SETS[1:]).items()})
     for name, r in rows.items():
         cells = (name, str(len(r)), q(r[:, 0]), q(r[:, 7]), q(r[:, 0] / r[:, 1]), q(r[:, 2]),
                  q((slope * r[:, 0] + icpt) / r[:, 2]), q(r[:, 3] / r[:, 2]),
