@@ -5,7 +5,7 @@
 A shin sensor's gyroscope says, with no model, how far its shank turns in a stride
 (:func:`imuloco.evaluate.gait.signal_swing`). On virtual walks (the right ankle, ``phone``
 noise, 50 Hz as the real phone) that swing is compared with the ground truth's shank
-(:func:`imuloco.evaluate.gait.shank_swing`), and a stride-from-swing law (stride over leg
+(:func:`imuloco.evaluate.gait.shank_swings`), and a stride-from-swing law (stride over leg
 length, linear in the swing) is fitted on ``bandai-namco-2``'s walks and read on
 ``bandai-namco-1``'s and ``cmu-iclone``'s (other styles, other people). Those two sets are
 also read turned (``--tilts``) and with damped accelerations (``--damped``), as the real
@@ -53,7 +53,7 @@ def virtual_rows(data: Path, seed: int, model, change: Callable | None = None,
     leg length, its right and left shank swing, the truth's left shank swing and the
     signal's :func:`inclination`; each recording first mapped by ``change``."""
     from imuloco.core.retarget import resampled
-    from imuloco.evaluate.gait import gait_parameters, shank_swing, signal_swing
+    from imuloco.evaluate.gait import gait_parameters, shank_swings, signal_swing
     from imuloco.sensors.simulate import simulate
 
     out = {}
@@ -65,11 +65,11 @@ def virtual_rows(data: Path, seed: int, model, change: Callable | None = None,
             rec = simulate(clip, ["right_ankle"], rate=50.0, noise="phone", seed=seed)
             rec = rec if change is None else change(rec)
             rec_motion = model.reconstruct(rec)
-            rows.append([signal_swing(rec), shank_swing(clip, "right"),
+            truth, read = shank_swings(clip), shank_swings(rec_motion)
+            rows.append([signal_swing(rec), truth["right"],
                          gait_parameters(clip)["stride_length_m"] / clip.skeleton.leg_length(),
                          gait_parameters(rec_motion)["stride_length_m"] / leg_model,
-                         shank_swing(rec_motion, "right"), shank_swing(rec_motion, "left"),
-                         shank_swing(clip, "left"), inclination(rec)])
+                         read["right"], read["left"], truth["left"], inclination(rec)])
         out[name] = np.array(rows, dtype=np.float64)
     return out
 
@@ -85,18 +85,18 @@ def inclination(rec) -> float:
 
 def real_rows(data: Path, model) -> list[tuple[str, dict[str, float]]]:
     """The whole real walk on each calibration branch: the model's gait and shank swings."""
-    from imuloco.evaluate.gait import gait_parameters, shank_swing, signal_swing
+    from imuloco.evaluate.gait import gait_parameters, shank_swings, signal_swing
 
     out = []
     for branch, still_s in (("gravity at rest (default)", 1.0), ("the walk's mean force", 1e9)):
         rec = real_walk(data, None, still_s)
         m = model.reconstruct(rec)
-        g = gait_parameters(m)
+        g, swing = gait_parameters(m), shank_swings(m)
         out.append((branch, {"signal swing": signal_swing(rec), "inclination": inclination(rec),
                              "stride / leg": g["stride_length_m"] / model.skeleton_.leg_length(),
                              "stride m": g["stride_length_m"], "speed": g["speed_mps"],
-                             "cadence": g["cadence_spm"], "right swing": shank_swing(m, "right"),
-                             "left swing": shank_swing(m, "left"),
+                             "cadence": g["cadence_spm"], "right swing": swing["right"],
+                             "left swing": swing["left"],
                              "stance L / R": (g["left_stance_pct"], g["right_stance_pct"])}))
     return out
 
@@ -105,7 +105,7 @@ def scaled_rows(data: Path, model, seconds: float = 240.0) -> list[str]:
     """The real walk's first ``seconds`` (after 10 s) with its signals' amplitude scaled: the
     acceleration's dynamics (:func:`shin_novelty.dynamics`) and the whole gyroscope. Table
     rows: the model's stride and both shanks' swing."""
-    from imuloco.evaluate.gait import gait_parameters, shank_swing
+    from imuloco.evaluate.gait import gait_parameters, shank_swings
 
     real = real_walk(data, seconds)
     changes = {"as recorded": real}
@@ -116,8 +116,9 @@ def scaled_rows(data: Path, model, seconds: float = 240.0) -> list[str]:
     lines = []
     for name, rec in changes.items():
         m = model.reconstruct(rec)
+        swing = shank_swings(m)
         lines.append(f"| {name} | {gait_parameters(m)['stride_length_m']:.2f} | "
-                     f"{shank_swing(m, 'right'):.0f} / {shank_swing(m, 'left'):.0f} |")
+                     f"{swing['right']:.0f} / {swing['left']:.0f} |")
     return lines
 
 

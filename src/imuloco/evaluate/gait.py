@@ -228,7 +228,7 @@ def signal_swing(rec, sensor: int = 0, stride_hz: tuple[float, float] = (0.5, 1.
     its raw gyroscope, independent of any reconstruction: the rate about the principal axis
     (as :func:`signal_cadence` reads it) integrated, then :func:`_stride_range` at the
     signal's own stride frequency. A sensor on the shank gives the shank's swing, which
-    :func:`shank_swing` measures on a motion: on virtual walks the two agree
+    :func:`shank_swings` measures on a motion: on virtual walks the two agree
     (``benchmarks/shin_stride.py``). NaN under two strides."""
     rate = _swing_rate(rec, sensor)
     cadence = _rate_cadence(rate, stride_hz)
@@ -238,21 +238,25 @@ def signal_swing(rec, sensor: int = 0, stride_hz: tuple[float, float] = (0.5, 1.
     return math.degrees(_stride_range(angle, SIGNAL_RATE_HZ, cadence / 120.0))
 
 
-def shank_swing(motion: Motion, side: str = "right",
-                stride_hz: tuple[float, float] = (0.5, 1.8)) -> float:
-    """Degrees the shank (knee to ankle) turns through in one stride in the sagittal plane
-    (its pitch against the vertical along the heading, :func:`_stride_range` at the motion's
-    rhythm, :func:`motion_cadence`): what :func:`signal_swing` reads from a shank sensor.
-    NaN under two strides."""
-    cadence = motion_cadence(motion, stride_hz)
+def shank_swings(motion: Motion, stride_hz: tuple[float, float] = (0.5, 1.8)
+                 ) -> dict[str, float]:
+    """Degrees each shank (knee to ankle; ``{"left": ..., "right": ...}``) turns through in
+    one stride in the sagittal plane: its pitch against the vertical along the heading,
+    :func:`_stride_range` at the motion's rhythm (:func:`motion_cadence`). What
+    :func:`signal_swing` reads from a shank sensor. NaN under two strides."""
+    p = motion.part_positions(["pelvis", "left_hip", "right_hip", "left_ankle", "right_ankle",
+                               "left_knee", "right_knee"])
+    cadence = _rhythm_cadence(p[:, :5], motion.fps, stride_hz)
     if not math.isfinite(cadence):
-        return math.nan
-    p = motion.part_positions(["left_hip", "right_hip", f"{side}_knee", f"{side}_ankle"])
-    theta = heading_angle(p[:, 0], p[:, 1], 0.1 * motion.fps)
-    shank = p[:, 3] - p[:, 2]
-    ahead = shank[:, 0] * np.sin(theta) + shank[:, 2] * np.cos(theta)
-    pitch = np.arctan2(ahead, -shank[:, 1])
-    return math.degrees(_stride_range(pitch, motion.fps, cadence / 120.0))
+        return dict.fromkeys(FEET, math.nan)
+    theta = heading_angle(p[:, 1], p[:, 2], 0.1 * motion.fps)
+    out = {}
+    for side, ankle, knee in zip(FEET, (3, 4), (5, 6)):
+        shank = p[:, ankle] - p[:, knee]
+        ahead = shank[:, 0] * np.sin(theta) + shank[:, 2] * np.cos(theta)
+        pitch = np.arctan2(ahead, -shank[:, 1])
+        out[side] = math.degrees(_stride_range(pitch, motion.fps, cadence / 120.0))
+    return out
 
 
 def _stride_range(angle: np.ndarray, rate: float, stride_f: float) -> float:
@@ -302,11 +306,17 @@ def motion_cadence(motion: Motion, stride_hz: tuple[float, float] = (0.5, 1.8)) 
     That difference changes sign every step (half-wave antisymmetric), so its spectrum holds
     the stride frequency and its odd harmonics only: the stride is the fundamental's peak (a
     ``P(f) + P(2 f)`` score would tie with ``f / 2`` and halve the cadence)."""
-    pos = motion.part_positions(["pelvis", "left_hip", "right_hip", "left_ankle",
-                                 "right_ankle"])
-    theta = heading_angle(pos[:, 1], pos[:, 2], 0.1 * motion.fps)
+    return _rhythm_cadence(motion.part_positions(["pelvis", "left_hip", "right_hip",
+                                                  "left_ankle", "right_ankle"]),
+                           motion.fps, stride_hz)
+
+
+def _rhythm_cadence(pos: np.ndarray, fps: float, stride_hz: tuple[float, float]) -> float:
+    """:func:`motion_cadence` from the positions (T, 5, 3) of the pelvis, left and right hip,
+    left and right ankle."""
+    theta = heading_angle(pos[:, 1], pos[:, 2], 0.1 * fps)
     ahead = forward_difference(pos[:, 4], pos[:, 3], pos[:, 0], theta)
-    return _stride_cadence(ahead, motion.fps, stride_hz, harmonics=(1,))
+    return _stride_cadence(ahead, fps, stride_hz, harmonics=(1,))
 
 
 def plausibility(motion: Motion) -> dict[str, float]:
@@ -320,7 +330,7 @@ def plausibility(motion: Motion) -> dict[str, float]:
     ``hip_out_of_range_pct`` (frames outside the limits), ``foot_skate_cm_s`` (mean horizontal
     speed of feet while the reconstruction's own contacts say they are down, see
     :func:`imuloco.evaluate.metrics.foot_skate`), ``contact_pct`` (frames with a foot down)
-    and ``left_shank_swing_deg`` / ``right_shank_swing_deg`` (:func:`shank_swing`: in a
+    and ``left_shank_swing_deg`` / ``right_shank_swing_deg`` (:func:`shank_swings`: in a
     walk both shanks swing alike, and a shank sensor's own swing, :func:`signal_swing`, says
     how far its leg's should).
     """
@@ -341,5 +351,5 @@ def plausibility(motion: Motion) -> dict[str, float]:
         "hip_max_deg": float(hip.max()), "hip_out_of_range_pct": out(hip, HIP_LIMITS_DEG),
         "foot_skate_cm_s": foot_skate(motion, motion, contacts),
         "contact_pct": 100.0 * float(np.mean(down)),
-        **{f"{side}_shank_swing_deg": shank_swing(motion, side) for side in FEET},
+        **{f"{side}_shank_swing_deg": v for side, v in shank_swings(motion).items()},
     }
