@@ -331,6 +331,16 @@ def test_a_slow_log_in_seconds_is_refused_for_its_rate(rows, tmp_path):
     assert "cover" not in str(e.value)
 
 
+def test_a_log_too_short_to_tell_its_unit_is_refused_with_both_readings(rows, tmp_path):
+    """3 samples at 3 Hz in seconds: 0.67 s, or 3 kHz for 0.67 ms; no unit gives a rate that
+    lasts a second. The message gave only the millisecond reading's length (0.000667 s)."""
+    lines = [rows[0]] + [f"{k / 3:.6f}," + r.split(",", 1)[1] for k, r in enumerate(rows[1:4])]
+    with pytest.raises(FormatError, match=r"rate of 3 Hz \(expected at least 5 Hz\); read as "
+                                          r"ms, 3e\+03 Hz for only 0.000667 s \(expected at "
+                                          r"least 1 s\)"):
+        read_log(_write(tmp_path, lines))
+
+
 @pytest.mark.parametrize("rate", [5.0, 2000.0, 10_000.0])
 def test_a_jittered_log_at_any_rate_is_written_increasing_and_read(sample_db, tmp_path, rate):
     """simulate --rate 10000 --noise phone wrote a log the reader refused (2 ms of jitter

@@ -304,7 +304,7 @@ def _time_scale(s: Stream, times: np.ndarray) -> float:
     the unit (ms, us, ns) that makes it so (a ``time_s`` column holding milliseconds), warned.
     A unit is only taken if the signal then lasts :data:`MIN_DURATION`: a log of a few Hz in
     seconds is refused for its rate, not read as milliseconds lasting a few hundredths of a
-    second.
+    second; one too short to tell (a few samples) is refused with both readings.
 
     ``times`` : ndarray, shape (N,), sorted distinct timestamps of ``s`` as read."""
     med = float(np.median(np.diff(times)))
@@ -326,8 +326,16 @@ def _time_scale(s: Stream, times: np.ndarray) -> float:
                                         f"{med:.3g} s per sample, a rate of {1.0 / med:.3g} Hz: "
                                         f"too low for gait, expected at least {MIN_RATE:g} Hz"
                                         + other)
-    if rated:
-        return rated[0][1]  # too short in every unit: refused for its length
+    if rated and rated[0][0] == "s":
+        return 1.0  # a rate in seconds, too short: refused for its length
+    if rated:  # too slow in seconds, too short in every unit with a rate: both readings said
+        unit, scale = rated[0]
+        raise FormatError(s.path, None, f"{s.quantity}: {len(times)} timestamps a median {med:.3g} "
+                                        f"apart: in seconds a rate of {1.0 / med:.3g} Hz "
+                                        f"(expected at least {MIN_RATE:g} Hz); read as {unit}, "
+                                        f"{1.0 / (med * scale):.3g} Hz for only "
+                                        f"{span * scale:.3g} s (expected at least "
+                                        f"{MIN_DURATION:g} s)")
     raise FormatError(s.path, None, f"{s.quantity}: the timestamps step by a median {med:.3g} "
                                     f"per sample: in s, ms, us or ns that is no sampling rate "
                                     f"between {MIN_RATE:g} and {MAX_RATE:g} Hz")
