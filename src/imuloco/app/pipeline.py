@@ -344,8 +344,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     from imuloco.evaluate.gait import (
         height_scale,
         plausibility,
-        signal_cadence,
-        signal_swing,
+        signal_rhythm,
         to_height,
         to_json,
     )
@@ -384,6 +383,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar.set_postfix_str("gait")
     k = rec.placements.index(fitted.placements_[0])
     gait = gait_report(motion, rec, placement, height)
+    cadence, swing = signal_rhythm(rec, k)  # the raw signal's, beside the motion's
     gait["strides"] = with_confidence(gait["strides"], confidence.error_m, motion.fps)
     report = ReconstructionReport(
         recording=log_report.to_json(),
@@ -393,8 +393,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
                 "duration_s": round(motion.duration, 3)},
         height_m=height,
         **gait,
-        signal_cadence_spm=to_json({"v": signal_cadence(rec, k)})["v"],
-        signal_swing_deg=(to_json({"v": signal_swing(rec, k)})["v"]
+        signal_cadence_spm=to_json({"v": cadence})["v"],
+        signal_swing_deg=(to_json({"v": swing})["v"]
                           if get_placement(rec.placements[k]).on_shank else None),
         plausibility=to_json(plausibility(motion)), confidence=confidence,
     )

@@ -230,12 +230,18 @@ def signal_swing(rec, sensor: int = 0, stride_hz: tuple[float, float] = (0.5, 1.
     signal's own stride frequency. A sensor on the shank gives the shank's swing, which
     :func:`shank_swings` measures on a motion: on virtual walks the two agree
     (``benchmarks/shin_stride.py``). NaN under two strides."""
+    return signal_rhythm(rec, sensor, stride_hz)[1]
+
+
+def signal_rhythm(rec, sensor: int = 0, stride_hz: tuple[float, float] = (0.5, 1.8)
+                  ) -> tuple[float, float]:
+    """:func:`signal_cadence` and :func:`signal_swing` from one reading of the swing rate."""
     rate = _swing_rate(rec, sensor)
     cadence = _rate_cadence(rate, stride_hz)
     if not math.isfinite(cadence):
-        return math.nan
+        return cadence, math.nan
     angle = np.cumsum(rate) / SIGNAL_RATE_HZ
-    return math.degrees(_stride_range(angle, SIGNAL_RATE_HZ, cadence / 120.0))
+    return cadence, math.degrees(_stride_range(angle, SIGNAL_RATE_HZ, cadence / 120.0))
 
 
 def shank_swings(motion: Motion, stride_hz: tuple[float, float] = (0.5, 1.8)
