@@ -50,8 +50,8 @@ from scipy.optimize import nnls
 from scipy.stats import spearmanr
 from sklearn.isotonic import IsotonicRegression
 
-from imuloco.evaluate import confidence as conf
 from imuloco.io.atomic import atomic_write_text, check_output
+from imuloco.lab import confidence as conf
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs/results/generalization"
 HELDOUT = [RESULTS / "learned-heldout-contents-reverse" / d
@@ -88,8 +88,8 @@ def smoothed(rows: Rows, seconds: float) -> Rows:
 def retargeting_floor(rows: Rows, data: Path) -> np.ndarray:
     """Per ``cross-dataset`` row (N,), metres: the rms part error of the test clip's ground
     truth retargeted onto the training skeleton, as bench's protocol moves and scores it."""
-    from imuloco.evaluate.bench import load_cross_dataset
-    from imuloco.evaluate.metrics import part_errors
+    from imuloco.lab.bench import load_cross_dataset
+    from imuloco.measures.metrics import part_errors
 
     _, test, moved = load_cross_dataset([data / "bandai-namco-2", data / "bandai-namco-1"],
                                         [data / "cmu-iclone"], limit=30)

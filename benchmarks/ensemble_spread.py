@@ -16,7 +16,7 @@ Bandai-Namco sets, 30 clips a folder) and ``cross-dataset`` (the same 60 clips -
 kept under ``--models`` as ``FOLD-seedN.npz``, reused when present; ``xd`` for
 ``cross-dataset``) are averaged into one ensemble (:func:`~imuloco.methods.learned.
 method.ensemble`), which reconstructs the fold's test clips simulated with seed 0's test seed
-and is measured as the bench measures (:func:`imuloco.evaluate.bench.measure`). Its rows are
+and is measured as the bench measures (:func:`imuloco.lab.bench.measure`). Its rows are
 kept as bench result folders (``ROWS_DIR/heldout-contents``, ``ROWS_DIR/cross-dataset``, each
 with a ``confidence-learned.npz``; each measured again only when missing), which ``imuloco
 calibrate`` reads.
@@ -40,10 +40,10 @@ from foot_lock import fold_model
 from scipy.stats import spearmanr
 
 from imuloco.core.motion import MotionDatabase
-from imuloco.evaluate import confidence as conf
-from imuloco.evaluate.bench import cross_dataset_test, load_data, measure
-from imuloco.evaluate.protocols import folds
 from imuloco.io.atomic import atomic_write, atomic_write_text, check_output
+from imuloco.lab import confidence as conf
+from imuloco.lab.bench import cross_dataset_test, load_data, measure
+from imuloco.lab.protocols import folds
 from imuloco.methods.base import calibrated_error
 from imuloco.methods.learned.method import ensemble
 from imuloco.methods.training import TEST_SEED_OFFSET, synthesize

@@ -10,7 +10,7 @@ one floor level per clip (``sloped_floor=False``, the rule before the sloping fl
 :func:`imuloco.phases.contacts.floor_under`). Prints per group the mean stance share per foot
 (either heel or toe down), the largest change of a clip's stance share, the mean rise of the
 fitted floor under the heels over the clip and the ground truth's own foot skate
-(:func:`imuloco.evaluate.metrics.foot_skate` of the ground truth against itself) under each
+(:func:`imuloco.measures.metrics.foot_skate` of the ground truth against itself) under each
 labelling. A measurement, never a fit: nothing here changes a constant.
 """
 
@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from imuloco.evaluate.metrics import foot_skate
 from imuloco.io.database import load_database
+from imuloco.measures.metrics import foot_skate
 from imuloco.phases.contacts import FEET, SPEED_TOL, floor_under, foot_contacts
 
 SETS = ("cmu-iclone", "bandai-namco-2", "bandai-namco-1")

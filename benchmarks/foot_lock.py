@@ -40,10 +40,10 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
-from imuloco.evaluate import metrics
-from imuloco.evaluate.bench import load_data
-from imuloco.evaluate.protocols import folds
 from imuloco.io.atomic import atomic_write_text
+from imuloco.lab.bench import load_data
+from imuloco.lab.protocols import folds
+from imuloco.measures import metrics
 from imuloco.methods import get_method, pose
 from imuloco.methods.learned.method import PIN_SMOOTHING, lock, pin
 from imuloco.methods.modelfile import load_model

@@ -5,13 +5,13 @@
 
 Virtual right- and left-foot sensors (``simulate``, 100 Hz, the ``imu`` noise preset by
 default) on the clips of ``bandai-namco-2`` and ``bandai-namco-1`` (at most ``--limit`` per
-content, evenly spread), measured by :func:`imuloco.evaluate.sensorgait.foot_gait` as a real
+content, evenly spread), measured by :func:`imuloco.measures.sensorgait.foot_gait` as a real
 shoe sensor is. The truth is each foot's strikes by the motion's own contacts
 (:func:`imuloco.phases.gait_phases`); strikes less than 0.5 s from the clip's start or 0.2 s
 from its end (no whole swing before them or stance after) are left out. Per content: the
 clips (feet), the mean absolute step count error (%, over the strikes' span widened by the
 matching tolerance), the matched, missed and extra contacts (one to one within 0.25 s,
-:func:`imuloco.evaluate.real.match_events`) and the matched ones' timing error (median of
+:func:`imuloco.lab.real.match_events`) and the matched ones' timing error (median of
 the absolute and of the signed, ms; negative: early). A check beside the real recordings;
 nothing is fitted to it.
 """
@@ -35,9 +35,9 @@ def measure(data: Path, limit: int, noise: str, progress: bool = True) -> dict[s
     ``ic_median_ms``, ``ic_bias_ms``."""
     from tqdm.auto import tqdm
 
-    from imuloco.evaluate.real import IC_TOLERANCE_S, match_events
-    from imuloco.evaluate.sensorgait import foot_gait
     from imuloco.io.database import load_database
+    from imuloco.lab.real import IC_TOLERANCE_S, match_events
+    from imuloco.measures.sensorgait import foot_gait
     from imuloco.phases import gait_phases
     from imuloco.sensors.simulate import simulate
 

@@ -11,7 +11,7 @@ only, what such an error costs: the ``bandai-namco-2`` clips every shipped-style
 out (:func:`imuloco.methods.training.held_out_clips`) and ``--limit`` ``bandai-namco-1``
 walks and backward walks, right ankle, ``phone`` noise, test seed 1000, with every clip's
 sensor turned about its x axis by each angle (:func:`imuloco.methods.learned.train.inclined`),
-measured as ``imuloco bench`` measures a clip (:func:`imuloco.evaluate.bench.measure`):
+measured as ``imuloco bench`` measures a clip (:func:`imuloco.lab.bench.measure`):
 MPJPE (cm) and, on the backward walks, foot skate (cm/s). Nothing here changes a constant.
 """
 
@@ -43,9 +43,9 @@ def turned(examples: list, degrees: float) -> list:
 
 def main() -> None:
     from imuloco.app.pipeline import shipped_model
-    from imuloco.evaluate.bench import aggregate, measure
     from imuloco.io.atomic import atomic_write_text, check_output
     from imuloco.io.database import load_database
+    from imuloco.lab.bench import aggregate, measure
     from imuloco.methods import load_model
     from imuloco.methods.training import held_out_clips, synthesize
 

@@ -7,7 +7,7 @@ U-turn's end to the last strike) 10 m: stride = 2 x 10 m / the strikes of both f
 speed = 10 m / its duration. A foot sensor's summary reports the mean of its complete strides
 and speed from its contacts' span. For every trial and foot this measures, per bout, what
 separates the two: the foot's ZUPT distance over the swings that end at its contacts in the
-bout (:func:`imuloco.evaluate.real.bout_contacts`), the first and last of those swings against
+bout (:func:`imuloco.lab.real.bout_contacts`), the first and last of those swings against
 the middle ones, and the errors of both definitions against the reference (per trial, the
 mean over its two bouts, as ``imuloco bench --real`` scores them). A measurement of the
 protocol's definitions: nothing here changes a constant.
@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from imuloco.evaluate.real import IC_TOLERANCE_S, bout_contacts
-from imuloco.evaluate.sensorgait import sensor_gait
 from imuloco.io.realimu import IPOL_BOUT_M, find_datasets, read_trials
+from imuloco.lab.real import IC_TOLERANCE_S, bout_contacts
+from imuloco.measures.sensorgait import sensor_gait
 
 
 def bout_figures(trial) -> list[dict]:

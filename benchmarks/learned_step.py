@@ -6,10 +6,10 @@
 ``imuloco bench --speed`` fits the methods it times (it takes no model file); this times a
 saved model, by default the shipped right-shin one, on the speed benchmark's test clip (the
 first ``random-clips`` test clip of ``--data``, default the bundled sample; ``phone`` noise,
-the test seed) with one BLAS/OpenMP thread, by :mod:`imuloco.evaluate.speed`'s own timers: CPU
+the test seed) with one BLAS/OpenMP thread, by :mod:`imuloco.lab.speed`'s own timers: CPU
 ms a step (p50 over at least 300 steps) and offline frames per CPU second. ``--against REV``:
 the same file read by the ``learned`` code of a git commit too, alternating with today's in
-one run (``imuloco.evaluate.speed.method_at``). Then the breakdown of each version's step:
+one run (``imuloco.lab.speed.method_at``). Then the breakdown of each version's step:
 the CPU time of each part :meth:`LearnedStream.step` calls (mean ms a step), timed by wrapping
 those functions; ``glue`` is the rest of the step. Prints a markdown table, and writes it with the
 figures as ``learned_step.md`` / ``learned_step.json`` under ``--out``.
@@ -29,9 +29,9 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from imuloco.app.pipeline import shipped_model
-from imuloco.evaluate import speed
-from imuloco.evaluate.bench import load_data
 from imuloco.io.atomic import atomic_write, atomic_write_text
+from imuloco.lab import speed
+from imuloco.lab.bench import load_data
 from imuloco.methods import load_model
 from imuloco.methods.training import TEST_SEED_OFFSET, synthesize
 

@@ -8,7 +8,7 @@ time, which also sends the abusive messages (a 1 MiB message, 20 x 1000 rows 1e-
 2000 messages as fast as it can, a second phone, a viewer that talks). Prints and writes
 ``load.json``: viewers dropped, poses per second each viewer received, the server's memory
 growth, its log lines; then ``dropout.json``: the recovery after 1 s sensor dropouts on
-replayed simulated walks (:func:`imuloco.app.live.bench.dropout_recovery`). Linux only (reads
+replayed simulated walks (:func:`imuloco.lab.livebench.dropout_recovery`). Linux only (reads
 /proc for the server's memory); bounded: one run of ``--seconds``, nine dropout replays.
 """
 
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from imuloco.app.live.bench import dropout_recovery, load_test
 from imuloco.io.atomic import atomic_write
+from imuloco.lab.livebench import dropout_recovery, load_test
 
 
 def dropouts(threshold_cm: float = 1.0) -> dict:

@@ -5,7 +5,7 @@
 
 For each model file (``--models``, comma separated; ``shipped``: the shipped model of the
 placement), one sensor at ``--placement`` (default the right ankle), ``phone`` noise, test seed
-1000, measured as ``imuloco bench`` measures a test clip (:func:`imuloco.evaluate.bench.measure`):
+1000, measured as ``imuloco bench`` measures a test clip (:func:`imuloco.lab.bench.measure`):
 
 - ``lab``: the ``bandai-namco-2`` clips every such model holds out for its validation curve
   (:func:`imuloco.methods.training.held_out_clips`, the method's default share);
@@ -31,9 +31,9 @@ def main() -> None:
     from imuloco.app.pipeline import shipped_model
     from imuloco.core.motion import MotionDatabase
     from imuloco.core.retarget import resampled
-    from imuloco.evaluate.bench import aggregate, measure
     from imuloco.io.atomic import atomic_write_text, check_output
     from imuloco.io.database import load_database
+    from imuloco.lab.bench import aggregate, measure
     from imuloco.methods import load_model
     from imuloco.methods.training import held_out_clips, synthesize
 

@@ -34,9 +34,9 @@ from scipy.spatial import cKDTree
 from sklearn.neighbors import KDTree
 from threadpoolctl import threadpool_limits
 
-from imuloco.evaluate import speed
-from imuloco.evaluate.bench import load_data
 from imuloco.io.atomic import atomic_write, check_output
+from imuloco.lab import speed
+from imuloco.lab.bench import load_data
 from imuloco.methods import method_class
 from imuloco.methods.mousas2017.beam import SegmentBeam
 from imuloco.methods.training import TEST_SEED_OFFSET, synthesize

@@ -5,7 +5,7 @@
 
 For each model file (``shipped``: the placement's shipped model), one sensor at
 ``--placement`` (the right ankle), ``phone`` noise, test seed 1000, measured as ``imuloco
-bench`` measures a clip (:func:`imuloco.evaluate.bench.measure`): the rms over frames of the
+bench`` measures a clip (:func:`imuloco.lab.bench.measure`): the rms over frames of the
 actual error (rms over joints a frame), of the predicted error (``error_m``, calibrated when
 the file holds a calibration) and of the network's own estimate (``sigma_m``), in cm, on the
 ``bandai-namco-2`` clips every shipped-style model holds out
@@ -31,9 +31,9 @@ def rms_cm(rows: list[dict], key: str, content: str | None = None) -> float:
 
 def main() -> None:
     from imuloco.app.pipeline import shipped_model
-    from imuloco.evaluate.bench import measure
     from imuloco.io.atomic import atomic_write_text, check_output
     from imuloco.io.database import load_database
+    from imuloco.lab.bench import measure
     from imuloco.methods import load_model
     from imuloco.methods.training import held_out_clips, synthesize
 

@@ -10,10 +10,10 @@ folder, as ``docs/results/generalization/README.md``):
 - the flat-foot pitch (:func:`imuloco.phases.contacts.flat_foot_pitch`) of Bandai-Namco's
   clips, of the CMU clips on their own rig, and of the CMU clips retargeted onto the
   Bandai-Namco skeleton as the bench and training retarget them
-  (:func:`imuloco.evaluate.bench.truth_on_training_rig`); a retargeting that keeps a flat foot
+  (:func:`imuloco.lab.bench.truth_on_training_rig`); a retargeting that keeps a flat foot
   flat gives the third the first's pitch;
 - the parts measure's floor: that retargeted truth scored against the CMU truth on body parts
-  (:func:`imuloco.evaluate.metrics.evaluate_parts`);
+  (:func:`imuloco.measures.metrics.evaluate_parts`);
 - with ``--models``: each ``xd-seedN.npz`` there (``benchmarks/ensemble_spread.py``'s
   ``cross-dataset`` networks) scored as ``bench`` scores it, on the parts and against the
   retargeted truth, on seed 0's test signals.
@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 from foot_lock import fold_model
 
-from imuloco.evaluate.bench import load_cross_dataset, measure
-from imuloco.evaluate.metrics import evaluate_parts
+from imuloco.lab.bench import load_cross_dataset, measure
+from imuloco.measures.metrics import evaluate_parts
 from imuloco.methods.training import TEST_SEED_OFFSET, synthesize
 from imuloco.phases.contacts import flat_foot_pitch
 

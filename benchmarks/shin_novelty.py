@@ -138,8 +138,8 @@ def novelty_rows(data: Path) -> list[str]:
 def model_rows(data: Path, files: list[str], min_still_s: float = 1.0) -> list[str]:
     """The ``--models`` table (module docstring)."""
     from imuloco.app.pipeline import shipped_model
-    from imuloco.evaluate.gait import gait_parameters, plausibility, signal_cadence
     from imuloco.io.motionfile import read_motion
+    from imuloco.measures.gait import gait_parameters, plausibility, signal_cadence
     from imuloco.methods import load_model
     from imuloco.phases import gait_phases
     from imuloco.sensors.simulate import simulate

@@ -3,9 +3,9 @@
     python benchmarks/shin_stride.py [--data ../shared/data] [--seed 1] [-o TABLE.md]
 
 A shin sensor's gyroscope says, with no model, how far its shank turns in a stride
-(:func:`imuloco.evaluate.gait.signal_swing`). On virtual walks (the right ankle, ``phone``
+(:func:`imuloco.measures.gait.signal_swing`). On virtual walks (the right ankle, ``phone``
 noise, 50 Hz as the real phone) that swing is compared with the ground truth's shank
-(:func:`imuloco.evaluate.gait.shank_swings`), and a stride-from-swing law (stride over leg
+(:func:`imuloco.measures.gait.shank_swings`), and a stride-from-swing law (stride over leg
 length, linear in the swing) is fitted on ``bandai-namco-2``'s walks and read on
 ``bandai-namco-1``'s and ``cmu-iclone``'s (other styles, other people). Those two sets are
 also read turned (``--tilts``) and with damped accelerations (``--damped``), as the real
@@ -38,7 +38,7 @@ MIN_SECONDS = 4.0  # a signal's cadence needs two of the slowest strides (signal
 def walks(data: Path, name: str):
     """The walking clips of one shared motion set long enough for a cadence (most of
     ``cmu-iclone``'s walks are 2-4 s)."""
-    from imuloco.evaluate.bench import load_data
+    from imuloco.lab.bench import load_data
 
     db = load_data(data / name, skip_frames=1 if name == "cmu-iclone" else 0)
     for clip, lab in zip(db.clips, db.labels):
@@ -53,7 +53,7 @@ def virtual_rows(data: Path, seed: int, model, change: Callable | None = None,
     leg length, its right and left shank swing, the truth's left shank swing and the
     signal's :func:`inclination`; each recording first mapped by ``change``."""
     from imuloco.core.retarget import resampled
-    from imuloco.evaluate.gait import gait_parameters, shank_swings, signal_swing
+    from imuloco.measures.gait import gait_parameters, shank_swings, signal_swing
     from imuloco.sensors.simulate import simulate
 
     out = {}
@@ -85,7 +85,7 @@ def inclination(rec) -> float:
 
 def real_rows(data: Path, model) -> list[tuple[str, dict[str, float]]]:
     """The whole real walk on each calibration branch: the model's gait and shank swings."""
-    from imuloco.evaluate.gait import gait_parameters, shank_swings, signal_swing
+    from imuloco.measures.gait import gait_parameters, shank_swings, signal_swing
 
     out = []
     for branch, still_s in (("gravity at rest (default)", 1.0), ("the walk's mean force", 1e9)):
@@ -105,7 +105,7 @@ def scaled_rows(data: Path, model, seconds: float = 240.0) -> list[str]:
     """The real walk's first ``seconds`` (after 10 s) with its signals' amplitude scaled: the
     acceleration's dynamics (:func:`shin_novelty.dynamics`) and the whole gyroscope. Table
     rows: the model's stride and both shanks' swing."""
-    from imuloco.evaluate.gait import gait_parameters, shank_swings
+    from imuloco.measures.gait import gait_parameters, shank_swings
 
     real = real_walk(data, seconds)
     changes = {"as recorded": real}

@@ -130,11 +130,11 @@ def sensor_table(data: Path, placement: str, model_file: Path | None = None) -> 
 
 def gait_check(motion, trial, placement: str) -> list[float]:
     """Plausibility of a real trial's reconstruction (on the walker's height when known):
-    its cadence, the sensor-level estimator's (:func:`imuloco.evaluate.sensorgait.
+    its cadence, the sensor-level estimator's (:func:`imuloco.measures.sensorgait.
     sensor_gait`), each foot's stance % and the feet's skate (cm/s, as ``reconstruct``
     reports it)."""
-    from imuloco.evaluate.gait import gait_parameters, plausibility, to_height
-    from imuloco.evaluate.sensorgait import sensor_gait
+    from imuloco.measures.gait import gait_parameters, plausibility, to_height
+    from imuloco.measures.sensorgait import sensor_gait
 
     ref = trial.reference
     if np.isfinite(ref.height_m):

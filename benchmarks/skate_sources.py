@@ -8,11 +8,11 @@ missing, and test signals), today's ``learned`` post-processing (root pinned, le
 ``--flat-turns``: a flat foot's direction left to the motion, the thirteenth round's lock).
 Per fold:
 
-- the contact head against the ground truth's contacts (:func:`imuloco.evaluate.metrics.
+- the contact head against the ground truth's contacts (:func:`imuloco.measures.metrics.
   gt_contacts`), heel and toe: precision, recall, the ground truth's and the network's
   contact lengths (frames), and the onsets and offsets matched within 5 frames with their
   mean and median delay (network minus ground truth, ms);
-- the foot skate (:func:`imuloco.evaluate.metrics.foot_skate`'s samples: a foot part's
+- the foot skate (:func:`imuloco.measures.metrics.foot_skate`'s samples: a foot part's
   horizontal speed between two frames of ground-truth contact, pooled) split by what the
   foot lock did with that foot at the second frame: ``held`` (this part the held one),
   ``held, other part`` (the heel held while the toe is measured, or the reverse), ``landing``
@@ -40,10 +40,10 @@ import numpy as np
 from foot_lock import fold_model
 
 from imuloco.core.motion import Motion
-from imuloco.evaluate import metrics
-from imuloco.evaluate.bench import load_data
-from imuloco.evaluate.protocols import folds
 from imuloco.io.atomic import atomic_write_text
+from imuloco.lab.bench import load_data
+from imuloco.lab.protocols import folds
+from imuloco.measures import metrics
 from imuloco.methods import pose
 from imuloco.methods.learned.method import PIN_SMOOTHING, pin
 from imuloco.methods.postprocess import FootLock
@@ -83,7 +83,7 @@ def traced_lock(motion: Motion, c: np.ndarray, **kw) -> tuple[Motion, dict]:
 
 
 def speeds(motion: Motion) -> np.ndarray:
-    """(T - 1, 4) horizontal speeds, m/s, of :data:`imuloco.evaluate.metrics.FOOT_PARTS`."""
+    """(T - 1, 4) horizontal speeds, m/s, of :data:`imuloco.measures.metrics.FOOT_PARTS`."""
     p = motion.part_positions(list(metrics.FOOT_PARTS))[..., [0, 2]]
     return np.linalg.norm(np.diff(p, axis=0), axis=-1) * motion.fps
 

@@ -2,7 +2,7 @@
 
     python benchmarks/truth_jitter.py --data ../shared/data [--models DIR]
 
-Issue 16 asks a reconstruction's jitter (mean jerk, :func:`imuloco.evaluate.metrics.jerk`) to be
+Issue 16 asks a reconstruction's jitter (mean jerk, :func:`imuloco.measures.metrics.jerk`) to be
 within +-20 % of its ground truth's. On ``cross-dataset`` the CMU truth's is twice
 Bandai-Namco's for the same walking. Prints, per content, the jitter of the canonical body parts
 of each data set's ground truth (30 clips a folder, at the training set's 30 fps; ``cmu-iclone``
@@ -11,7 +11,7 @@ also at its own 60 fps) as recorded and after a zero-phase low-pass at 6 and 10 
 kinematics, Winter 2009). With ``--models``: the ``xd-seed0.npz`` network there
 (``benchmarks/ensemble_spread.py``'s ``cross-dataset`` one) and its ``walk``, ``run`` and
 ``walk-back`` ``heldout-contents`` networks, their reconstructions' jitter against their truth's
-at each cutoff, on the parts as ``bench`` aligns them (:func:`imuloco.evaluate.metrics.
+at each cutoff, on the parts as ``bench`` aligns them (:func:`imuloco.measures.metrics.
 part_errors`), seed 0's test signals.
 """
 
@@ -27,9 +27,9 @@ from scipy.signal import butter, sosfiltfilt
 from imuloco.core.bodymap import PARTS
 from imuloco.core.motion import MotionDatabase
 from imuloco.core.retarget import resampled
-from imuloco.evaluate.bench import load_data
-from imuloco.evaluate.metrics import jerk, part_errors
-from imuloco.evaluate.protocols import folds
+from imuloco.lab.bench import load_data
+from imuloco.lab.protocols import folds
+from imuloco.measures.metrics import jerk, part_errors
 from imuloco.methods.training import TEST_SEED_OFFSET, synthesize
 
 CUTOFFS = (None, 6.0, 10.0)  # Hz; None: as recorded

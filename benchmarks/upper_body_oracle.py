@@ -11,14 +11,14 @@ rate). It is trained on the split's training clips to give the upper body's join
 (same frame; mean squared error, standardized), and tested on its test clips. Its upper-body
 error is what knowing the legs exactly leaves; a method that reads the legs from a sensor does
 no better there, short of seeing the arms. Printed per seed: the upper body's MPJPE over the
-skeleton's upper joints (:func:`imuloco.evaluate.metrics.body_halves`) and over the canonical
+skeleton's upper joints (:func:`imuloco.measures.metrics.body_halves`) and over the canonical
 upper parts (``cross-dataset``'s measure), the training set's mean upper pose beside it, and
 the whole body's MPJPE if the lower body were exact, which bounds what a method whose upper
 body is no better than the oracle's can reach.
 
 Splits: ``heldout-styles`` (``bandai-namco-2``: styles ``exhausted`` and ``feminine`` left
 out, as ``bench``) and ``cross-dataset`` (both Bandai-Namco sets -> ``cmu-iclone``'s ground
-truth retargeted onto the training skeleton, :func:`imuloco.evaluate.bench.
+truth retargeted onto the training skeleton, :func:`imuloco.lab.bench.
 truth_on_training_rig`; the measure whose floor is zero). Needs torch (the ``[deep]`` extra).
 """
 
@@ -33,9 +33,9 @@ import torch
 
 from imuloco.core.bodymap import UPPER_PARTS
 from imuloco.core.motion import Motion, MotionDatabase
-from imuloco.evaluate.bench import load_cross_dataset, load_data
-from imuloco.evaluate.metrics import body_halves, heading_of, local_positions
-from imuloco.evaluate.protocols import folds
+from imuloco.lab.bench import load_cross_dataset, load_data
+from imuloco.lab.protocols import folds
+from imuloco.measures.metrics import body_halves, heading_of, local_positions
 from imuloco.ops.heading import to_heading_frame
 
 WINDOW, STRIDE, BATCH, HIDDEN, PEAK_LR = 120, 30, 32, 128, 4e-3

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from imuloco.evaluate import metrics
-from imuloco.evaluate.protocols import split
+from imuloco.lab.protocols import split
+from imuloco.measures import metrics
 from imuloco.methods import get_method, method_class, method_names, pose
 from imuloco.methods.features import (
     PoseIntegrator,

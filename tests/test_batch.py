@@ -21,10 +21,10 @@ from imuloco.app.batch import (
 )
 from imuloco.cli import cli
 from imuloco.errors import OutputExistsError
-from imuloco.evaluate.gait import gait_parameters
-from imuloco.evaluate.strides import STRIDE_FIELDS, stride_rows
 from imuloco.io.bvh import read_bvh
 from imuloco.io.sensorlog import write_generic_csv
+from imuloco.measures.gait import gait_parameters
+from imuloco.measures.strides import STRIDE_FIELDS, stride_rows
 from imuloco.sensors.simulate import simulate
 
 distributed = pytest.importorskip("distributed")
@@ -274,7 +274,7 @@ def test_a_walkers_file_gives_each_walker_its_height(logs, fitted, client, tmp_p
     tables (an empty cell or no row: --height), the study's columns the tables (a walker of
     another batch is counted and left out); a re-run redoes only the walker whose height
     changed."""
-    from imuloco.evaluate.gait import stature
+    from imuloco.measures.gait import stature
 
     paths, _ = logs
     names = output_names(paths)
@@ -415,7 +415,7 @@ def test_cli_batch_on_a_scheduler_reports_failures(logs, fitted, client, tmp_pat
 
 
 def test_benchmark_walkers_are_continuous_and_seeded(sample_db):
-    from imuloco.evaluate.batchbench import WALKING, walker_motion
+    from imuloco.lab.batchbench import WALKING, walker_motion
     from imuloco.ops.heading import heading_from_hips, wrap_angle
 
     clips = [c for c, lab in zip(sample_db.clips, sample_db.labels)

@@ -10,8 +10,8 @@ import pytest
 from click.testing import CliRunner
 
 from imuloco.cli import cli
-from imuloco.evaluate.bench import run_bench
-from imuloco.evaluate.protocols import MOTION_TYPES, PROTOCOL_VERSION
+from imuloco.lab.bench import run_bench
+from imuloco.lab.protocols import MOTION_TYPES, PROTOCOL_VERSION
 from imuloco.methods import REGISTRY
 from imuloco.methods.baselines import MeanPose
 
@@ -193,7 +193,7 @@ def test_a_split_that_leaves_no_test_clips_is_refused_by_name(sample_db):
     """Data with none of the held-out styles (e.g. ``--limit`` too small) is an InputError
     naming the split and the counts, which the CLI prints as one line, not a traceback."""
     from imuloco.errors import InputError
-    from imuloco.evaluate.protocols import HELDOUT_STYLES, split
+    from imuloco.lab.protocols import HELDOUT_STYLES, split
 
     keep = [i for i, lab in enumerate(sample_db.labels) if lab.get("style") not in HELDOUT_STYLES]
     with pytest.raises(InputError, match=r"heldout-styles.*\(\d+ / 0 clips\)"):

@@ -235,7 +235,7 @@ def test_real_foot_sensors_turn_about_their_calibrated_medio_lateral_axis(shared
 def test_calibrating_a_shoe_sensor_and_measuring_its_gait_track_it_once(foot_walks):
     """``reconstruct`` calibrates a shoe sensor, then measures its gait from the same signals:
     the ZUPT track is computed once."""
-    from imuloco.evaluate.sensorgait import sensor_gait
+    from imuloco.measures.sensorgait import sensor_gait
     from imuloco.sensors.foottrack import _track
 
     rec = Recording(foot_walks[0].times, foot_walks[0].acc + 1e-9, foot_walks[0].gyro,

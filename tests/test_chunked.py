@@ -12,8 +12,8 @@ from click.testing import CliRunner
 from imuloco.app.chunked import reconstruct_pieces
 from imuloco.app.pipeline import reconstruct_recording
 from imuloco.core.recording import Recording
-from imuloco.evaluate.gait import stature
 from imuloco.io.bvh import read_bvh, write_bvh, write_bvh_pieces
+from imuloco.measures.gait import stature
 from imuloco.ops.rotations import geodesic
 from imuloco.sensors.simulate import simulate
 
@@ -131,8 +131,8 @@ def test_pieces_report_a_foot_sensors_own_gait(sample_db, tmp_path):
     pytest.importorskip("gaitmap")
     from imuloco.app.chunked import reconstruct_to_bvh
     from imuloco.app.pipeline import reconstruct_file
-    from imuloco.evaluate.sensorgait import GAIT_KEYS
     from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.measures.sensorgait import GAIT_KEYS
     from imuloco.methods import get_method
 
     clip = sample_db.where(content="walk").clips[0]

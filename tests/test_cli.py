@@ -200,7 +200,7 @@ def test_missing_extra_hint_is_quoted_for_the_shell():
 
 def test_bench_load_takes_comma_separated_folders(tmp_path, monkeypatch):
     """`--load A,B` as its help says (click refused the pair as one missing folder)."""
-    from imuloco.evaluate import loadspeed
+    from imuloco.lab import loadspeed
 
     seen = []
     monkeypatch.setattr(loadspeed, "load_benchmark",

@@ -390,10 +390,10 @@ def test_a_bad_model_or_rig_leaves_no_partial_demo_and_is_refused_first(tmp_path
 
 def test_the_height_range_has_one_source(monkeypatch, tmp_path, two_joint_skeleton):
     """--height, a walkers file and height_scale take the body heights of
-    :mod:`imuloco.evaluate.gait`: the command line reads them on first use (so that importing
+    :mod:`imuloco.measures.gait`: the command line reads them on first use (so that importing
     it imports no numpy); each had its own copy of 0.5 to 2.6."""
     from imuloco.app.walkers import HEIGHT_RANGE_M
-    from imuloco.evaluate import gait
+    from imuloco.measures import gait
 
     assert HEIGHT_RANGE_M == (gait.MIN_HEIGHT_M, gait.MAX_HEIGHT_M)
     monkeypatch.setattr(gait, "MAX_HEIGHT_M", 2.0)

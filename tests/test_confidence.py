@@ -17,8 +17,8 @@ from click.testing import CliRunner
 from imuloco.app.confidence import MAX_BINS, MAX_SEGMENTS, Confidence, flagged_segments
 from imuloco.app.pipeline import DEMO_CLIP, ModelChoice, reconstruct_file
 from imuloco.cli import cli
-from imuloco.evaluate.strides import with_confidence
 from imuloco.io.sensorlog import write_generic_csv
+from imuloco.measures.strides import with_confidence
 from imuloco.methods.base import Reconstruction
 from imuloco.sensors.simulate import simulate
 
@@ -131,7 +131,7 @@ def test_stride_confidence_is_the_mean_predicted_error_over_the_stride():
 
 # ---- the pipeline ------------------------------------------------------------------------
 def test_report_carries_the_methods_confidence_and_height_scales_it(confident, log_file):
-    from imuloco.evaluate.gait import height_scale
+    from imuloco.measures.gait import height_scale
     from imuloco.sensors.reallog import read_log
 
     motion, report = reconstruct_file(log_file, fitted=confident)
@@ -293,7 +293,7 @@ def test_batch_fills_the_stride_tables_confidence(confident, log_file, tmp_path,
 
 # ---- the demo's plot ---------------------------------------------------------------------
 def test_error_plot_draws_predicted_beside_actual(sample_db, tmp_path, monkeypatch):
-    from imuloco.evaluate.metrics import rmse_per_frame
+    from imuloco.measures.metrics import rmse_per_frame
     from imuloco.viz import plots
 
     gt, rec = sample_db.clips[0].slice(0, 60), sample_db.clips[0].slice(8, 68)  # 8 frames late
@@ -316,7 +316,7 @@ def test_error_plot_draws_predicted_beside_actual(sample_db, tmp_path, monkeypat
 
 def test_demo_report_sets_predicted_beside_actual(sample_db):
     from imuloco.app.pipeline import confidence_check, confidence_markdown
-    from imuloco.evaluate.metrics import rmse_per_frame
+    from imuloco.measures.metrics import rmse_per_frame
 
     gt, rec = sample_db.clips[0].slice(0, 60), sample_db.clips[0].slice(8, 68)  # 8 frames late
     actual = rmse_per_frame(gt, rec) / 100

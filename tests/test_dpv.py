@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from imuloco.core.motion import Motion
-from imuloco.evaluate.metrics import angle_error, dpv
+from imuloco.measures.metrics import angle_error, dpv
 from imuloco.ops.rotations import from_rotvec, qmul
 
 

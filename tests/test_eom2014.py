@@ -7,7 +7,7 @@ import pytest
 from hmmlearn.hmm import CategoricalHMM
 from scipy.optimize import check_grad
 
-from imuloco.evaluate import metrics
+from imuloco.measures import metrics
 from imuloco.methods import get_method, load_model
 from imuloco.methods.eom2014 import gplvm
 from imuloco.methods.eom2014 import hmm as H

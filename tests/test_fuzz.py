@@ -7,7 +7,7 @@ import json
 from click.testing import CliRunner
 
 from imuloco.cli import cli
-from imuloco.evaluate.fuzz import OUTCOMES, judge
+from imuloco.lab.fuzz import OUTCOMES, judge
 
 
 def test_judge_tells_clean_from_foreign_and_accepted(tmp_path, sample_db):
@@ -35,7 +35,7 @@ def test_bench_fuzz_writes_the_table(tmp_path):
 def test_fuzzed_real_data_folders_end_in_clean_errors():
     """The real-data layouts (pyshoe-vicon, ipol-gait, mobilise-d-lab): generated malformed
     folders are read or refused with the library's own error, none hangs or is implausible."""
-    from imuloco.evaluate.fuzz import run_fuzz
+    from imuloco.lab.fuzz import run_fuzz
 
     r = run_fuzz(150, ("real",))["real"]
     assert r["wrong exception type"] == r["hang"] == r["garbage accepted"] == 0, r["examples"]
@@ -46,7 +46,7 @@ def test_fuzzed_xsens_exports_end_in_clean_errors():
     """Xsens text exports (MT Manager, the DOT app, ipol-gait) through read_log: generated
     malformed files are read or refused with the library's own error, none hangs or is
     implausible (before the xsens seed the fuzzer never read one)."""
-    from imuloco.evaluate.fuzz import run_fuzz
+    from imuloco.lab.fuzz import run_fuzz
 
     r = run_fuzz(150, ("xsens",))["xsens"]
     assert r["wrong exception type"] == r["hang"] == r["garbage accepted"] == 0, r["examples"]

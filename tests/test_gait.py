@@ -1,4 +1,4 @@
-"""Cadence from a motion's rhythm (imuloco.evaluate.gait.motion_cadence)."""
+"""Cadence from a motion's rhythm (imuloco.measures.gait.motion_cadence)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from imuloco.core.motion import Motion
-from imuloco.evaluate.gait import motion_cadence
+from imuloco.measures.gait import motion_cadence
 from imuloco.ops.rotations import qmul
 from imuloco.phases import gait_phases
 

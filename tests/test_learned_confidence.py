@@ -14,7 +14,7 @@ from click.testing import CliRunner
 
 from imuloco.cli import cli
 from imuloco.errors import ImulocoError
-from imuloco.evaluate import confidence as conf
+from imuloco.lab import confidence as conf
 from imuloco.methods import get_method, load_model
 from imuloco.methods.base import calibrated_error
 from imuloco.methods.learned.train import proportioned
@@ -177,7 +177,7 @@ def test_bidirectional_looks_both_ways_and_is_offline_only(sample_db, signals):
     # live refuses it by name before it starts
     from imuloco.app.live.session import LiveSession
     from imuloco.errors import InputError
-    from imuloco.evaluate.bench import _latency
+    from imuloco.lab.bench import _latency
 
     assert not bi.can_stream() and bi.supports_online
     assert _latency(bi, signals) == (None, None, None)

@@ -109,7 +109,7 @@ def test_session_calibrates_then_streams_the_offline_reconstruction(fitted, phon
 def test_session_streams_in_the_wearers_height(fitted, phone):
     pytest.importorskip("websockets")
     from imuloco.app.live.server import LiveServer
-    from imuloco.evaluate.gait import stature, to_height
+    from imuloco.measures.gait import stature, to_height
 
     times, acc, gyro = phone
     server = LiveServer(fitted, calibrate_s=CALIB_S, height_m=1.55)  # not listening
@@ -351,8 +351,8 @@ def test_a_long_pause_restarts_the_model_and_the_walker_stays_where_it_was(fitte
 
 def test_a_one_second_dropout_is_recovered_within_one_second(fitted, sample_db):
     """Pose error against the run without the gap <= 1 cm from at most 1 s of stream time after
-    the first sample after the gap on (see imuloco.app.live.bench), on three replays."""
-    from imuloco.app.live.bench import dropout_recovery
+    the first sample after the gap on (see imuloco.lab.livebench), on three replays."""
+    from imuloco.lab.livebench import dropout_recovery
 
     clip = next(c for c in sample_db.clips if c.name == CLIP)
     for seed, gap_start in ((11, 4.5), (12, 5.0), (13, 5.5)):

@@ -8,7 +8,7 @@ import pytest
 
 import imuloco
 from imuloco.errors import FormatError
-from imuloco.evaluate.loadspeed import arrow_parse, numpy_parse
+from imuloco.lab.loadspeed import arrow_parse, numpy_parse
 
 SAMPLE = Path(imuloco.__file__).parent / "data" / "sample"
 
@@ -27,8 +27,8 @@ def test_arrow_and_numpy_parse_count_the_same_frames(tmp_path):
 
 
 def test_reader_comparison_finds_the_largest_difference_and_refusals(tmp_path):
-    from imuloco.evaluate.loadspeed import compare_readers, motion_difference
     from imuloco.io.bvh import read_bvh
+    from imuloco.lab.loadspeed import compare_readers, motion_difference
 
     files = sorted(SAMPLE.glob("*.bvh"))[:2]
     assert compare_readers(files, read_bvh, progress=False) == (0.0, 0)

@@ -11,12 +11,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from imuloco.core.recording import Recording
-from imuloco.evaluate.real import evaluate_gait, summarize
-from imuloco.evaluate.sensorgait import SensorGait, chord_factor, stride_row
 from imuloco.io.realimu import Bout, GaitDefinition, GaitReference, RealTrial, read_trials
+from imuloco.lab.real import evaluate_gait, summarize
+from imuloco.measures.sensorgait import SensorGait, chord_factor, stride_row
 
 pytest.importorskip("mobgap")
-from imuloco.evaluate.sensorgait import lower_back_gait
+from imuloco.measures.sensorgait import lower_back_gait
 from imuloco.sensors.calibration import body_axes
 
 

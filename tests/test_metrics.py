@@ -7,7 +7,7 @@ import pytest
 
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
-from imuloco.evaluate import metrics
+from imuloco.measures import metrics
 from imuloco.ops.rotations import about_y, from_rotvec, qinv, qmul, qrot
 
 

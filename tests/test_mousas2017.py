@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from scipy.special import logsumexp
 
-from imuloco.evaluate.metrics import mpjpe
+from imuloco.measures.metrics import mpjpe
 from imuloco.methods import get_method, load_model
 from imuloco.methods.mousas2017.forward import Topology, forward
 from imuloco.methods.mousas2017.registration import split_by_speed, warp_matrix

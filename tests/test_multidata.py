@@ -13,14 +13,6 @@ from imuloco.core.motion import Motion
 from imuloco.core.retarget import resampled
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError
-from imuloco.evaluate.bench import run_bench
-from imuloco.evaluate.metrics import (
-    METRIC_KEYS,
-    RETARGETED_KEYS,
-    evaluate_parts,
-    evaluate_parts_curves,
-)
-from imuloco.evaluate.protocols import folds
 from imuloco.io.bvh import write_bvh
 from imuloco.io.database import (
     content_of,
@@ -28,6 +20,14 @@ from imuloco.io.database import (
     load_database,
     load_databases,
     load_sample,
+)
+from imuloco.lab.bench import run_bench
+from imuloco.lab.protocols import folds
+from imuloco.measures.metrics import (
+    METRIC_KEYS,
+    RETARGETED_KEYS,
+    evaluate_parts,
+    evaluate_parts_curves,
 )
 
 
@@ -94,7 +94,7 @@ def test_several_folders_become_one_set_on_the_first_skeleton(rig_folder):
     assert all(c.fps == 30.0 for c in db.clips)
     assert {lab["dataset"] for lab in db.labels} == {"sample", rig_folder.name}
     # a retargeted clip moves as the sample clip it was made from (rig_folder's second)
-    from imuloco.evaluate.metrics import mpjpe
+    from imuloco.measures.metrics import mpjpe
 
     orig, back = load_sample().clips[4], db.clips[17]
     assert back.num_frames == orig.num_frames
@@ -154,8 +154,8 @@ def test_cross_dataset_confidence_rows_also_hold_the_error_against_the_retargete
     """A reconstruction equal to the truth on the training rig: its confidence rows' actual
     error on the other rig's parts is the proportions' floor, against the retargeted truth
     zero."""
-    from imuloco.evaluate.bench import measure
-    from imuloco.evaluate.confidence import check
+    from imuloco.lab.bench import measure
+    from imuloco.lab.confidence import check
     from imuloco.methods.base import Reconstruction
     from imuloco.methods.training import Example
 
@@ -220,8 +220,8 @@ def test_cross_dataset_from_the_command_line(rig_folder, tmp_path):
 
 def test_the_truth_on_the_training_rig_is_the_motion_the_test_clip_was_made_from(
         sample, rig_folder):
-    from imuloco.evaluate.bench import truth_on_training_rig
-    from imuloco.evaluate.metrics import mpjpe
+    from imuloco.lab.bench import truth_on_training_rig
+    from imuloco.measures.metrics import mpjpe
 
     test = load_database(rig_folder, progress=False)
     test = type(test)([resampled(c, 30.0) for c in test.clips], test.labels)

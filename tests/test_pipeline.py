@@ -12,7 +12,9 @@ from click.testing import CliRunner
 from imuloco.app.pipeline import DEMO_CLIP
 from imuloco.cli import cli
 from imuloco.core.recording import Recording
-from imuloco.evaluate.gait import (
+from imuloco.io.bvh import read_bvh
+from imuloco.io.sensorlog import write_generic_csv
+from imuloco.measures.gait import (
     gait_parameters,
     knee_flexion,
     plausibility,
@@ -20,8 +22,6 @@ from imuloco.evaluate.gait import (
     signal_cadence,
     signal_swing,
 )
-from imuloco.io.bvh import read_bvh
-from imuloco.io.sensorlog import write_generic_csv
 from imuloco.ops.rotations import from_rotvec, qrot
 from imuloco.phases import gait_phases
 from imuloco.sensors.simulate import simulate
@@ -168,7 +168,7 @@ def test_the_shipped_learned_model_is_the_default():
 
 def test_reconstruct_file_gives_a_walk_on_the_training_skeleton(log_file, fitted, demo_clip):
     from imuloco.app.pipeline import reconstruct_file
-    from imuloco.evaluate.metrics import mpjpe
+    from imuloco.measures.metrics import mpjpe
 
     motion, report = reconstruct_file(log_file, fitted=fitted)
     assert motion.skeleton.names == fitted.skeleton_.names
@@ -193,7 +193,7 @@ def test_reconstruct_file_gives_a_walk_on_the_training_skeleton(log_file, fitted
 def test_calibration_makes_the_phone_orientation_irrelevant(fitted, demo_clip):
     """A phone strapped turned gives the same reconstruction once calibrated."""
     from imuloco.app.pipeline import reconstruct_recording
-    from imuloco.evaluate.metrics import mpjpe
+    from imuloco.measures.metrics import mpjpe
 
     rec = simulate(demo_clip, ["right_ankle"], rate=100.0, noise="phone", seed=4)
     q = from_rotvec(np.array([0.0, 0.0, np.pi / 2]) + 0.2)  # screen turned a quarter and more

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from imuloco.core.motion import Motion
-from imuloco.evaluate.metrics import foot_skate, jitter
+from imuloco.measures.metrics import foot_skate, jitter
 from imuloco.methods.postprocess import FootPinner, pin_feet
 from imuloco.phases import foot_contacts
 

@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from imuloco.errors import FormatError
-from imuloco.evaluate.gait import gait_parameters
-from imuloco.evaluate.real import match_events, path_errors, reference_stance, run_real
 from imuloco.io.realimu import GaitDefinition, detect_layout, read_trials
+from imuloco.lab.real import match_events, path_errors, reference_stance, run_real
+from imuloco.measures.gait import gait_parameters
 
 pytest.importorskip("gaitmap")
 pytest.importorskip("mobgap")
-from imuloco.evaluate.sensorgait import foot_gait, lower_back_gait, sensor_gait
+from imuloco.measures.sensorgait import foot_gait, lower_back_gait, sensor_gait
 from imuloco.sensors.foottrack import foot_track, slow_swings, swings
 
 DEMO = "dataset-2_walk_normal_001"
@@ -76,8 +76,8 @@ def test_a_reconstruction_s_swings_end_at_its_strikes(demo_rec, demo_clip, monke
     strike's ankle distance from that foot's previous strike: a right stride's length is the
     swing ending at its last strike, and the swings sum to both ankles' floor distance."""
     from imuloco.app import pipeline
-    from imuloco.evaluate.real import reconstruction_gait
     from imuloco.io.realimu import GaitReference, RealTrial
+    from imuloco.lab.real import reconstruction_gait
     from imuloco.phases import gait_phases
 
     # the reconstruction is the clip itself, so the swings can be read off the clip
@@ -133,7 +133,7 @@ def test_contacts_fall_back_to_the_unfiltered_gyroscope(demo_rec, monkeypatch):
     """Where the low-passed gyroscope shows no swing peak (a jogging stride's can blur into its
     toe off), the contact is searched on the unfiltered one: with a cutoff so low that no
     stride keeps its peak, every contact is still found."""
-    from imuloco.evaluate import sensorgait
+    from imuloco.measures import sensorgait
 
     t, acc, gyro = demo_rec.times, demo_rec.acc[:, 0], demo_rec.gyro[:, 0]
     walk = foot_gait(t, acc, gyro, "right").initial_contacts
@@ -253,7 +253,7 @@ def test_the_zupt_detector_is_rts_kalman_s_default():
 def test_cadence_leaves_pauses_out():
     """A walker who stops for 7 s between two walks of 1 s strides walks at 120 steps/min:
     an interval longer than the longest stride (3 s) is a pause, not a step."""
-    from imuloco.evaluate.sensorgait import SensorGait
+    from imuloco.measures.sensorgait import SensorGait
 
     ic = np.array([0.0, 1.0, 2.0, 3.0, 10.0, 11.0, 12.0])
     foot = SensorGait("right_foot", "", initial_contacts=ic, steps_per_contact=2)
@@ -315,9 +315,9 @@ def test_ipol_stride_and_speed_follow_the_reference_s_definition():
     means' definition, the same reference gives the walk summary's error."""
     from dataclasses import replace
 
-    from imuloco.evaluate.real import evaluate_gait
-    from imuloco.evaluate.sensorgait import SensorGait, stride_row
     from imuloco.io.realimu import Bout, GaitDefinition, GaitReference, RealTrial
+    from imuloco.lab.real import evaluate_gait
+    from imuloco.measures.sensorgait import SensorGait, stride_row
 
     right = np.array([0.5, 1.6, 2.7, 3.8, 4.9, 6.0])  # the reference's strikes, bout [0, 6]
     swings = np.array([0.4, 1.4, 1.4, 1.4, 1.4, 0.7, 0.9])  # the first from standing
@@ -371,8 +371,8 @@ def test_strides_over_the_whole_trial_count_its_pauses(tmp_path):
     against the reference's 90."""
     from scipy.io import savemat
 
-    from imuloco.evaluate.real import evaluate_gait
-    from imuloco.evaluate.sensorgait import SensorGait, stride_row
+    from imuloco.lab.real import evaluate_gait
+    from imuloco.measures.sensorgait import SensorGait, stride_row
 
     t = np.arange(1000) / 200.0
     imu = np.zeros((len(t), 6))
@@ -395,7 +395,7 @@ def test_strides_over_the_whole_trial_count_its_pauses(tmp_path):
 def test_the_note_on_the_strides_mean_names_the_rows_it_lists():
     """The README's sentence names the data sets and sensors of the rows with the strides'
     mean (whatever they are) and the definition they follow, and none of the others."""
-    from imuloco.evaluate.real import MEAN_DEFINITION, _mean_note
+    from imuloco.lab.real import MEAN_DEFINITION, _mean_note
 
     def s(ds, sensor, est="imuloco", mean=True):
         return {"dataset": ds, "sensor": sensor, "estimator": est} | (
@@ -417,7 +417,7 @@ def test_a_published_path_row_names_the_trial_s_sensor(tmp_path):
     from scipy.io import savemat
 
     from imuloco.core.recording import Recording
-    from imuloco.evaluate.real import published_path_row
+    from imuloco.lab.real import published_path_row
 
     t = np.arange(400) / 200.0
     imu = np.zeros((len(t), 6))
@@ -557,8 +557,8 @@ def test_running_lengths_agree_with_speed_and_cadence(sample_db):
 
 
 def test_to_height_scales_every_length_and_speed(demo_clip):
-    from imuloco.evaluate.gait import stature, to_height
-    from imuloco.evaluate.strides import stride_rows
+    from imuloco.measures.gait import stature, to_height
+    from imuloco.measures.strides import stride_rows
 
     h = stature(demo_clip.skeleton)
     assert 1.4 < h < 2.0  # an adult's stature from the leg
@@ -580,8 +580,8 @@ def test_reconstruct_file_height_and_foot_gait(tmp_path, demo_rec, demo_clip):
     """A foot sensor: the report's gait comes from the sensor's signal (ZUPT strides), the
     motion from the shipped foot model, scaled to --height."""
     from imuloco.app.pipeline import choose_method, reconstruct_file
-    from imuloco.evaluate.gait import stature
     from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.measures.gait import stature
 
     rec = demo_rec.select(["right_foot"])
     path = write_generic_csv(rec, tmp_path / "foot.csv")
@@ -611,7 +611,7 @@ def test_a_shoe_sensor_in_its_makers_axes_reconstructs_as_one_in_the_foot_s(demo
     it gives for a sensor in the foot's frame; fed as it is, the model is lost."""
     from imuloco.app.pipeline import choose_method, reconstruct_recording
     from imuloco.core.recording import Recording
-    from imuloco.evaluate.metrics import mpjpe
+    from imuloco.measures.metrics import mpjpe
     from imuloco.ops.rotations import from_rotvec, qrot
 
     fitted, _ = choose_method(placement="left_foot")
@@ -655,7 +655,7 @@ def test_a_lower_back_sensor_in_its_makers_axes_reconstructs_as_one_in_the_l5_fr
     sensor's own axes, the model is lost."""
     from imuloco.app.pipeline import choose_method, reconstruct_recording
     from imuloco.core.recording import Recording
-    from imuloco.evaluate.metrics import mpjpe
+    from imuloco.measures.metrics import mpjpe
     from imuloco.ops.rotations import from_rotvec, qrot
 
     fitted, _ = choose_method(placement="lower_back")
@@ -678,7 +678,7 @@ def test_a_model_refuses_a_placement_it_does_not_know(tmp_path, ridge_without_de
 
 
 def test_gait_report_states_when_nothing_was_measured(demo_clip, demo_rec):
-    from imuloco.evaluate.sensorgait import gait_report
+    from imuloco.measures.sensorgait import gait_report
 
     still = demo_clip.slice(0, 1)
     still = type(still)(still.skeleton, np.repeat(still.rotations, 60, axis=0),
@@ -691,7 +691,7 @@ def test_gait_report_states_when_nothing_was_measured(demo_clip, demo_rec):
 def test_the_summary_counts_the_contacts_no_estimate_matched():
     """Two recordings: one matched everywhere, one whose 8 contacts all came too early. The
     median timing error sees only the first; the matched share shows the second."""
-    from imuloco.evaluate.real import summarize, table
+    from imuloco.lab.real import summarize, table
 
     rows = [{"dataset": "d", "sensor": "right_foot", "estimator": "imuloco", "measured": True,
              "ic_matched": 12, "ic_missed": 0, "ic_median_ms": 10.0},
@@ -706,13 +706,13 @@ def test_the_summary_counts_the_contacts_no_estimate_matched():
 @pytest.mark.shared
 def test_a_failing_estimator_is_logged_not_passed_off_as_no_gait(real_dir, monkeypatch,
                                                                  caplog):
-    from imuloco.evaluate import real
+    from imuloco.lab import real
 
     def broken(rec, placement, **kw):
         raise ValueError("the estimator broke")
 
     monkeypatch.setattr(real, "sensor_gait", broken)
-    with caplog.at_level("WARNING", logger="imuloco.evaluate.real"):
+    with caplog.at_level("WARNING", logger="imuloco.lab.real"):
         rows = run_real(real_dir / "ipol-gait", None, limit=1)
     assert rows and all(not r["measured"] and r["reason"] == "the estimator broke"
                         for r in rows if r["estimator"] == "imuloco")

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from imuloco.errors import FormatError
-from imuloco.evaluate import fuzz_real as fr
 from imuloco.io.realimu import GaitDefinition, read_trials
+from imuloco.lab import fuzz_real as fr
 
 
 def _folder(tmp_path, layout: int, **replace: bytes):

@@ -167,8 +167,8 @@ def test_skeleton_option_writes_the_motion_on_the_users_rig(clip, tmp_path):
 def test_the_character_creator_rig_of_cmu_iclone(shared_dir, clip):
     """Every part maps on the 101-joint CC rig; a clip goes onto it and back with its
     body-part rotations; a CC clip retargeted onto the Bandai-Namco skeleton keeps its legs."""
-    from imuloco.evaluate.metrics import evaluate_parts, part_errors
     from imuloco.io.database import load_database
+    from imuloco.measures.metrics import evaluate_parts, part_errors
 
     cc = load_database(shared_dir.parent / "cmu-iclone", limit=2, progress=False)
     assert cc.skeleton.num_joints > 90 and set(cc.skeleton.body_map) == set(PARTS)

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from imuloco.evaluate.speed import build_database, speed_benchmark, speed_table
+from imuloco.lab.speed import build_database, speed_benchmark, speed_table
 
 KEYS = {"method", "db_frames", "online_fps", "online_latency_ms_p50", "online_latency_ms_p99"}
 

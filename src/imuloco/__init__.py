@@ -2,10 +2,11 @@
 
 The package follows the data through the pipeline::
 
-    io -> sensors -> phases -> methods -> evaluate -> viz
+    ops, core -> io, sensors, phases -> methods -> measures -> viz -> app -> lab -> cli
 
-with ``core`` for the data types, ``ops`` for the shared maths and ``app`` for the
-application layer (pipeline, batch, live). See ``docs/glossary.md`` for the conventions
+``ops`` holds the shared maths, ``core`` the data types, ``measures`` the product's measures
+(metrics, gait, strides), ``app`` the application (pipeline, batch, live) and ``lab`` the harness
+that benchmarks the methods. Nothing imports upwards (``lint-imports`` checks it). See ``docs/glossary.md`` for the conventions
 (quaternion order, axes, units).
 """
 

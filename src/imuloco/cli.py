@@ -181,7 +181,7 @@ platform_option = click.option(
     help="Phone of a Sensor Logger export [default: from its Metadata.csv, else guessed with "
          "a warning].")
 height_option = click.option(
-    "--height", type=_LibraryRange("imuloco.evaluate.gait", "MIN_HEIGHT_M", "MAX_HEIGHT_M"),
+    "--height", type=_LibraryRange("imuloco.measures.gait", "MIN_HEIGHT_M", "MAX_HEIGHT_M"),
     default=None, metavar="METRES",
     help="The wearer's body height: the skeleton and every length and speed in their "
          "proportions [default: the training skeleton's].")
@@ -317,7 +317,7 @@ def _folders(values: tuple[str, ...], hint: str = "--data") -> list[Path] | None
 @click.option("--split", "split_name",
               type=click.Choice([*SPLITS, "heldout-contents", "cross-dataset"]),
               default="random-clips", show_default=True,
-              help="Protocol (imuloco.evaluate.protocols); cross-dataset takes --train/--test.")
+              help="Protocol (imuloco.lab.protocols); cross-dataset takes --train/--test.")
 @noise_option
 @placement_option
 @data_options
@@ -331,22 +331,22 @@ def _folders(values: tuple[str, ...], hint: str = "--data") -> list[Path] | None
 @click.option("--fold", "fold_names", default=None, metavar="CONTENT[,CONTENT]",
               help="heldout-contents: run only these folds (left-out contents).")
 @click.option("--speed", is_flag=True,
-              help="Run the speed benchmark (imuloco.evaluate.speed) instead.")
+              help="Run the speed benchmark (imuloco.lab.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
 @click.option("--fuzz", type=click.IntRange(1), default=None, metavar="N",
-              help="Instead: read N generated malformed inputs per reader (imuloco.evaluate."
+              help="Instead: read N generated malformed inputs per reader (imuloco.lab."
                    "fuzz) and write fuzz.md and fuzz.json.")
 @click.option("--readers", default=None,
               help="With --fuzz: readers, comma separated [default: all].")
 @click.option("--real", "real_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
               default=None, help="Instead: the real-data gait protocol on this folder (real "
-                                 "IMUs with references, imuloco.evaluate.real).")
+                                 "IMUs with references, imuloco.lab.real).")
 @click.option("--baseline", is_flag=True,
               help="With --real: also measure the gait of the motion the placement's shipped "
                    "model reconstructs (the right-ankle one where it has none).")
 @click.option("--batch", "batch_walkers", type=click.IntRange(1), default=None, metavar="N",
-              help="Instead: the batch benchmark (imuloco.evaluate.batchbench) on N simulated "
+              help="Instead: the batch benchmark (imuloco.lab.batchbench) on N simulated "
                    "walkers of 60 s; writes batch_bench.md and batch_bench.json.")
 @click.option("--load", "load_dirs", multiple=True, metavar="DIR",
               help="Instead: time loading these motion folders (repeat or comma-separate): "
@@ -364,7 +364,7 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
           real_dir: Path | None, baseline: bool, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
     if fuzz is not None:
-        from imuloco.evaluate.fuzz import READERS, write_fuzz
+        from imuloco.lab.fuzz import READERS, write_fuzz
 
         chosen = tuple(_csv(readers)) or READERS
         unknown = sorted(set(chosen) - set(READERS))
@@ -375,7 +375,7 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
         return
     if real_dir is not None:
         from imuloco.app.pipeline import GAIT_EXTRA, require_extras
-        from imuloco.evaluate.real import run_real, summarize, table
+        from imuloco.lab.real import run_real, summarize, table
 
         for p in GAIT_EXTRA:  # feet and lower backs
             require_extras(p)
@@ -384,14 +384,14 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
         click.echo(f"wrote {out / 'real.json'}, real.csv and README.md")
         return
     if batch_walkers is not None:
-        from imuloco.evaluate.batchbench import batch_benchmark, markdown
+        from imuloco.lab.batchbench import batch_benchmark, markdown
 
         click.echo(markdown(batch_benchmark(batch_walkers, out, method=method_names,
                                             placement=placement)))
         click.echo(f"wrote {out / 'batch_bench.json'} and {out / 'batch_bench.md'}")
         return
     if load_dirs:
-        from imuloco.evaluate.loadspeed import load_benchmark, table
+        from imuloco.lab.loadspeed import load_benchmark, table
 
         folders = _folders(load_dirs, "--load")
         click.echo(table(load_benchmark(folders, out, against), against))
@@ -403,14 +403,14 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
     names = _csv(method_names)
     data = _folders(data_items)
     if speed:
-        from imuloco.evaluate.speed import speed_benchmark, speed_table
+        from imuloco.lab.speed import speed_benchmark, speed_table
 
         frames = _whole_numbers(db_frames, "--db-frames") or None
         click.echo(speed_table(speed_benchmark(names, out, data[0] if data else None, frames,
                                                against=against), data[0] if data else None))
         return
-    from imuloco.evaluate.bench import run_bench
-    from imuloco.evaluate.report import COLUMNS, table
+    from imuloco.lab.bench import run_bench
+    from imuloco.lab.report import COLUMNS, table
 
     records = run_bench(names, split_name, noise, _csv(placement), _folders(data_items), out,
                         limit, seed, progress=True, seeds=n_seeds,
@@ -428,7 +428,7 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
 def evaluate(ground_truth: Path, reconstructed: Path, as_json: bool) -> None:
     """Print the metrics of a RECONSTRUCTED motion against its GROUND_TRUTH (same skeleton;
     the longer is cut to the shorter's length)."""
-    from imuloco.evaluate.metrics import evaluate_files
+    from imuloco.measures.metrics import evaluate_files
 
     values, note = evaluate_files(ground_truth, reconstructed)
     if note:
@@ -466,9 +466,9 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
     """
 
     from imuloco.errors import InputError, UnknownNameError
-    from imuloco.evaluate.bench import data_label, load_data
-    from imuloco.evaluate.protocols import split
     from imuloco.io.atomic import check_outputs
+    from imuloco.lab.bench import data_label, load_data
+    from imuloco.lab.protocols import split
     from imuloco.methods import get_method, method_class
     from imuloco.methods.registry import parse_params
 
@@ -537,8 +537,8 @@ def ensemble(members: tuple[Path, ...], output: Path, mirrored_path: Path | None
     Members train independently, so they can run at once on several cores or machines.
     """
     from imuloco.errors import ImulocoError
-    from imuloco.evaluate.bench import load_data
     from imuloco.io.atomic import check_outputs
+    from imuloco.lab.bench import load_data
     from imuloco.methods import load_model
     from imuloco.methods.learned.method import ensemble as combine
 
@@ -609,9 +609,9 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
     other contents). Prints the per-content table before and after; --check applies the
     calibration of all RESULTS to other folders; --model/-o writes it into a model file.
     """
-    from imuloco.evaluate import confidence as conf
-    from imuloco.evaluate.bench import slug
     from imuloco.io.atomic import atomic_write, check_output, check_outputs
+    from imuloco.lab import confidence as conf
+    from imuloco.lab.bench import slug
     from imuloco.methods.base import calibrated_error
 
     if (model_path is None) != (output is None):

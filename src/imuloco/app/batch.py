@@ -12,7 +12,7 @@ and stride length, ..., height), ``walkers.parquet`` (the same rows with placeme
 :data:`WALKER_FIELDS`, with the method's mean predicted error and flagged share and a shank
 sensor's swings) and
 ``strides.parquet`` (one row per stride, ``walker`` then
-:data:`imuloco.evaluate.strides.STRIDE_FIELDS`). A walkers file
+:data:`imuloco.measures.strides.STRIDE_FIELDS`). A walkers file
 (:mod:`imuloco.app.walkers`) gives each walker a height and the study's own columns.
 
 - The model travels as its file's bytes, scattered once to the workers and loaded once per
@@ -45,8 +45,8 @@ from typing import Any
 
 from imuloco.app.walkers import Walkers, read_walkers
 from imuloco.errors import ImulocoError, MissingExtraError, OutputExistsError
-from imuloco.evaluate.strides import STRIDE_FIELDS
 from imuloco.io.atomic import atomic_write, check_output
+from imuloco.measures.strides import STRIDE_FIELDS
 
 log = logging.getLogger(__name__)
 

@@ -113,10 +113,10 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
 def _sensor_gait(piece: Motion, rec: Recording, placement: str, height: float | None
                  ) -> dict[str, Any]:
     """A foot or lower-back sensor's own gait over the whole recording, as one piece reports
-    it (:func:`imuloco.evaluate.sensorgait.gait_report`; ``piece``, on the reported skeleton,
+    it (:func:`imuloco.measures.sensorgait.gait_report`; ``piece``, on the reported skeleton,
     gives the stature when ``height`` is None): ``gait``, ``gait_source``, ``gait_note`` and
     ``strides``; empty for other placements, whose gait is the motion's."""
-    from imuloco.evaluate.sensorgait import FOOT_PLACEMENTS, LOWER_BACK, gait_report
+    from imuloco.measures.sensorgait import FOOT_PLACEMENTS, LOWER_BACK, gait_report
 
     if placement not in (*FOOT_PLACEMENTS, LOWER_BACK):
         return {}
@@ -158,7 +158,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     recording, scaled with ``height``). ``unit``: the BVH's length unit
     (:func:`imuloco.io.bvh.write_bvh`).
     ``height``: the wearer's body height in metres; every piece is scaled to it
-    (:func:`imuloco.evaluate.gait.to_height`, the same factor for all) before its gait is
+    (:func:`imuloco.measures.gait.to_height`, the same factor for all) before its gait is
     measured and it is written.
     """
     import time
@@ -166,15 +166,15 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     from tqdm.auto import tqdm
 
     from imuloco.app.pipeline import calibrated, choose_method, require_extras
-    from imuloco.evaluate.gait import (
+    from imuloco.io.bvh import write_bvh_pieces
+    from imuloco.measures.gait import (
         gait_parameters,
         height_scale,
         plausibility,
         to_height,
         to_json,
     )
-    from imuloco.evaluate.strides import with_confidence
-    from imuloco.io.bvh import write_bvh_pieces
+    from imuloco.measures.strides import with_confidence
     from imuloco.methods.training import frame_times
     from imuloco.phases import gait_phases
     from imuloco.sensors.reallog import read_log

@@ -8,7 +8,7 @@ rate; :meth:`Confidence.to_json` is the reports' ``confidence`` (the JSON report
 reconstruct``, ``batch``'s NAME.json, the demo's report.json). Methods that give
 nothing (``ridge``, ...) are ``available: false`` with ``None`` values, never zeros. Whether
 the predicted error is honest is checked, and calibrated, on bench results by
-:mod:`imuloco.evaluate.confidence`.
+:mod:`imuloco.lab.confidence`.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@
 calibrate how the phone sits on the leg (:mod:`imuloco.sensors.calibration`), reconstruct with a
 method (:mod:`imuloco.methods`), pin the feet during their contacts
 (:func:`imuloco.methods.postprocess.pin_feet`) and report gait parameters and plausibility
-checks (:mod:`imuloco.evaluate.gait`). :func:`demo` runs the same path on a phone recording
+checks (:mod:`imuloco.measures.gait`). :func:`demo` runs the same path on a phone recording
 simulated from a bundled clip and writes every output next to the ground truth.
 
 Which model reconstructs (:func:`choose_method`): a model file when given; otherwise the
@@ -166,12 +166,12 @@ class ReconstructionReport:
     motion : frames, fps and duration of the reconstruction.
     height_m : the wearer's height given (``None``: the model skeleton's proportions).
     gait, gait_source, gait_note, strides, motion_gait :
-        :func:`imuloco.evaluate.sensorgait.gait_report` (``motion_gait``: a foot or lower-back
+        :func:`imuloco.measures.sensorgait.gait_report` (``motion_gait``: a foot or lower-back
         sensor's reconstructed motion's own gait, None otherwise).
-    plausibility : :func:`imuloco.evaluate.gait.plausibility`, as JSON.
+    plausibility : :func:`imuloco.measures.gait.plausibility`, as JSON.
     signal_cadence_spm : the cadence of the raw signal (Welch), steps per minute.
     signal_swing_deg : for a sensor on the shank, the degrees the raw signal turns through in
-        a stride (:func:`imuloco.evaluate.gait.signal_swing`), against which ``plausibility``'s
+        a stride (:func:`imuloco.measures.gait.signal_swing`), against which ``plausibility``'s
         ``{side}_shank_swing_deg`` reads the reconstruction's legs; None for other sensors.
     skeleton : the user's rig the motion was retargeted onto (``None``: the model's).
     seconds : wall time of the whole reconstruction.
@@ -329,27 +329,27 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     skeleton : a motion file of the user's rig: the motion comes out on it (:func:`onto_rig`;
         gait is measured before, on the model's skeleton).
     height : the wearer's body height in metres: the skeleton, and so every length and speed,
-        is scaled to it (:func:`imuloco.evaluate.gait.to_height`) before gait is measured.
+        is scaled to it (:func:`imuloco.measures.gait.to_height`) before gait is measured.
 
     Returns
     -------
     The Motion (on the model's training skeleton or ``skeleton``'s rig, at the model's frame
     rate) and the :class:`ReconstructionReport`: the import, the calibration, the model, gait
     parameters from the best estimator for the placement
-    (:func:`imuloco.evaluate.sensorgait.gait_report`) with per-stride rows, plausibility checks
+    (:func:`imuloco.measures.sensorgait.gait_report`) with per-stride rows, plausibility checks
     and the cadence of the raw signal (``report.to_json()`` for JSON).
     """
     from tqdm.auto import tqdm
 
-    from imuloco.evaluate.gait import (
+    from imuloco.measures.gait import (
         height_scale,
         plausibility,
         signal_rhythm,
         to_height,
         to_json,
     )
-    from imuloco.evaluate.sensorgait import gait_report
-    from imuloco.evaluate.strides import with_confidence
+    from imuloco.measures.sensorgait import gait_report
+    from imuloco.measures.strides import with_confidence
     from imuloco.sensors.placement import get_placement
     from imuloco.sensors.reallog import read_log, recording_name
 
@@ -457,7 +457,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     writes into ``out_dir``: ``reconstruction.bvh``, the side-by-side ground truth and
     reconstruction ``demo.mp4`` and ``demo.gif``, the viewer ``demo.html``, plots
     (``signals.png``, ``phases.png``, ``errors.png``) and ``report.md`` / ``report.json`` with
-    the metrics (:func:`imuloco.evaluate.metrics.evaluate`) and gait parameters of both, and
+    the metrics (:func:`imuloco.measures.metrics.evaluate`) and gait parameters of both, and
     for a method with a confidence its predicted error beside the actual one
     (:func:`confidence_check`; per frame in ``errors.png`` and the viewer).
     ``unit`` is the BVH's length unit (``cm`` or ``m``).
@@ -470,12 +470,12 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     """
     from tqdm.auto import tqdm
 
-    from imuloco.evaluate.gait import gait_parameters, plausibility, to_json
-    from imuloco.evaluate.metrics import evaluate
     from imuloco.io.atomic import atomic_write, check_outputs
     from imuloco.io.bvh import write_bvh
     from imuloco.io.database import load_sample
     from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.measures.gait import gait_parameters, plausibility, to_json
+    from imuloco.measures.metrics import evaluate
     from imuloco.phases import gait_phases
     from imuloco.sensors.simulate import simulate
     from imuloco.viz.plots import plot_errors, plot_phases, plot_signals
@@ -552,15 +552,15 @@ def confidence_check(gt: Motion, rec: Motion, confidence: Confidence) -> dict[st
     """A method's predicted error against the actual one, frame by frame, where a ground
     truth exists (the demo's ``confidence_check``): ``mean_predicted_error_m``,
     ``mean_actual_error_m`` (the per-frame rms joint position error,
-    :func:`imuloco.evaluate.metrics.rmse_per_frame`, the quantity predicted), their
+    :func:`imuloco.measures.metrics.rmse_per_frame`, the quantity predicted), their
     ``ratio`` (predicted / actual: 1 is calibrated, below 1 over-confident), their 90th
     percentiles (``p90_predicted_error_m``, ``p90_actual_error_m``), the ``spearman`` rank
     correlation of the two over frames, and the actual error on ``unreliable`` and
     ``reliable`` frames (metres); every value ``None`` for a method without confidence."""
     from scipy.stats import spearmanr
 
-    from imuloco.evaluate.gait import to_json
-    from imuloco.evaluate.metrics import rmse_per_frame
+    from imuloco.measures.gait import to_json
+    from imuloco.measures.metrics import rmse_per_frame
 
     keys = ("mean_predicted_error_m", "mean_actual_error_m", "ratio", "p90_predicted_error_m",
             "p90_actual_error_m", "spearman", "actual_error_unreliable_m",

@@ -25,11 +25,11 @@ from pathlib import Path
 from typing import Any
 
 from imuloco.errors import FormatError
-from imuloco.evaluate.gait import MAX_HEIGHT_M, MIN_HEIGHT_M
+from imuloco.measures.gait import MAX_HEIGHT_M, MIN_HEIGHT_M
 
 log = logging.getLogger(__name__)
 NAME, HEIGHT = "name", "height_m"  # the file's own columns
-HEIGHT_RANGE_M = (MIN_HEIGHT_M, MAX_HEIGHT_M)  # as imuloco.evaluate.gait.height_scale takes
+HEIGHT_RANGE_M = (MIN_HEIGHT_M, MAX_HEIGHT_M)  # as imuloco.measures.gait.height_scale takes
 NAMED = 3  # recordings without a row named in the warning, then "..."
 
 

@@ -67,7 +67,7 @@ class Bout:
 
 class GaitDefinition(Enum):
     """How a reference defines its bouts' stride, speed and cadence and which window its step
-    count covers (what :func:`imuloco.evaluate.real.evaluate_gait` measures the estimate by)."""
+    count covers (what :func:`imuloco.lab.real.evaluate_gait` measures the estimate by)."""
 
     BOUT_MEANS = "bout-means"
     """The reference's own per-bout means, steps from its contacts inside its bouts:

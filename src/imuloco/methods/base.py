@@ -58,7 +58,7 @@ class Reconstruction:
         not know the motion (see ``note`` for how the flag is set).
     note : how ``error_m`` was calibrated and the flag set (one sentence for reports).
     scores : the uncalibrated per-frame quantities (T,) ``error_m`` is calibrated from, by name
-        (what :mod:`imuloco.evaluate.confidence` fits a calibration on).
+        (what :mod:`imuloco.lab.confidence` fits a calibration on).
     """
 
     motion: Motion
@@ -71,7 +71,7 @@ class Reconstruction:
 def calibrated_error(calibration: dict[str, Any], scores: dict[str, np.ndarray]) -> np.ndarray:
     """Predicted error (T,) in metres from a method's per-frame ``scores`` (T,) by name under
     a ``calibration`` ``{"coef": [a, b_1, ...], "scores": [name_1, ...]}``:
-    ``exp(a) * prod_k scores[name_k] ** b_k`` (fitted by :func:`imuloco.evaluate.confidence.
+    ``exp(a) * prod_k scores[name_k] ** b_k`` (fitted by :func:`imuloco.lab.confidence.
     fit`)."""
     coef = calibration["coef"]
     out = np.full(len(next(iter(scores.values()))), np.exp(coef[0]))
@@ -225,7 +225,7 @@ class Method(ABC):
         return Reconstruction(self.reconstruct_signals(signals))
 
     def set_calibration(self, calibration: dict[str, Any]) -> None:
-        """Use ``calibration`` (:func:`imuloco.evaluate.confidence.fit`) for ``error_m`` from
+        """Use ``calibration`` (:func:`imuloco.lab.confidence.fit`) for ``error_m`` from
         now on (saved with the model); methods that predict no error refuse it."""
         from imuloco.errors import InputError
 

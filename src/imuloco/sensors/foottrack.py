@@ -13,7 +13,7 @@ rests that carries the foot farther than the shortest stride.
 
 :func:`foot_track` also finds how the sensor sits on the shoe, in any orientation: gravity at
 rest gives up (gaitmap's ``align_dataset_to_gravity``), and the strides' displacement seen from
-the sensor at rest gives forward. Both the foot's gait (:mod:`imuloco.evaluate.sensorgait`)
+the sensor at rest gives forward. Both the foot's gait (:mod:`imuloco.measures.sensorgait`)
 and the foot's sensor-to-segment calibration (:mod:`imuloco.sensors.calibration`) read it.
 """
 

@@ -102,12 +102,12 @@ def plot_errors(gt: Motion, rec: Motion, path: str | Path, overwrite: bool = Fal
                 predicted_m: np.ndarray | None = None, unreliable: np.ndarray | None = None
                 ) -> Path:
     """Mean position error per joint (bars) and the per-frame RMSE over time, cm, of a
-    reconstruction against its ground truth (:mod:`imuloco.evaluate.metrics`).
+    reconstruction against its ground truth (:mod:`imuloco.measures.metrics`).
 
     predicted_m : ndarray, shape (T,), optional: the method's predicted rms joint position
         error per frame, metres, drawn beside the actual one.
     unreliable : ndarray of bool, shape (T,), optional: frames the method flags, shaded."""
-    from imuloco.evaluate.metrics import joint_errors, rmse_per_frame
+    from imuloco.measures.metrics import joint_errors, rmse_per_frame
     from imuloco.phases.contacts import runs
 
     err = joint_errors(gt, rec) * 100.0  # (T, J) cm

@@ -24,7 +24,7 @@ import numpy as np
 
 from imuloco.core.recording import Recording
 from imuloco.errors import InputError
-from imuloco.evaluate.gait import height_scale
+from imuloco.measures.gait import height_scale
 from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import about_y, qmul, qrot
 
@@ -201,7 +201,7 @@ class LiveSession:
     calibration : a calibration found earlier for the same phone (skips calibrating).
     max_gap_s : a longer pause between samples is a dropout (see :meth:`push`).
     height_m : the wearer's body height in metres: the skeleton and the root path are scaled
-        to it as :func:`imuloco.evaluate.gait.to_height` scales a reconstruction (``None``: the
+        to it as :func:`imuloco.measures.gait.to_height` scales a reconstruction (``None``: the
         model skeleton's proportions).
 
     Bounded state: samples beyond ``MAX_RATE_HZ`` per second of their own timestamps (after a

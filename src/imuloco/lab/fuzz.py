@@ -2,8 +2,8 @@
 
 ``imuloco bench --fuzz N`` runs :func:`run_fuzz`: for each reader (BVH, ASF/AMC, sensor-log
 tables, :func:`~imuloco.sensors.reallog.read_log`, model files, the real-data folders of
-:func:`~imuloco.io.realimu.read_trials`: :mod:`imuloco.evaluate.fuzz_real`, Xsens text exports
-read by ``read_log``: :mod:`imuloco.evaluate.fuzz_xsens`) it builds small
+:func:`~imuloco.io.realimu.read_trials`: :mod:`imuloco.lab.fuzz_real`, Xsens text exports
+read by ``read_log``: :mod:`imuloco.lab.fuzz_xsens`) it builds small
 valid files from the bundled sample (:func:`seed_files`), derives N inputs from them by random
 mutation (bytes, lines, cells) and by the structured attacks of issue 18 (a timestamp jumping by days, rows a
 nanosecond apart, cells of 1e308, ``Frame Time`` of 1000 s, 20,000 nested joints, ASF units of
@@ -50,8 +50,8 @@ from pathlib import Path
 
 import numpy as np
 
-from imuloco.evaluate.fuzz_real import read_real, real_attack, real_garbage, real_seeds
-from imuloco.evaluate.fuzz_xsens import xsens_attack, xsens_seeds
+from imuloco.lab.fuzz_real import read_real, real_attack, real_garbage, real_seeds
+from imuloco.lab.fuzz_xsens import xsens_attack, xsens_seeds
 
 READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "real", "xsens")
 READER_TITLES = {"bvh": "BVH", "asf": "ASF/AMC", "sensorlog": "sensor-log tables",

@@ -1,7 +1,7 @@
 """The benchmark runner: fit methods on a protocol's training clips, reconstruct every test clip
 from freshly simulated sensors, measure, aggregate and report.
 
-Protocol details fixed here (see also :mod:`imuloco.evaluate.protocols`):
+Protocol details fixed here (see also :mod:`imuloco.lab.protocols`):
 
 - Test recordings: every test clip is simulated with ``seed + TEST_SEED_OFFSET`` (per clip,
   :func:`imuloco.methods.training.clip_seed`), so they never share noise with training, and
@@ -9,7 +9,7 @@ Protocol details fixed here (see also :mod:`imuloco.evaluate.protocols`):
   reconstructed frames align with the ground truth's one to one.
 - Start: a reconstruction's root is turned and moved so that its first frame stands at the
   ground truth's first root position and faces its first heading
-  (:func:`imuloco.evaluate.metrics.align_heading`); a user would give the start the same way.
+  (:func:`imuloco.measures.metrics.align_heading`); a user would give the start the same way.
 - Aggregation: per motion type and ``all``, each metric is the frame-weighted mean of its
   per-clip values (for per-frame metrics this is the mean over all test frames; for ``dpv``,
   a per-clip sum by definition, clips count by their length). ``foot_skate`` ignores clips
@@ -23,7 +23,7 @@ Protocol details fixed here (see also :mod:`imuloco.evaluate.protocols`):
 - ``cross-dataset``: the training folders become one set on the first one's skeleton
   (:func:`imuloco.io.database.load_databases`); test clips stay on their own skeleton,
   resampled to the training frame rate, their sensors simulated there, and are compared on
-  canonical body parts (:func:`imuloco.evaluate.metrics.evaluate_parts`), both against
+  canonical body parts (:func:`imuloco.measures.metrics.evaluate_parts`), both against
   their own ground truth and against it retargeted onto the training skeleton as the
   training clips of other rigs are (:func:`truth_on_training_rig`; the ``*_retargeted_cm``
   keys), which takes the bodies' differences out of the error.
@@ -40,7 +40,7 @@ Protocol details fixed here (see also :mod:`imuloco.evaluate.protocols`):
   flag and the uncalibrated scores, with clip, content, fold and seed (``cross-dataset`` adds
   ``actual_retargeted_m``, the body-part error against the truth retargeted onto the training
   skeleton, whose floor is zero): what
-  :mod:`imuloco.evaluate.confidence` checks and calibrates. Each method runs with one BLAS/OpenMP
+  :mod:`imuloco.lab.confidence` checks and calibrates. Each method runs with one BLAS/OpenMP
   thread (threadpoolctl), like a single core, so that timings compare across machines'
   core counts (torch's own thread pool is the method's business).
 
@@ -64,9 +64,9 @@ from tqdm.auto import tqdm
 
 from imuloco.core.motion import Motion, MotionDatabase
 from imuloco.errors import UnknownNameError
-from imuloco.evaluate import metrics
-from imuloco.evaluate.protocols import MOTION_TYPES, PROTOCOL_VERSION, folds
 from imuloco.io.atomic import atomic_write, atomic_write_text
+from imuloco.lab.protocols import MOTION_TYPES, PROTOCOL_VERSION, folds
+from imuloco.measures import metrics
 from imuloco.methods.training import (
     TEST_SEED_OFFSET,
     Example,
@@ -181,7 +181,7 @@ def evaluate_method(
     model_bytes), ``per_joint`` (mean heading-frame error per joint, cm, shape (J,)) and
     ``curves`` (per-frame RMSE, cm, of each test clip by name). Test clips on another
     skeleton than the training one are measured on body parts
-    (:func:`imuloco.evaluate.metrics.evaluate_parts`) and leave ``per_joint`` and ``curves``
+    (:func:`imuloco.measures.metrics.evaluate_parts`) and leave ``per_joint`` and ``curves``
     out (None / {}).
     """
     from imuloco.methods import get_method, method_class
@@ -280,7 +280,7 @@ def run_bench(
     methods : registry names, each optionally with hyperparameters as
         ``NAME[key=value;key=value]`` (see :func:`imuloco.methods.registry.parse_method_spec`); records keep the spec
         as their ``method``.
-    split_name : a protocol of :data:`imuloco.evaluate.protocols.SPLITS`.
+    split_name : a protocol of :data:`imuloco.lab.protocols.SPLITS`.
     noise : sensor noise preset for training and test signals.
     placements : sensor placement presets.
     data : folder(s) of clips (None: the bundled sample); not for ``cross-dataset``.
@@ -425,7 +425,7 @@ def slug(spec: str) -> str:
 def write_results(records: list[dict[str, Any]], details: dict[str, dict[str, Any]],
                   test: list[Example], out: Path) -> None:
     """``results.json`` (the records), ``per_clip.json`` and ``results.md`` with its plots."""
-    from imuloco.evaluate.report import write_report
+    from imuloco.lab.report import write_report
 
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "results.json", json.dumps(records, indent=1) + "\n")

@@ -13,7 +13,7 @@ From the foot strikes and contacts that :func:`imuloco.phases.gait_phases` detec
   ankles' separation at a strike, ``ankle_step_length_m``, the "heel to heel" step length, is
   shorter than the distance covered per step when running: the flight adds to it.)
 - ``ankle_stride_length_m``: the median horizontal distance the striking ankle travelled
-  between two strikes of the same foot (:func:`imuloco.evaluate.strides.stride_rows` has
+  between two strikes of the same foot (:func:`imuloco.measures.strides.stride_rows` has
   each stride).
 - ``stance_pct`` / ``swing_pct``: per foot, the share of the frames between that foot's first
   and last strike (whole gait cycles) spent in contact / in the air; ``stance_swing_ratio`` is
@@ -335,12 +335,12 @@ def plausibility(motion: Motion) -> dict[str, float]:
     ``hip_max_deg`` (limit :data:`HIP_LIMITS_DEG`), ``knee_out_of_range_pct`` and
     ``hip_out_of_range_pct`` (frames outside the limits), ``foot_skate_cm_s`` (mean horizontal
     speed of feet while the reconstruction's own contacts say they are down, see
-    :func:`imuloco.evaluate.metrics.foot_skate`), ``contact_pct`` (frames with a foot down)
+    :func:`imuloco.measures.metrics.foot_skate`), ``contact_pct`` (frames with a foot down)
     and ``left_shank_swing_deg`` / ``right_shank_swing_deg`` (:func:`shank_swings`: in a
     walk both shanks swing alike, and a shank sensor's own swing, :func:`signal_swing`, says
     how far its leg's should).
     """
-    from imuloco.evaluate.metrics import foot_skate
+    from imuloco.measures.metrics import foot_skate
     from imuloco.phases import foot_contacts
 
     pos = motion.positions()

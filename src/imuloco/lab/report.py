@@ -103,7 +103,7 @@ def write_report(
 
     Parameters
     ----------
-    records : the benchmark records (see :func:`imuloco.evaluate.bench.run_bench`).
+    records : the benchmark records (see :func:`imuloco.lab.bench.run_bench`).
     per_joint : method -> mean heading-frame position error per joint, cm, shape (J,).
     joint_names : J names for the per-joint plot.
     curves : method -> per-frame RMSE, cm, shape (T,), of the one clip ``curve_clip``.

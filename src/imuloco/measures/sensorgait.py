@@ -118,7 +118,7 @@ class SensorGait:
 
     def to_json(self) -> dict:
         """JSON-ready: placement, method, measured, reason, summary and per-stride rows."""
-        from imuloco.evaluate.gait import to_json
+        from imuloco.measures.gait import to_json
 
         return {"placement": self.placement, "method": self.method,
                 "measured": self.measured, "reason": self.reason or None,
@@ -129,7 +129,7 @@ class SensorGait:
 
 
 def stride_row(foot: str, start: float, end: float, length: float, stance: float) -> dict:
-    """A stride in the fields of :data:`imuloco.evaluate.strides.STRIDE_FIELDS` (times in
+    """A stride in the fields of :data:`imuloco.measures.strides.STRIDE_FIELDS` (times in
     seconds, ``stance`` the share of the stride in contact, NaN when unknown)."""
     dur = end - start
     return {"foot": foot, "start_s": start, "end_s": end, "duration_s": dur,
@@ -383,7 +383,7 @@ GAIT_KEYS = ("steps", "cadence_spm", "step_length_m", "stride_length_m", "speed_
 def gait_report(motion, rec, placement: str, height_m: float | None = None) -> dict:
     """The gait a study reads for a recording, from the best estimator for its placement:
     the sensor's own signal for a foot or the lower back (:func:`sensor_gait`), the
-    reconstructed motion otherwise (:func:`imuloco.evaluate.gait.gait_parameters`).
+    reconstructed motion otherwise (:func:`imuloco.measures.gait.gait_parameters`).
 
     Returns
     -------
@@ -391,11 +391,11 @@ def gait_report(motion, rec, placement: str, height_m: float | None = None) -> d
     sensor, also what it does not measure, such as the other foot's stance or the legs'
     rhythm, so that no value mixes two sources), ``gait_source`` (what measured them),
     ``gait_note`` (why nothing was measured, or None), ``strides`` (one row per stride,
-    :data:`imuloco.evaluate.strides.STRIDE_FIELDS`) and ``motion_gait``: for a sensor, the
+    :data:`imuloco.measures.strides.STRIDE_FIELDS`) and ``motion_gait``: for a sensor, the
     reconstructed motion's own parameters beside it (None otherwise, where ``gait`` is that).
     """
-    from imuloco.evaluate.gait import gait_parameters, stature, to_json
-    from imuloco.evaluate.strides import stride_rows
+    from imuloco.measures.gait import gait_parameters, stature, to_json
+    from imuloco.measures.strides import stride_rows
     from imuloco.phases import gait_phases
 
     phases = gait_phases(motion)

@@ -41,7 +41,7 @@ Rows = dict[str, np.ndarray]
 
 def load_rows(folders: Iterable[str | Path], method: str | None = None) -> Rows:
     """The per-frame rows of the ``confidence-METHOD.npz`` file in each bench result folder
-    (``method`` in its file-name form, :func:`imuloco.evaluate.bench.slug`; None: the folder's
+    (``method`` in its file-name form, :func:`imuloco.lab.bench.slug`; None: the folder's
     only one), joined."""
     files = []
     for folder in folders:

@@ -8,7 +8,7 @@
   another content the training set. Motion the methods never saw.
 - ``cross-dataset``: train on some folders, test on another (other people, another rig); the
   bench gets the two sets separately and compares canonical body parts
-  (:func:`imuloco.evaluate.metrics.evaluate_parts`).
+  (:func:`imuloco.measures.metrics.evaluate_parts`).
 
 Version 2 added the last two; ``random-clips`` and ``heldout-styles`` split as in version 1,
 so their numbers compare across the two versions.

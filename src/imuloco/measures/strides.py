@@ -1,7 +1,7 @@
 """One row per stride: the table a gait study loads beside the per-walker summary.
 
 A stride of one foot runs from one of its strikes to its next (the strikes and foot contacts of
-:func:`imuloco.phases.gait_phases`, the events :func:`imuloco.evaluate.gait.gait_parameters`
+:func:`imuloco.phases.gait_phases`, the events :func:`imuloco.measures.gait.gait_parameters`
 summarises). Each row (:data:`STRIDE_FIELDS`):
 
 - ``foot``: ``left`` or ``right``; ``start_s``, ``end_s``: the two strikes, seconds from the

@@ -5,7 +5,7 @@ Dropout recovery. One recording is streamed through :class:`LiveSession` twice: 
 with ``gap_s`` seconds of samples removed from ``gap_start`` on. The walker has *recovered* at
 the first frame after the gap from which, for the rest of the compared window, the pose error
 against the whole run's frame of the same number stays at or below ``threshold_cm``. The pose
-error is the MPJPE of :func:`imuloco.evaluate.metrics.joint_errors` (joint positions relative
+error is the MPJPE of :func:`imuloco.measures.metrics.joint_errors` (joint positions relative
 to the pelvis in the heading frame, all joints but the root, cm). The recovery time counts
 stream seconds from the first sample after the gap, so it does not depend on the machine.
 Where the walker stands is reported beside it: the horizontal distance between the two runs'
@@ -72,7 +72,7 @@ def dropout_recovery(method, times: np.ndarray, acc: np.ndarray, gyro: np.ndarra
     window_s : seconds after the gap compared (the recording must reach that far).
     """
     from imuloco.core.motion import Motion
-    from imuloco.evaluate.metrics import heading_of, joint_errors
+    from imuloco.measures.metrics import heading_of, joint_errors
 
     keep = (times < gap_start) | (times >= gap_start + gap_s)
     whole = _stream(method, times, acc, gyro, calibrate_s)

@@ -3,7 +3,7 @@ reference measured otherwise.
 
 For every trial of every data set found under ``DIR`` (:mod:`imuloco.io.realimu`) and every
 sensor it has, the gait is measured once over the whole recording, as a user would, by the
-estimator for that placement (:mod:`imuloco.evaluate.sensorgait`; ``reconstruction``: the
+estimator for that placement (:mod:`imuloco.measures.sensorgait`; ``reconstruction``: the
 former path, a right-ankle reconstruction's gait, with ``--baseline``) and compared within the
 reference's windows, by the reference's own definitions of a bout's stride, speed and cadence
 and of its steps' window, which each reader declares (:class:`~imuloco.io.realimu.
@@ -51,8 +51,8 @@ from typing import Any
 
 import numpy as np
 
-from imuloco.evaluate.sensorgait import SensorGait, not_measured, sensor_gait
 from imuloco.io.realimu import GaitDefinition, GaitReference, RealTrial, find_datasets, read_trials
+from imuloco.measures.sensorgait import SensorGait, not_measured, sensor_gait
 
 log = logging.getLogger(__name__)
 
@@ -311,14 +311,14 @@ def published_path_row(trial: RealTrial) -> dict[str, Any] | None:
 
 
 def reconstruction_gait(trial: RealTrial, placement: str, fitted) -> SensorGait:
-    """Gait read from a reconstruction's strikes (:func:`imuloco.evaluate.gait.
+    """Gait read from a reconstruction's strikes (:func:`imuloco.measures.gait.
     gait_parameters`): the sensor's signal reconstructed by ``fitted`` (a model of that
     placement, or the former path: a right-ankle model reading it as a shin phone), on the
     walker's height when the reference gives it."""
     from imuloco.app.pipeline import reconstruct_recording
     from imuloco.core.recording import Recording
-    from imuloco.evaluate.gait import to_height
-    from imuloco.evaluate.strides import stride_rows
+    from imuloco.measures.gait import to_height
+    from imuloco.measures.strides import stride_rows
     from imuloco.phases import gait_phases
 
     rec = trial.recording.select([placement])
@@ -515,8 +515,8 @@ def write_results(rows: list[dict[str, Any]], out: str | Path) -> None:
     import csv
     import io
 
-    from imuloco.evaluate.gait import to_json
     from imuloco.io.atomic import atomic_write
+    from imuloco.measures.gait import to_json
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -19,7 +19,7 @@ Protocol details fixed here:
   of its signals looped to :data:`MIN_STEPS` frames, after an untimed one of :data:`WARMUP`
   frames; wall and CPU: ``offline_fps``, ``offline_fps_cpu``) and the record has the MPJPE of
   the clip's own reconstruction (``test_mpjpe_cm``, heading-aligned at the first frame as in
-  :mod:`imuloco.evaluate.bench`): the same clip for every method, size and revision.
+  :mod:`imuloco.lab.bench`): the same clip for every method, size and revision.
 - ``against``: each method is also fitted and timed as its module was at that git commit
   (the module file from git, on today's package; for a method that is a package of modules,
   such as ``mousas2017``, the names its module takes from that package at that commit too;
@@ -49,8 +49,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from imuloco.core.motion import MotionDatabase
-from imuloco.evaluate.protocols import in_random_test
 from imuloco.io.atomic import atomic_write
+from imuloco.lab.protocols import in_random_test
 from imuloco.methods.training import TEST_SEED_OFFSET, Example, synthesize
 
 DEFAULT_SIZES = (500, 1000, 2000, 5000, 10000, 20000, 50000, 100000)
@@ -149,7 +149,7 @@ def _prefix(examples: list[Example], frames: int) -> tuple[list[Example], dict[s
 
 
 def _module_at(rev: str, module: str):
-    from imuloco.evaluate.loadspeed import module_at
+    from imuloco.lab.loadspeed import module_at
 
     return module_at(rev, "src/" + module.replace(".", "/") + ".py",
                      f"imuloco_at_{rev}_{module.replace('.', '_')}")
@@ -195,7 +195,7 @@ def time_offline(method, test: Example, min_frames: int = MIN_STEPS, warmup: int
     :meth:`reconstruct_signals` of the test example's signals, looped to ``min_frames``,
     after an untimed one of its first ``warmup`` frames (which builds what a method builds on
     first use); and ``test_mpjpe_cm``, the MPJPE of the test example's reconstruction."""
-    from imuloco.evaluate import metrics
+    from imuloco.measures import metrics
 
     method.reconstruct_signals(test.signals[:warmup])
     rows = np.concatenate([test.signals] * int(np.ceil(min_frames / len(test.signals))))
@@ -259,7 +259,7 @@ def speed_benchmark(
     ``load_avg``, ``states`` (the method's state count when it has one), ``offline_fps``,
     ``offline_fps_cpu`` and ``test_mpjpe_cm``.
     """
-    from imuloco.evaluate.bench import load_data
+    from imuloco.lab.bench import load_data
     from imuloco.methods import method_class
     from imuloco.methods.registry import parse_method_spec
 

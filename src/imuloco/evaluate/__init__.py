@@ -1,1 +1,0 @@
-"""Measuring reconstructions: metrics, protocols (splits, noise, placements) and the benchmark."""
