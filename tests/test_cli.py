@@ -11,7 +11,8 @@ from click.testing import CliRunner
 
 from imuloco.cli import cli
 from imuloco.io.bvh import write_bvh
-from imuloco.io.sensorlog import FORMATS, write_generic_csv
+from imuloco.io.logformats import FORMATS
+from imuloco.io.sensorlog import write_generic_csv
 from imuloco.sensors.simulate import simulate
 
 

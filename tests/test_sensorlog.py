@@ -13,7 +13,8 @@ from mutations import reads_cleanly
 
 from imuloco.core.recording import Recording
 from imuloco.errors import FormatError
-from imuloco.io.sensorlog import detect_format, write_generic_csv
+from imuloco.io.logformats import detect_format
+from imuloco.io.sensorlog import write_generic_csv
 from imuloco.sensors.calibration import still_mask
 from imuloco.sensors.reallog import read_log, recording_name
 from imuloco.sensors.simulate import simulate

@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from mutations import byte_mutations, reads_cleanly
 
 from imuloco.errors import FormatError
-from imuloco.io.sensorlog import detect_format
+from imuloco.io.logformats import detect_format
 from imuloco.io.xsens import read_xsens, unwrap_counter
 from imuloco.sensors.reallog import read_log
 

@@ -60,7 +60,7 @@ def _options(*decorators: Callable) -> Callable:
 
 
 class _LogFormat(click.Choice):
-    """``auto`` or one of :data:`imuloco.io.sensorlog.FORMATS`, read on first use (importing
+    """``auto`` or one of :data:`imuloco.io.logformats.FORMATS`, read on first use (importing
     sensorlog, hence numpy, at start-up would slow down ``imuloco --help``)."""
 
     def __init__(self) -> None:
@@ -68,7 +68,7 @@ class _LogFormat(click.Choice):
 
     @property
     def choices(self) -> tuple[str, ...]:  # type: ignore[override]
-        from imuloco.io.sensorlog import FORMATS
+        from imuloco.io.logformats import FORMATS
 
         return ("auto", *FORMATS)
 

@@ -14,7 +14,7 @@ that stand for no part (twist, share, finger and face bones, clavicles, extra sp
 take their mean local rotation over the target rig's poses. The root path is the source
 pelvis's scaled by the ratio of leg lengths (target / source), and the result is moved up or
 down so that its feet stand on the floor where the source's did (a low percentile of the
-lowest foot joint's height, as :func:`imuloco.phases.contacts.floor_height`).
+lowest foot joint's height, as :func:`imuloco.core.contacts.floor_height`).
 
 Two skeletons with the same joint names and parents are one rig family (same joint frames,
 other bone lengths): there the local rotations are copied as they are (every joint angle is
@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imuloco.core.bodymap import PARTS, BodyMapError
+from imuloco.core.contacts import flat_foot_pitch, foot_pitches
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.ops.kinematics import fk
@@ -117,16 +118,13 @@ class Rig:
         """The rig of ``motions`` (clips of one skeleton; at most :data:`MAX_POSES` frames
         are used, evenly spaced). ``where`` names them in errors.
 
-        The flat-foot pitch is :func:`imuloco.phases.contacts.flat_foot_pitch` of the
+        The flat-foot pitch is :func:`imuloco.core.contacts.flat_foot_pitch` of the
         motions (feet with heel and toe on the floor) over the first
         :data:`MAX_PITCH_FRAMES` of at most :data:`MAX_PITCH_CLIPS`, evenly spaced: finding
         contacts took 6 s on a 640 s reconstruction, which ``reconstruct --skeleton``
         measures. Motions without such a frame (one T-pose, sprints) give the median pitch
         of their poses, which a T-pose stands flat in.
         """
-        # phases build on core: imported here
-        from imuloco.phases.contacts import flat_foot_pitch, foot_pitches
-
         sk = motions[0].skeleton
         check_mapped(sk, where or motions[0].name or "motion")
         rot = np.concatenate([m.rotations for m in motions])
@@ -184,7 +182,7 @@ def retarget(motion: Motion, target: Rig | Skeleton, source: Rig | None = None) 
 
 def _floor(motion: Motion) -> float:
     """The floor under a motion's feet: the 5th percentile of the lowest foot joint's height
-    (as :func:`imuloco.phases.contacts.floor_height`)."""
+    (as :func:`imuloco.core.contacts.floor_height`)."""
     return float(np.percentile(motion.part_positions(list(FEET))[..., 1].min(axis=1), 5.0))
 
 

@@ -59,7 +59,6 @@ from imuloco.io.atomic import atomic_write, check_output
 log = logging.getLogger(__name__)
 
 GENERIC_COLUMNS = ("acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z")
-FORMATS = ("generic", "realworld", "phyphox", "sensorlogger", "xsens")
 
 
 @dataclass(eq=False)
@@ -676,40 +675,3 @@ def is_export(path: str | Path) -> bool:
         return True
     with open(path, "rb") as f:
         return f.read(4) == b"PK\x03\x04" or zipfile.is_zipfile(path)
-
-
-def detect_format(path: str | Path) -> str:
-    """Which reader fits ``path`` (a file, an export folder or an export zip)."""
-    path = Path(path)
-    if is_export(path):
-        with Export(path) as ex:
-            kind = ex.kind()
-        if kind is None:
-            raise FormatError(path, None, "expected a Sensor Logger export (Gyroscope.csv with "
-                                          "TotalAcceleration.csv, or Accelerometer.csv + "
-                                          "Gravity.csv) or a phyphox export (tables with "
-                                          f"'Time (s)' columns); found {ex.names()[:10]}")
-        return kind
-    with open(path, "rb") as f:
-        header = next((ln for _, ln in _text_lines(path, f)
-                       if ln.strip() and not ln.startswith("#")), "")
-    h = header.strip().lower()
-    if not header.isprintable():
-        header = "binary data"
-    if h.startswith("time_s"):
-        return "generic"
-    if "attr_time" in h:
-        return "realworld"
-    if "time (s)" in h:
-        return "phyphox"
-    if h.startswith(_SENSOR_LOGGER_HEADER):
-        return "sensorlogger"
-    from imuloco.io.xsens import is_xsens  # built on this module: imported when needed
-
-    if is_xsens(path):
-        return "xsens"
-    raise FormatError(path, 1, "unknown sensor log: expected a header starting 'time_s' "
-                               "(generic), 'id,attr_time' (RealWorld), '\"Time (s)\"' (phyphox) "
-                               "or 'time,seconds_elapsed' (Sensor Logger), or an Xsens export's "
-                               "('// Update Rate: ...' lines, then 'PacketCounter ... Acc_X "
-                               f"... Gyr_X ...'), found {header[:80]!r}")

@@ -42,7 +42,9 @@ import numpy as np
 from imuloco.core.motion import Motion, MotionDatabase
 from imuloco.core.recording import Recording
 from imuloco.core.skeleton import Skeleton
-from imuloco.errors import NotFittedError
+from imuloco.errors import InputError, NotFittedError, UnknownNameError
+from imuloco.methods.modelfile import save_model
+from imuloco.methods.names import registered_name
 from imuloco.methods.training import TrainingSet, model_frames
 
 
@@ -103,12 +105,10 @@ class Stream(ABC):
 
 class _RegisteredName:
     """A method class's name: its entry point's in the group ``imuloco.methods`` (stated once,
-    in ``pyproject.toml``; :func:`imuloco.methods.registry.registered_name`). A class
+    in ``pyproject.toml``; :func:`imuloco.methods.names.registered_name`). A class
     registered by hand states ``name`` itself, which takes precedence."""
 
     def __get__(self, obj: object, cls: type) -> str:
-        from imuloco.methods.registry import registered_name
-
         return registered_name(cls)
 
 
@@ -227,8 +227,6 @@ class Method(ABC):
     def set_calibration(self, calibration: dict[str, Any]) -> None:
         """Use ``calibration`` (:func:`imuloco.lab.confidence.fit`) for ``error_m`` from
         now on (saved with the model); methods that predict no error refuse it."""
-        from imuloco.errors import InputError
-
         raise InputError(f"method {self.name!r} predicts no per-frame error to calibrate")
 
     def can_stream(self) -> bool:
@@ -255,8 +253,6 @@ class Method(ABC):
     def set_params(self, **params: Any) -> Self:
         """Change hyperparameters (refit afterwards); unknown names raise
         :class:`~imuloco.errors.UnknownNameError`."""
-        from imuloco.errors import UnknownNameError
-
         valid = self._param_names()
         for key, value in params.items():
             if key not in valid:
@@ -268,8 +264,6 @@ class Method(ABC):
     def check_params(self) -> None:
         """Raise :class:`~imuloco.errors.InputError` naming the first hyperparameter outside
         its :attr:`param_ranges` interval (NaN is outside every one)."""
-        from imuloco.errors import InputError
-
         for key, interval in self.param_ranges.items():
             value = getattr(self, key)
             if value is None:  # an optional one left out (e.g. a rank: chosen by the fit)
@@ -304,8 +298,6 @@ class Method(ABC):
 
     def save(self, path: str | Path, overwrite: bool = False) -> Path:
         """Write the fitted model to one ``.npz`` file (:mod:`imuloco.methods.modelfile`)."""
-        from imuloco.methods.modelfile import save_model
-
         self.check_fitted()
         return save_model(self, path, overwrite=overwrite)
 

@@ -24,6 +24,9 @@ import numpy as np
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import ModelFileError, UnknownNameError
 from imuloco.io.atomic import atomic_write, check_output
+from imuloco.methods.registry import method_class
+from imuloco.sensors.noise import NOISE_PRESETS
+from imuloco.sensors.placement import PRESETS
 
 if TYPE_CHECKING:
     from imuloco.methods.base import Method
@@ -139,8 +142,6 @@ def load_model(path: str | Path) -> Method:
 
 
 def _load(path: Path, arrays: _Arrays) -> Method:
-    from imuloco.methods.registry import method_class
-
     header = _read_header(path, arrays)
     try:
         cls = method_class(header["method"])
@@ -234,9 +235,6 @@ def check_header(path: str | Path, header: object) -> None:
     placement names; ``noise`` a known noise preset; ``fps`` a number in
     :data:`MIN_FPS`..:data:`MAX_FPS`; nesting at most :data:`MAX_HEADER_DEPTH` levels.
     """
-    from imuloco.sensors.noise import NOISE_PRESETS
-    from imuloco.sensors.placement import PRESETS
-
     def bad(field: str, expected: str, value: object) -> ModelFileError:
         return ModelFileError(f"{path}: header field {field!r}: expected {expected}, found "
                               f"{json.dumps(value)[:80] if _depth(value) < 4 else '...'}")

@@ -4,8 +4,8 @@ A method's name is stated once, as an entry point of the group ``imuloco.methods
 ``pyproject.toml`` (``name = "module:Class"``, ``name = "module:Class [extra]"`` when it
 needs an optional extra of the distribution); a third-party package adds its own methods the
 same way, in its own ``pyproject.toml``, and needs no change here. The class learns its name
-from there (:func:`registered_name`); a class may also be registered by hand with
-:func:`register` (tests, notebooks), then it states its ``name`` itself.
+from there (:func:`imuloco.methods.names.registered_name`); a class may also be registered by
+hand with :func:`register` (tests, notebooks), then it states its ``name`` itself.
 
 :func:`method_class` imports a method's module on first use, so a command that needs
 ``ridge`` never imports torch; :func:`describe` tells what a method is without importing it.
@@ -18,17 +18,16 @@ import importlib.util
 import json
 from collections.abc import Iterable
 from dataclasses import dataclass
-from functools import cache
-from importlib.metadata import EntryPoint, PackageNotFoundError, distribution, entry_points
+from importlib.metadata import EntryPoint, PackageNotFoundError, distribution
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from imuloco.errors import MissingExtraError, UnknownNameError
+from imuloco.methods.names import GROUP, _entry_points
 
 if TYPE_CHECKING:
     from imuloco.methods.base import Method
 
-GROUP = "imuloco.methods"
 REGISTRY: dict[str, type[Method]] = {}  # by hand (register) and loaded entry points
 M = TypeVar("M", bound="type[Method]")
 
@@ -39,23 +38,6 @@ def register(cls: M) -> M:
         raise ValueError(f"method name {cls.name!r} is registered twice")
     REGISTRY[cls.name] = cls
     return cls
-
-
-@cache
-def _entry_points() -> dict[str, EntryPoint]:
-    return {ep.name: ep for ep in entry_points(group=GROUP)}
-
-
-def registered_name(cls: type) -> str:
-    """The entry-point name of ``cls`` or of the nearest registered class it derives from."""
-    targets = {(ep.module, ep.attr): name for name, ep in _entry_points().items()}
-    for c in cls.__mro__:
-        name = targets.get((c.__module__, c.__qualname__))
-        if name is not None:
-            return name
-    raise AttributeError(f"method class {cls.__module__}.{cls.__qualname__} has no name: "
-                         f"give it an entry point in the group {GROUP!r} or a class attribute "
-                         "`name`")
 
 
 def method_names() -> list[str]:

@@ -35,19 +35,12 @@ import numpy as np
 
 from imuloco.core.recording import Recording
 from imuloco.errors import FormatError, InputError, MissingInputError, UnknownNameError
-from imuloco.io.sensorlog import (
+from imuloco.io.logformats import (  # noqa: F401  (realworld_accelerometer: batch's name for it)
     FORMATS,
-    PLATFORMS,
-    Stream,
-    detect_format,
-    is_export,
-    read_generic_csv,
-    read_phyphox,
-    read_phyphox_export,
-    read_realworld,
-    read_sensor_logger,
+    read_streams,
+    realworld_accelerometer,
 )
-from imuloco.io.xsens import read_xsens
+from imuloco.io.sensorlog import PLATFORMS, Stream
 from imuloco.ops.filters import resample_linear
 from imuloco.sensors.resample import Gap, find_gaps, resample
 
@@ -65,7 +58,7 @@ class LogReport:
 
     Attributes
     ----------
-    format : reader used (see :data:`imuloco.io.sensorlog.FORMATS`).
+    format : reader used (see :data:`imuloco.io.logformats.FORMATS`).
     files : the files read.
     samples : samples per signal after cleaning, ``{"acc": n, "gyro": m}`` (summed over sensors).
     unsorted : samples whose timestamp was earlier than the one before (per signal).
@@ -185,7 +178,8 @@ FORMAT_NAMES = ("auto", *FORMATS)
 
 def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
                   platform: str | None) -> tuple[str, list[Stream]]:
-    """Step 1: the format (detected when ``"auto"``) and the streams the reader found."""
+    """Step 1: the format (detected when ``"auto"``) and the streams the reader found
+    (:func:`imuloco.io.logformats.read_streams`)."""
     if isinstance(path, (list, tuple)):
         if len(path) != 2:
             raise InputError(f"expected one log or an (accelerometer, gyroscope) pair of files, "
@@ -194,42 +188,7 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
     path = Path(path)
     if not path.exists():
         raise MissingInputError(f"{path}: no such file or folder")
-    fmt = detect_format(path) if fmt == "auto" else fmt
-    export = is_export(path)
-    if gyro_path is not None and fmt in ("generic", "sensorlogger", "xsens"):
-        raise FormatError(gyro_path, None, f"a second file, but a {fmt} log holds both signals "
-                                           f"in {path.name}: give one file (many walkers: "
-                                           "imuloco batch)")
-    if fmt == "generic":
-        return fmt, read_generic_csv(path)
-    if fmt == "phyphox":
-        streams = read_phyphox_export(path) if export else read_phyphox(path)
-        if gyro_path is not None:
-            streams += read_phyphox(gyro_path)
-        return fmt, streams
-    if fmt == "sensorlogger":
-        return fmt, read_sensor_logger(path if export else path.parent, platform)
-    if fmt == "realworld":
-        return fmt, read_realworld(*_realworld_pair(path, gyro_path))
-    if fmt == "xsens":
-        if export:
-            raise FormatError(path, None, "an Xsens export is one text file per sensor: give "
-                                          "the file")
-        return fmt, read_xsens(path)
-    raise UnknownNameError(f"unknown log format {fmt!r}; expected one of {list(FORMAT_NAMES)}")
-
-
-RW_ACC, RW_GYRO = ("acc_",), ("gyroscope_", "gyr_")  # RealWorld file names, any case
-
-
-def _rw_kind(path: Path) -> tuple[str | None, str]:
-    """``("acc" | "gyro" | None, the name after its prefix)`` of a RealWorld file."""
-    low = path.name.lower()
-    for kind, prefixes in (("acc", RW_ACC), ("gyro", RW_GYRO)):
-        for p in prefixes:
-            if low.startswith(p):
-                return kind, path.name[len(p):]
-    return None, path.name
+    return read_streams(path, fmt, gyro_path, platform)
 
 
 def recording_name(path: str | Path) -> str:
@@ -237,36 +196,6 @@ def recording_name(path: str | Path) -> str:
     ``.`` is named after the folder it stands for)."""
     full = Path(os.path.normpath(Path(path).absolute()))
     return full.name if full.is_dir() else full.stem
-
-
-def realworld_accelerometer(path: str | Path) -> Path | None:
-    """For a RealWorld gyroscope file (``gyroscope_X.csv``, ``gyr_X.csv``), the
-    ``acc_X.csv`` beside it that reads the pair; None for any other file."""
-    path = Path(path)
-    kind, rest = _rw_kind(path)
-    return path.with_name(RW_ACC[0] + rest) if kind == "gyro" else None
-
-
-def _realworld_pair(path: Path, gyro_path: Path | None) -> tuple[Path, Path]:
-    """The (accelerometer, gyroscope) files of a RealWorld log: ``acc_X.csv`` finds
-    ``gyroscope_X.csv`` beside it; a pair whose names say it was given gyroscope first is
-    turned round. A gyroscope file alone is refused, naming its accelerometer file (which
-    finds it: a folder's files given one by one, as ``batch --glob`` does, are one walker)."""
-    kind, rest = _rw_kind(path)
-    if gyro_path is not None:
-        return (gyro_path, path) if (kind, _rw_kind(gyro_path)[0]) == ("gyro", "acc") else (
-            path, gyro_path)
-    if kind != "acc":
-        raise FormatError(path, None, "a RealWorld log comes as two files, acc_NAME.csv and "
-                                      "gyroscope_NAME.csv: give the acc_ file (it finds the "
-                                      "other) or both" + (f" (acc_{rest})" if kind else ""))
-    names = [p + rest for p in RW_GYRO]
-    found = sorted(f for f in path.parent.iterdir()
-                   if f.name.lower() in {n.lower() for n in names} and f.is_file())
-    if not found:
-        raise FormatError(path, None, f"a RealWorld log comes as two files: no "
-                                      f"{' or '.join(names)} beside it (give both files)")
-    return path, found[0]
 
 
 def _sensors(streams: list[Stream], placement: str) -> dict[str, dict[str, Stream]]:
@@ -449,7 +378,7 @@ def read_log(path: str | Path | Sequence[str | Path], placement: str = "right_an
         gyroscope) file pair.
     placement : placement name of the sensor when the file names none (generic multi-sensor
         files name theirs).
-    fmt : ``"auto"`` (from the header) or one of :data:`imuloco.io.sensorlog.FORMATS`.
+    fmt : ``"auto"`` (from the header) or one of :data:`imuloco.io.logformats.FORMATS`.
     options : a :class:`LogOptions`, or its fields as keyword arguments:
         gyro_path : the gyroscope file of formats that split the signals (RealWorld, phyphox).
         acc_unit : ``"auto"``, ``"m/s^2"`` or ``"g"``; gyro_unit : ``"auto"``, ``"rad/s"`` or
