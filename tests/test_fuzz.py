@@ -51,3 +51,14 @@ def test_fuzzed_xsens_exports_end_in_clean_errors():
     r = run_fuzz(150, ("xsens",))["xsens"]
     assert r["wrong exception type"] == r["hang"] == r["garbage accepted"] == 0, r["examples"]
     assert r["clean"] > 50 and r["accepted"] > 5  # both outcomes are exercised
+
+
+def test_fuzzed_model_headers_are_refused_or_sound():
+    """Huge ints, NaN, Infinity, other types and deep nests anywhere in a saved model's JSON
+    header (issue 42: 9, 13): each refused naming the file, or loaded with its parameters in
+    the method's table and no non-finite learned value; none hangs."""
+    from imuloco.lab.fuzz import run_fuzz
+
+    r = run_fuzz(12, ("model_header",), timeout=30)["model_header"]
+    assert r["clean"] + r["accepted"] == 12, r["examples"]
+    assert r["clean"] > 0

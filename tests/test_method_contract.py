@@ -188,3 +188,33 @@ def test_a_method_whose_extra_is_missing_is_listed_with_the_install_hint(monkeyp
     info = registry.describe("learned")
     assert info.missing == "torch" and info.extra == "deep" and info.supports_online
     assert registry.describe("ridge").missing is None
+
+
+# --- one constraint table per method, checked at construction (constructors only store)
+
+@pytest.mark.parametrize("name", NAMES)
+def test_each_constraint_names_a_parameter_and_the_defaults_pass(name):
+    import inspect
+
+    cls = method_class(name)
+    takes = set(inspect.signature(cls.__init__).parameters) - {"self"}
+    assert set(cls.param_constraints) <= takes, set(cls.param_constraints) - takes
+    cls().check_params()  # the defaults lie within their own table
+
+
+def test_a_method_built_directly_is_checked_as_it_is_built():
+    """The constraint table is checked before ``__init__`` stores anything, for a class built
+    directly as for one from the registry; ``set_params`` values are checked at fit."""
+    from imuloco.errors import ParameterError
+    from imuloco.methods.baselines import KnnPose
+
+    with pytest.raises(ParameterError, match=r"method 'knn': parameter 'k' expects value") as e:
+        KnnPose(k=0)
+    assert e.value.key == "k"
+    with pytest.raises(ParameterError, match="'window' expects a whole number"):
+        KnnPose(3.5)  # positional arguments too
+    with pytest.raises(ParameterError, match="has no parameter 'kk'"):
+        KnnPose(kk=3)
+    method = KnnPose().set_params(k=-1)  # stored: checked again when fitted
+    with pytest.raises(ParameterError, match="'k'"):
+        method.check_params()

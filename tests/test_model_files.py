@@ -287,3 +287,74 @@ def test_zip_of_an_unknown_version_is_a_model_file_error(models, tmp_path):
     (tmp_path / "v.npz").write_bytes(bytes(blob))
     with pytest.raises(ModelFileError, match="v.npz"):
         load_model(tmp_path / "v.npz")
+
+
+# --- the method's parameter table checked at load; no non-finite number in a header (issue 42:
+# 9, 13): every field named, refused before anything is built from it
+
+def _edit_header(src, dst, edit):
+    """Copy model file ``src`` to ``dst`` with ``edit(header)`` applied to its JSON header
+    (written with NaN and Infinity as Python's json writes them)."""
+    with zipfile.ZipFile(src) as a, zipfile.ZipFile(dst, "w") as b:
+        for info in a.infolist():
+            data = a.read(info)
+            if info.filename == "__header__.npy":
+                header = json.loads(bytes(np.lib.format.read_array(io.BytesIO(data))).decode())
+                edit(header)
+                out = io.BytesIO()
+                np.lib.format.write_array(
+                    out, np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
+                data = out.getvalue()
+            b.writestr(info, data)
+    return dst
+
+
+@pytest.mark.parametrize("key, value, words", [
+    ("window", 100000, "expects value in [1, 1000]"), ("window", 0, "expects value in"),
+    ("window", 2.5, "whole number"), ("alpha", -1.0, "expects value in [0, inf)"),
+    ("alpha", "big", "finite number"), ("nosuch", 1, "no parameter")])
+def test_parameters_out_of_the_methods_table_are_refused_at_load(models, tmp_path, key, value,
+                                                                 words):
+    path = models["ridge"].save(tmp_path / "r.npz")
+    bad = _edit_header(path, tmp_path / "bad.npz", lambda h: h["params"].update({key: value}))
+    with pytest.raises(ModelFileError, match=f"{bad}: header field 'params.{key}'") as caught:
+        load_model(bad)
+    assert words in str(caught.value)
+
+
+@pytest.mark.parametrize("key, value", [
+    ("members", 100000), ("layers", 5000), ("lag", 1e7), ("hidden", 10**9), ("lag", -1),
+    ("bidirectional", "yes")])
+def test_a_learned_header_beyond_its_ranges_is_refused_before_building_it(tmp_path, key,
+                                                                          value):
+    """``members: 100000``, ``layers: 5000`` or ``lag: 1e7`` ran for 20 s and took 2.5 GB."""
+    pytest.importorskip("torch")
+    from imuloco.data import MODELS_DIR
+
+    bad = _edit_header(MODELS_DIR / "learned_right_ankle.npz", tmp_path / "big.npz",
+                       lambda h: h["params"].update({key: value}))
+    with pytest.raises(ModelFileError, match=f"{bad}: header field 'params.{key}'"):
+        load_model(bad)
+
+
+@pytest.mark.parametrize("where, key, value", [
+    ("values", "novelty_threshold", float("nan")), ("values", "novelty_scale", float("inf")),
+    ("values", "flat_pitch", float("-inf")), ("protocol", "seed", float("nan")),
+    ("params", "lr", float("nan"))])
+def test_non_finite_numbers_in_a_header_are_refused_by_key(tmp_path, where, key, value):
+    """NaN flagged no frame at all; Infinity predicted 1.5 cm where the model says 47."""
+    pytest.importorskip("torch")
+    from imuloco.data import MODELS_DIR
+
+    bad = _edit_header(MODELS_DIR / "learned_right_ankle.npz", tmp_path / "nan.npz",
+                       lambda h: h[where].update({key: value}))
+    with pytest.raises(ModelFileError, match=f"{bad}: header field '{where}.{key}'"):
+        load_model(bad)
+
+
+def test_non_finite_numbers_deep_in_a_header_are_refused(models, tmp_path):
+    path = models["ridge"].save(tmp_path / "r.npz")
+    bad = _edit_header(path, tmp_path / "deep.npz",
+                       lambda h: h["protocol"].update({"a": [1, {"b": float("inf")}]}))
+    with pytest.raises(ModelFileError, match=r"header field 'protocol.a\[1\].b'"):
+        load_model(bad)

@@ -63,3 +63,12 @@ class OutputExistsError(ImulocoError, FileExistsError):
 class MissingInputError(ImulocoError, FileNotFoundError):
     """An input file or folder that does not exist, or a folder without what is read from it
     (a data folder without motion files)."""
+
+
+class ParameterError(InputError):
+    """A method's hyperparameter that its constraint table refuses (of another kind, outside
+    its interval, not one of its options, unknown); ``key`` names it."""
+
+    def __init__(self, key: str, message: str) -> None:
+        self.key = key
+        super().__init__(message)

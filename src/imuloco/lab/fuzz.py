@@ -32,16 +32,20 @@ ends as a ``MemoryError`` (counted as a wrong exception type) instead of taking 
 
 from __future__ import annotations
 
+import importlib.util
 import io
 import itertools
 import json
+import logging
 import multiprocessing as mp
 import os
+import platform as host
 import random
 import resource
 import shutil
 import tempfile
 import time
+import warnings
 import zipfile
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -49,13 +53,32 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm.auto import tqdm
 
+from imuloco.core.recording import Recording
+from imuloco.data import MODELS_DIR, SAMPLE_DIR
+from imuloco.errors import ImulocoError
+from imuloco.io.asf_amc import read_asf_amc
+from imuloco.io.atomic import atomic_write
+from imuloco.io.bvh import read_bvh
+from imuloco.io.database import load_sample
+from imuloco.io.sensorlog import (
+    read_generic_csv,
+    read_phyphox,
+    read_sensor_logger,
+    write_generic_csv,
+)
 from imuloco.lab.fuzz_real import read_real, real_attack, real_garbage, real_seeds
 from imuloco.lab.fuzz_xsens import xsens_attack, xsens_seeds
+from imuloco.methods import get_method, load_model, method_class
+from imuloco.methods.modelfile import check_header, non_finite
+from imuloco.sensors.reallog import read_log
+from imuloco.sensors.simulate import simulate
 
-READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "real", "xsens")
+READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "model_header", "real", "xsens")
 READER_TITLES = {"bvh": "BVH", "asf": "ASF/AMC", "sensorlog": "sensor-log tables",
                  "read_log": "`read_log`", "model": "model files",
+                 "model_header": "model headers (JSON values)",
                  "real": "real-data folders (`read_trials`)",
                  "xsens": "Xsens exports (`read_log`)"}
 OUTCOMES = ("clean", "accepted", "wrong exception type", "hang", "garbage accepted")
@@ -78,11 +101,6 @@ class Case:
 
 def seed_files(work: Path) -> dict[str, list[Files]]:
     """Small valid inputs per reader, made from the bundled sample in ``work``."""
-    from imuloco.data import SAMPLE_DIR
-    from imuloco.io.database import load_sample
-    from imuloco.io.sensorlog import write_generic_csv
-    from imuloco.methods import get_method
-    from imuloco.sensors.simulate import simulate
 
     bvh_path = min(Path(SAMPLE_DIR).glob("*.bvh"))
     bvh = _cut_bvh(bvh_path.read_text(), 40).encode()
@@ -90,8 +108,6 @@ def seed_files(work: Path) -> dict[str, list[Files]]:
     clip = db.where(content="walk").clips[0]
     rec = simulate(clip, ["right_ankle"], 100.0, "phone", 3)
     keep = rec.times <= rec.times[0] + 3.0  # three seconds: small and quick to read
-    from imuloco.core.recording import Recording
-
     rec = Recording(rec.times[keep], rec.acc[keep], rec.gyro[keep], rec.placements)
     generic = write_generic_csv(rec, work / "seed.csv", overwrite=True).read_bytes()
     phyphox = _phyphox(rec).encode()
@@ -110,9 +126,19 @@ def seed_files(work: Path) -> dict[str, list[Files]]:
                       {"TotalAcceleration.csv": total}],
         "read_log": [{"log.csv": generic}, {"phyphox.csv": phyphox}, {"export.zip": sl_zip}],
         "model": models,
+        "model_header": models + _shipped_model(),
         "real": real_seeds(),
         "xsens": xsens_seeds(rec.acc[:, 0], rec.gyro[:, 0]),
     }
+
+
+def _shipped_model() -> list[Files]:
+    """The smallest shipped ``learned`` model (its header has the most parameters to
+    forge); none without torch (the ``deep`` extra)."""
+    if importlib.util.find_spec("torch") is None:
+        return []
+    path = min(Path(MODELS_DIR).glob("learned_*.npz"), key=lambda p: p.stat().st_size)
+    return [{"model.npz": path.read_bytes()}]
 
 
 def _cut_bvh(text: str, frames: int) -> str:
@@ -415,6 +441,40 @@ def _model_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
     return f"attack:{kind}", {name: out}
 
 
+# values a forged header field may take: huge and non-finite numbers, other types, nesting
+HEADER_VALUES = (10**6, 10**9, 10**18, 10**400, -1, 0, 1e7, 1e308, -1e308, float("nan"),
+                 float("inf"), float("-inf"), 2.5, True, False, None, "x", "", [], [1, 2],
+                 {}, {"a": 1})
+
+
+def _header_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
+    """One value anywhere in a model's JSON header (a parameter, a learned value, the
+    protocol, a top-level field) replaced by one of :data:`HEADER_VALUES` or a deep nest."""
+    name, data = next(iter(files.items()))
+    with zipfile.ZipFile(io.BytesIO(data)) as z:
+        members = {i.filename: z.read(i) for i in z.infolist()}
+    header = json.loads(np.lib.format.read_array(io.BytesIO(members["__header__.npy"])).tobytes())
+    paths = [(k,) for k in header] + [(k, sub) for k in ("params", "values", "protocol")
+                                      if isinstance(header.get(k), dict) for sub in header[k]]
+    path = rng.choice(paths)
+    if rng.random() < 0.1:
+        depth = rng.choice((10, 40, 10_000))
+        value: object = "NEST"
+        label = f"nest{depth}"
+    else:
+        value = rng.choice(HEADER_VALUES)
+        label = repr(value)[:12]
+    target = header
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = value
+    text = json.dumps(header)  # NaN and Infinity as Python's json writes them
+    if value == "NEST":
+        text = text.replace('"NEST"', "[" * depth + "]" * depth)
+    members["__header__.npy"] = _npy(np.frombuffer(text.encode(), np.uint8))
+    return f"header:{'.'.join(path)}={label}", {name: _zip(members)}
+
+
 def _npy(arr: np.ndarray) -> bytes:
     buf = io.BytesIO()
     np.lib.format.write_array(buf, arr, allow_pickle=False)
@@ -422,8 +482,12 @@ def _npy(arr: np.ndarray) -> bytes:
 
 
 ATTACKS = {"bvh": _bvh_attack, "asf": _asf_attack, "sensorlog": _table_attack,
-           "read_log": _table_attack, "model": _model_attack, "real": real_attack,
+           "read_log": _table_attack, "model": _model_attack, "model_header": _header_attack,
+           "real": real_attack,
            "xsens": xsens_attack}
+
+
+ONLY_ATTACKS = ("model_header",)  # structure-aware only: a flipped byte is the "model" class
 
 
 def cases(reader: str, seeds: list[Files], n: int, seed: int = 0) -> Iterator[Case]:
@@ -432,7 +496,7 @@ def cases(reader: str, seeds: list[Files], n: int, seed: int = 0) -> Iterator[Ca
     rng = random.Random(f"{reader}-{seed}")
     for _ in range(n):
         files = dict(rng.choice(seeds))
-        if rng.random() < 1 / 3:
+        if reader in ONLY_ATTACKS or rng.random() < 1 / 3:
             mutation, files = ATTACKS[reader](files, rng)
         else:
             target = rng.choice(list(files))
@@ -451,29 +515,19 @@ def cases(reader: str, seeds: list[Files], n: int, seed: int = 0) -> Iterator[Ca
 def read_case(reader: str, paths: list[Path]) -> object:
     """Read ``paths`` as ``reader`` does; returns what was read."""
     if reader == "bvh":
-        from imuloco.io.bvh import read_bvh
-
         return read_bvh(paths[0])
     if reader == "asf":
-        from imuloco.io.asf_amc import read_asf_amc
-
         return read_asf_amc(paths[0], paths[1])
     if reader == "sensorlog":
-        from imuloco.io.sensorlog import read_generic_csv, read_phyphox, read_sensor_logger
-
         name = paths[0].name
         if name == "TotalAcceleration.csv":
             (paths[0].parent / "Gyroscope.csv").write_bytes(paths[0].read_bytes())
             return read_sensor_logger(paths[0].parent, "android")
         return (read_phyphox if name.startswith("phyphox") else read_generic_csv)(paths[0])
     if reader in ("read_log", "xsens"):
-        from imuloco.sensors.reallog import read_log
-
         return read_log(paths[0])
     if reader == "real":
         return read_real(paths)
-    from imuloco.methods import load_model
-
     return load_model(paths[0])
 
 
@@ -509,9 +563,15 @@ def garbage(reader: str, result: object) -> str | None:
         return None
     if reader == "real":
         return real_garbage(result)
-    from imuloco.methods.modelfile import check_header
-
     model = result
+    if reader == "model_header":  # the forged value got past the header's checks
+        try:
+            model.check_params()
+        except ImulocoError as e:
+            return f"params: {e}"
+        at = non_finite(model.get_state()[1])
+        if at is not None:
+            return f"non-finite learned value {at}"
     try:
         check_header("model", {"format_version": 1, "method": model.name,
                                "params": model.get_params(), "values": {}, "protocol": {},
@@ -534,11 +594,6 @@ def garbage(reader: str, result: object) -> str | None:
 
 def judge(reader: str, paths: list[Path]) -> tuple[str, str]:
     """(outcome, detail) of reading ``paths`` (in the calling process, no time limit)."""
-    import logging
-    import warnings
-
-    from imuloco.errors import ImulocoError
-
     logging.disable(logging.CRITICAL)
     warnings.simplefilter("ignore")
     try:
@@ -615,18 +670,13 @@ def run_fuzz(n: int, readers: tuple[str, ...] = READERS, timeout: float = 5.0, s
              progress: bool = False, examples: int = 3) -> dict[str, dict]:
     """Read ``n`` generated inputs per reader; per reader the count of each outcome, the
     slowest input's seconds and up to ``examples`` examples of each outcome but ``accepted``."""
-    from tqdm.auto import tqdm
-
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="imuloco-fuzz-") as tmp:
         work = Path(tmp)
         seeds = seed_files(work)
-        # every reader imported before the workers fork: they all run the same code
-        import imuloco.io.asf_amc
-        import imuloco.io.bvh
-        import imuloco.io.realimu
-        import imuloco.methods.modelfile
-        import imuloco.sensors.reallog  # noqa: F401
+        if "model_header" in readers and importlib.util.find_spec("torch"):  # torch (the deep extra) imported
+            # before the workers fork: importing it in each took 8 s of a case's time limit
+            method_class("learned")
         pool = _Pool(timeout)
         try:
             for reader in readers:
@@ -669,10 +719,6 @@ def write_fuzz(n: int, out: str | Path, readers: tuple[str, ...] = READERS, time
                seed: int = 0, progress: bool = False) -> str:
     """Run :func:`run_fuzz` and write ``fuzz.json`` and ``fuzz.md`` (the table, the conditions
     and examples of every outcome but ``accepted``) into ``out``; returns the table."""
-    import platform as host
-
-    from imuloco.io.atomic import atomic_write
-
     t0 = time.perf_counter()
     results = run_fuzz(n, readers, timeout, seed, progress)
     seconds = time.perf_counter() - t0

@@ -16,10 +16,14 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import random
 from pathlib import Path
 
 import numpy as np
+from scipy.io import savemat
+
+from imuloco.io.realimu import detect_layout, read_trials
 
 Files = dict[str, bytes]
 
@@ -35,8 +39,6 @@ BAD_VALUES = ("text", "empty", "struct", "cell", "nan", "inf", "huge", "negative
 
 
 def _savemat(variables: dict) -> bytes:
-    from scipy.io import savemat
-
     buf = io.BytesIO()
     savemat(buf, variables)
     return buf.getvalue()
@@ -256,10 +258,6 @@ def _ipol_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
 
 def read_real(paths: list[Path]) -> tuple[str, list]:
     """The layout and every trial of the folder that holds ``paths`` (the seed's root)."""
-    import os
-
-    from imuloco.io.realimu import detect_layout, read_trials
-
     root = Path(os.path.commonpath([p.parent for p in paths]))
     layout = detect_layout(root)
     return layout, list(read_trials(root, layout))

@@ -31,7 +31,7 @@ import math
 import os
 import platform
 import time
-from abc import ABC, abstractmethod
+from abc import ABC, ABCMeta, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,6 +45,7 @@ from imuloco.core.skeleton import Skeleton
 from imuloco.errors import InputError, NotFittedError, UnknownNameError
 from imuloco.methods.modelfile import save_model
 from imuloco.methods.names import registered_name
+from imuloco.methods.params import Constraint, bind, check_params
 from imuloco.methods.training import TrainingSet, model_frames
 
 
@@ -112,7 +113,20 @@ class _RegisteredName:
         return registered_name(cls)
 
 
-class Method(ABC):
+class _Checked(ABCMeta):
+    """Method classes' type: a method's hyperparameters pass its constraint table
+    (:func:`imuloco.methods.params.check_params`) before its ``__init__`` stores them."""
+
+    def __call__(cls, *args: Any, **kwargs: Any) -> Any:
+        name = getattr(cls, "name", cls.__name__)
+        params = bind(cls, name, args, kwargs)
+        check_params(cls, name, params)
+        method = super().__call__(*args, **kwargs)
+        method.check_together()
+        return method
+
+
+class Method(ABC, metaclass=_Checked):
     """Base class of reconstruction methods (see the module docstring)."""
 
     name: ClassVar[str] = _RegisteredName()  # type: ignore[assignment]
@@ -131,10 +145,12 @@ class Method(ABC):
     # (None: any, it no longer matters): old files that carry it load without it, files with
     # another value are refused (retrain them)
     retired_params: ClassVar[dict[str, Any]] = {}
-    # the values a fit can use of a numeric hyperparameter, as an interval ("[1, inf)",
-    # "(0, 1]"); of a list-valued one, of each of its (at least one) items. Checked by
-    # check_params, so that a window of 0 is refused by name, not by numpy deep in a fit
-    param_ranges: ClassVar[dict[str, str]] = {}
+    # the method's constraint table (imuloco.methods.params): the values a fit can use of a
+    # numeric hyperparameter, as an interval ("[1, inf)", "(0, 1]"; of a list-valued one, of
+    # each of its at least one items), or the Options of a string one; the kinds come from the
+    # signature. Checked at construction, fit and load, so that a window of 0 is refused by
+    # name, not by numpy deep in a fit
+    param_constraints: ClassVar[dict[str, Constraint]] = {}
 
     @property
     def pins_feet(self) -> bool:
@@ -262,17 +278,15 @@ class Method(ABC):
         return self
 
     def check_params(self) -> None:
-        """Raise :class:`~imuloco.errors.InputError` naming the first hyperparameter outside
-        its :attr:`param_ranges` interval (NaN is outside every one)."""
-        for key, interval in self.param_ranges.items():
-            value = getattr(self, key)
-            if value is None:  # an optional one left out (e.g. a rank: chosen by the fit)
-                continue
-            items = list(value) if isinstance(value, (list, tuple)) else [value]
-            if not items or not all(_within(v, interval) for v in items):
-                what = "items" if isinstance(value, (list, tuple)) else "value"
-                raise InputError(f"method {self.name!r}: parameter {key!r} expects {what} in "
-                                 f"{interval}, got {value!r}")
+        """Raise :class:`~imuloco.errors.ParameterError` (an InputError) naming the first
+        hyperparameter its constraint table refuses (:func:`imuloco.methods.params.
+        check_params`), then :meth:`check_together`."""
+        check_params(type(self), self.name, self.get_params())
+        self.check_together()
+
+    def check_together(self) -> None:
+        """Raise :class:`~imuloco.errors.ParameterError` for hyperparameters that each pass
+        the table but not together; none by default."""
 
     def __repr__(self) -> str:
         """``Class(param=value, ...)`` with the hyperparameters that differ from the
@@ -300,18 +314,6 @@ class Method(ABC):
         """Write the fitted model to one ``.npz`` file (:mod:`imuloco.methods.modelfile`)."""
         self.check_fitted()
         return save_model(self, path, overwrite=overwrite)
-
-
-def _within(value: Any, interval: str) -> bool:
-    """Whether the number ``value`` lies in ``interval``, written ``[low, high)`` and the like
-    (``inf`` for no bound)."""
-    low, high = (float(x) for x in interval[1:-1].split(","))
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        return False
-    return ((low <= v if interval[0] == "[" else low < v)
-            and (v <= high if interval[-1] == "]" else v < high))
 
 
 def _same(a: Any, b: Any) -> bool:

@@ -22,6 +22,7 @@ from imuloco.methods.features import (
     standardize,
     windows,
 )
+from imuloco.methods.params import Constraint
 from imuloco.methods.training import Example, TrainingSet
 
 
@@ -116,7 +117,7 @@ class RidgePose(_Windowed):
     penalty (scikit-learn ``Ridge``) on standardized inputs and outputs."""
 
     summary = "ridge regression from a causal window of sensor samples to the pose (2014 Fig. 8)"
-    param_ranges: ClassVar[dict[str, str]] = {"window": WINDOW_RANGE, "alpha": "[0, inf)"}
+    param_constraints: ClassVar[dict[str, Constraint]] = {"window": WINDOW_RANGE, "alpha": "[0, inf)"}
 
     def __init__(self, window: int = 15, alpha: float = 1.0) -> None:
         self.window = window  # samples per causal window (0.5 s at 30 fps); not in the paper
@@ -152,7 +153,7 @@ class KnnPose(_Windowed):
     Training rows are kept every ``stride`` frames to bound the model's size."""
 
     summary = "k-nearest-neighbour lookup of poses by a causal window of sensor samples"
-    param_ranges: ClassVar[dict[str, str]] = {"window": WINDOW_RANGE, "k": "[1, inf)",
+    param_constraints: ClassVar[dict[str, Constraint]] = {"window": WINDOW_RANGE, "k": "[1, inf)",
                                               "stride": "[1, inf)"}
 
     def __init__(self, window: int = 15, k: int = 8, stride: int = 1) -> None:

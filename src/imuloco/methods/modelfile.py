@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from imuloco.core.skeleton import Skeleton
-from imuloco.errors import ModelFileError, UnknownNameError
+from imuloco.errors import ModelFileError, ParameterError, UnknownNameError
 from imuloco.io.atomic import atomic_write, check_output
 from imuloco.methods.registry import method_class
 from imuloco.sensors.noise import NOISE_PRESETS
@@ -148,8 +148,11 @@ def _load(path: Path, arrays: _Arrays) -> Method:
     except UnknownNameError as e:
         raise ModelFileError(f"{path}: {e}") from None
     params = _current_params(path, cls, header["params"])
-    try:  # a header or arrays that do not fit the method: missing keys, wrong shapes
+    try:  # the method's constraint table, before anything is built from the header
         method = cls(**{**cls.legacy_params, **params})
+    except ParameterError as e:
+        raise ModelFileError(f"{path}: header field 'params.{e.key}': {e}") from None
+    try:  # a header or arrays that do not fit the method: missing keys, wrong shapes
         sk = header["skeleton"]
         method.set_setup(Skeleton(sk["names"], arrays["__parents__"], arrays["__offsets__"],
                                   {int(k): np.array(v) for k, v in sk["end_sites"].items()},
@@ -226,6 +229,21 @@ def _depth(value: object) -> int:
     return deepest
 
 
+def non_finite(value: object, where: str = "") -> str | None:
+    """The path (``values.novelty_scale``, ``protocol.a[1].b``) of the first NaN or infinite
+    number in a JSON value, None when there is none (iterative: no recursion to exhaust)."""
+    stack = [(value, where)]
+    while stack:
+        v, at = stack.pop()
+        if isinstance(v, float) and not math.isfinite(v):
+            return at
+        if isinstance(v, dict):
+            stack += [(c, f"{at}.{k}" if at else str(k)) for k, c in reversed(v.items())]
+        elif isinstance(v, list):
+            stack += [(c, f"{at}[{i}]") for i, c in reversed(list(enumerate(v)))]
+    return None
+
+
 def check_header(path: str | Path, header: object) -> None:
     """The header's schema: raises :class:`ModelFileError` naming ``path`` and the field.
 
@@ -233,7 +251,9 @@ def check_header(path: str | Path, header: object) -> None:
     ``protocol`` and ``skeleton`` objects (``skeleton`` with ``names`` a list of strings,
     ``body_map`` and ``end_sites`` objects); ``placements`` a non-empty list of distinct known
     placement names; ``noise`` a known noise preset; ``fps`` a number in
-    :data:`MIN_FPS`..:data:`MAX_FPS`; nesting at most :data:`MAX_HEADER_DEPTH` levels.
+    :data:`MIN_FPS`..:data:`MAX_FPS`; nesting at most :data:`MAX_HEADER_DEPTH` levels; no
+    NaN or infinite number anywhere. (``params`` pass the method's constraint table when
+    :func:`load_model` constructs it.)
     """
     def bad(field: str, expected: str, value: object) -> ModelFileError:
         return ModelFileError(f"{path}: header field {field!r}: expected {expected}, found "
@@ -243,6 +263,11 @@ def check_header(path: str | Path, header: object) -> None:
         raise ModelFileError(f"{path}: not an imuloco model file (header is not a JSON object)")
     if _depth(header) > MAX_HEADER_DEPTH:
         raise ModelFileError(f"{path}: the header nests deeper than {MAX_HEADER_DEPTH} levels")
+    at = non_finite(header)
+    if at is not None:  # JSON's NaN and Infinity pass every range check (a novelty threshold
+        # of NaN flagged no frame; a novelty scale of Infinity predicted 1.5 cm, not 47)
+        raise ModelFileError(f"{path}: header field {at!r}: expected a finite number, found "
+                             "NaN or Infinity")
     version = header.get("format_version")
     if version != FORMAT_VERSION:
         raise ModelFileError(f"{path}: model file format version {version!r}, this imuloco "

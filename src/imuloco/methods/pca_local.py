@@ -30,6 +30,7 @@ from scipy.optimize import leastsq
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
 from imuloco.methods.base import Method
+from imuloco.methods.params import Constraint
 from imuloco.methods.training import TrainingSet
 from imuloco.ops.rotations import from_6d, to_matrix
 from imuloco.sensors.placement import anatomical_frame, get_placement
@@ -105,7 +106,7 @@ class PCALocal(Method):
     # k at most 1000 (50 by default): a neighbourhood that large is no longer local, and each
     # frame's PCA costs O(k); k=1e9 took every training frame for each (74 s on 4 sample clips,
     # not 0.2)
-    param_ranges: ClassVar[dict[str, str]] = {
+    param_constraints: ClassVar[dict[str, Constraint]] = {
         "k": "[1, 1000]", "energy": "(0, 1]", "sigma_control": "(0, inf)",
         "sigma_smooth": "(0, inf)", "max_nfev": "[1, inf)", "stride": "[1, inf)"}
 

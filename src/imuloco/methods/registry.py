@@ -98,98 +98,11 @@ def available_methods() -> dict[str, type[Method]]:
 
 
 def get_method(name: str, **params) -> Method:
-    """A new, unfitted method by name. A hyperparameter whose default is a bool or a number
-    must be one (:class:`~imuloco.errors.InputError` naming it otherwise: ``"True"`` reaching
-    torch as a string failed deep inside a training), a finite one, within the class's
-    :attr:`~imuloco.methods.base.Method.param_ranges`."""
-    from imuloco.errors import InputError
-
-    cls = method_class(name)
-    _check_types(name, cls, params)
-    try:
-        method = cls(**params)
-    except ValueError as e:  # a constructor's own check of a value (a choice, a range)
-        why = str(e).removeprefix(f"{name}: ")
-        raise InputError(f"method {name!r}: {why}") from None
-    method.check_params()
-    return method
-
-
-def _check_types(name: str, cls: type, params: dict[str, Any]) -> None:
-    """Raise InputError for a parameter the constructor does not take, or whose value is not
-    of the kind it expects (:func:`_kinds`)."""
-    import inspect
-
-    from imuloco.errors import InputError
-
-    sig = inspect.signature(cls.__init__)
-    hints = _hints(cls.__init__)
-    takes_any = any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values())
-    for key, value in params.items():
-        p = sig.parameters.get(key)
-        if p is None or p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
-            if takes_any:
-                continue
-            raise InputError(f"method {name!r} has no parameter {key!r}; it takes "
-                             f"{[k for k in sig.parameters if k != 'self']}")
-        kinds = _kinds(p.default, hints.get(key))
-        if kinds and not any(_fits(value, k) for k in kinds):
-            expected = " or ".join(_KIND_NAMES[k] for k in kinds)
-            raise InputError(f"method {name!r}: parameter {key!r} expects {expected}, got "
-                             f"{value!r}")
-
-
-# what a hyperparameter's value may be, and how an error names it; "ints" and "floats" are
-# lists of them (a tuple default, e.g. hidden=(32,), periods=(0.8, 1.0))
-_KIND_NAMES = {bool: "true or false", int: "a whole number", float: "a finite number",
-               str: "a string", type(None): "None", "ints": "a list of whole numbers",
-               "floats": "a list of finite numbers"}
-
-
-def _kinds(default: Any, hint: Any) -> tuple:
-    """The kinds of :data:`_KIND_NAMES` a parameter takes: its default's (bool before int, a
-    bool being an int), or for a default of None its annotation's (``int | None``); none to
-    check when either is another type."""
-    import types
-    import typing
-
-    if default is None:
-        union = typing.get_origin(hint) in (typing.Union, types.UnionType)
-        kinds = typing.get_args(hint) if union else (hint,)
-        return kinds if all(k in _KIND_NAMES for k in kinds) else ()
-    if isinstance(default, tuple) and default:
-        return ("ints" if all(_fits(d, int) for d in default) else "floats",)
-    return next(((k,) for k in (bool, int, float, str) if isinstance(default, k)), ())
-
-
-def _fits(value: Any, kind: Any) -> bool:
-    """Whether ``value`` is of ``kind`` (:data:`_KIND_NAMES`). Numbers must be finite (NaN and
-    inf pass every range check) and never a bool; an int is a float too."""
-    import math
-    from numbers import Integral, Real
-
-    import numpy as np
-
-    if kind in ("ints", "floats"):
-        return isinstance(value, (list, tuple)) and all(
-            _fits(v, int if kind == "ints" else float) for v in value)
-    flag = isinstance(value, (bool, np.bool_))
-    if kind is bool:
-        return flag
-    if kind in (int, float):
-        return (not flag and isinstance(value, Integral if kind is int else Real)
-                and math.isfinite(value))
-    return value is None if kind is type(None) else isinstance(value, kind)
-
-
-def _hints(function) -> dict[str, Any]:
-    """``function``'s resolved annotations; none when they cannot be resolved."""
-    import typing
-
-    try:
-        return typing.get_type_hints(function)
-    except (NameError, TypeError):
-        return {}
+    """A new, unfitted method by name. Its hyperparameters must pass the class's constraint
+    table (:mod:`imuloco.methods.params`, checked as the method is constructed):
+    :class:`~imuloco.errors.ParameterError` (an InputError) naming the first that does not
+    (``"True"`` reaching torch as a string failed deep inside a training)."""
+    return method_class(name)(**params)
 
 
 @dataclass(frozen=True)

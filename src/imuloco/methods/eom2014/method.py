@@ -67,6 +67,7 @@ from imuloco.methods.base import Method, Stream
 from imuloco.methods.eom2014 import hmm as hmm_mod
 from imuloco.methods.eom2014 import mlp as mlp_mod
 from imuloco.methods.eom2014.gplvm import GPLVM, fit_gplvm
+from imuloco.methods.params import Constraint, Options
 from imuloco.methods.postprocess import (
     laplacian_smooth,
     laplacian_smooth_quaternions,
@@ -134,12 +135,13 @@ class Eom2014(Method):
     # 10^4 (L-BFGS stops long before), MLP widths 4096 (32), context 300 frames each side
     # (10 s at 30 fps; the inputs grow 12 S per frame of it), smooth_iterations 10^4 (a
     # Laplacian of width sqrt(10^4 lambda), 70 frames at the default lambda)
-    param_ranges: ClassVar[dict[str, str]] = {
+    param_constraints: ClassVar[dict[str, Constraint]] = {
         "latent_dim": "[1, 100]", "window": "[1, inf)", "levels": "[1, 100]",
         "n_states": "[1, 100]", "sigma": "[0, 1000]", "n_active": "[1, inf)",
         "max_segment": "[2, inf)", "maxiter": "[0, 10000]", "x_prior": "[0, inf)",
         "hidden": "[1, 4096]", "context": "[0, 300]", "smooth_lambda": "[0, 1]",
-        "smooth_iterations": "[0, 10000]", "min_phase_frames": "[0, inf)", "seed": "[0, inf)"}
+        "smooth_iterations": "[0, 10000]", "min_phase_frames": "[0, inf)", "seed": "[0, inf)",
+        "variant": Options(*VARIANTS)}
     supports_online = True
 
     def __init__(
@@ -163,8 +165,6 @@ class Eom2014(Method):
         min_phase_frames: int = 60,   # phases with fewer training frames are dropped
         seed: int = 0,
     ) -> None:
-        if variant not in VARIANTS:
-            raise ValueError(f"eom2014: unknown variant {variant!r}; expected {VARIANTS}")
         self.variant = variant
         self.per_type = per_type
         self.latent_dim = latent_dim

@@ -40,6 +40,7 @@ from imuloco.methods.base import Method, Reconstruction, Stream, calibrated_erro
 from imuloco.methods.features import PoseIntegrator
 from imuloco.methods.learned import train as tr
 from imuloco.methods.learned.model import CONTACT_PARTS, Ensemble, Reconstructor, TorchFK
+from imuloco.methods.params import Constraint
 from imuloco.methods.postprocess import (
     FootLock,
     FootPinner,
@@ -167,7 +168,7 @@ class Learned(Method):
     # OpenMP), draws 100 (2: the training set 101 times over), lag 1000 frames (8; 33 s of
     # look-ahead), the loss weights 10^6 (10 and 150; 1e300 is inf in float32), weight_decay
     # 1 (1e-4: AdamW then shrinks each weight by lr a step), lr 1 (4e-3)
-    param_ranges: ClassVar[dict[str, str]] = {
+    param_constraints: ClassVar[dict[str, Constraint]] = {
         **dict.fromkeys(("batch_size", "window"), "[1, inf)"),
         "hidden": "[1, 4096]", "layers": "[1, 64]", "epochs": "[1, 10000]",
         "members": "[1, 64]", "threads": "[1, 1024]", "draws": "[0, 100]", "lag": "[0, 1000]",

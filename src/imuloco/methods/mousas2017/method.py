@@ -10,6 +10,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from imuloco.core.motion import Motion
+from imuloco.errors import ParameterError
 from imuloco.methods.base import Method
 from imuloco.methods.mousas2017.features import (
     layout,
@@ -24,7 +25,8 @@ from imuloco.methods.mousas2017.registration import (
     register_phase,
     segment_clip,
 )
-from imuloco.methods.mousas2017.stream import MousasStream, resolve_engine
+from imuloco.methods.mousas2017.stream import ENGINES, MousasStream
+from imuloco.methods.params import Constraint, Options
 from imuloco.methods.postprocess import pin_feet
 from imuloco.methods.training import TrainingSet
 
@@ -89,12 +91,13 @@ class Mousas2017(Method):
     """
 
     summary = "hierarchical multivariate HMM + reactive interpolation (Mousas 2017), online"
-    param_ranges: ClassVar[dict[str, str]] = {
+    param_constraints: ClassVar[dict[str, Constraint]] = {
         **dict.fromkeys(A_PHASE + A_FRAME, "[0, 1]"), "shrinkage": "[0, inf)",
         "ridge": "[0, inf)", "max_segment_s": "(0, inf)",
         # emission deviations 10^-6 to 10^6 times the y-marginal's: the likelihoods are then
         # one spike or flat in float64 (1e300 overflowed squaring it)
-        "sigma_scale": "[1e-6, 1e6]"}
+        "sigma_scale": "[1e-6, 1e6]", "blend": "(0, 1]", "K": "[1, inf)", "beam": "[0, inf)",
+        "engine": Options(*ENGINES)}
     supports_online = True
 
     # frames inside a gap of a recording (no sample for more than 0.1 s) reach the model as
@@ -137,18 +140,13 @@ class Mousas2017(Method):
         self.sigma_scale = sigma_scale
         self.beam = beam
         self.engine = engine
-        if not 0.0 < self.blend <= 1.0:
-            raise ValueError(f"mousas2017: blend must be in (0, 1], got {self.blend}")
-        if self.K < 1:
-            raise ValueError(f"mousas2017: K must be >= 1, got {self.K}")
-        if self.beam < 0:
-            raise ValueError(f"mousas2017: beam must be >= 0 (0: exact), got {self.beam}")
-        resolve_engine(self.engine)
+
+    def check_together(self) -> None:
         for group in (A_PHASE, A_FRAME):
             a = [getattr(self, k) for k in group]
             if not abs(sum(a) - 1) <= 1e-9:
-                raise ValueError(f"mousas2017: {', '.join(group)} are probabilities that must "
-                                 f"sum to 1, got {a}")
+                raise ParameterError(group[0], f"method {self.name!r}: {', '.join(group)} are "
+                                               f"probabilities that must sum to 1, got {a}")
 
     # ---- learning ---------------------------------------------------------------------------
     def learn(self, data: TrainingSet, progress: bool = False) -> None:

@@ -38,8 +38,10 @@ from scipy.interpolate import CubicSpline
 from scipy.optimize import least_squares
 
 from imuloco.core.motion import Motion
+from imuloco.errors import ParameterError
 from imuloco.methods import pose
 from imuloco.methods.base import Method
+from imuloco.methods.params import Constraint, Options
 from imuloco.methods.tautges2008.align import eq17_distance, world_acceleration
 from imuloco.methods.tautges2008.tensor import (
     MotionModel,
@@ -75,22 +77,18 @@ class Tautges2008(Method):
     """
 
     summary = "multilinear motion model fitted to windows of accelerations (Tautges 2008)"
-    param_ranges: ClassVar[dict[str, str]] = {
+    param_constraints: ClassVar[dict[str, Constraint]] = {
         # frames 1000 per cycle (the paper's 70 at 120 Hz; 1000 is over 8 s of a cycle at
         # 120 Hz), phases 360 (12; a start every degree of the cycle): beyond, memory ran out
         "frames": "[2, 1000]", "repetitions": "[1, inf)", "style_rank": "[1, inf)",
         "repetition_rank": "[1, inf)", "window": "[2, inf)", "hop": "[1, inf)",
         "phases": "[1, 360]", "periods": "(0, inf)", "max_iter": "[1, inf)",
-        "bounds_margin": "[0, inf)"}
+        "bounds_margin": "[0, inf)", "frame": Options("world", "sensor")}
 
     def __init__(self, frames: int = 32, repetitions: int = 3, style_rank: int | None = None,
                  repetition_rank: int | None = None, window: int = 32, hop: int = 16,
                  phases: int = 12, periods: tuple[float, ...] = (0.8, 1.0, 1.25),
                  max_iter: int = 15, bounds_margin: float = 0.25, frame: str = "world") -> None:
-        if frame not in ("world", "sensor"):
-            raise ValueError(f"frame must be 'world' or 'sensor', got {frame!r}")
-        if hop > window:  # frames between two windows would get no pose (NaN)
-            raise ValueError(f"hop must be at most window, got hop {hop} > window {window}")
         self.frames = frames
         self.repetitions = repetitions
         self.style_rank = style_rank
@@ -102,6 +100,11 @@ class Tautges2008(Method):
         self.max_iter = max_iter
         self.bounds_margin = bounds_margin
         self.frame = frame
+
+    def check_together(self) -> None:
+        if self.hop > self.window:  # frames between two windows would get no pose (NaN)
+            raise ParameterError("hop", f"method {self.name!r}: hop must be at most window, "
+                                        f"got hop {self.hop} > window {self.window}")
 
     # ---- learning ---------------------------------------------------------------------------
     def learn(self, data: TrainingSet, progress: bool = False) -> None:
