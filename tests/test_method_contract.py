@@ -218,3 +218,13 @@ def test_a_method_built_directly_is_checked_as_it_is_built():
     method = KnnPose().set_params(k=-1)  # stored: checked again when fitted
     with pytest.raises(ParameterError, match="'k'"):
         method.check_params()
+
+
+def test_a_huge_whole_number_is_refused_by_its_range_not_an_overflow():
+    """10**400 (JSON allows it) overflowed float() in the kind check (OverflowError)."""
+    from imuloco.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="'window' expects value in"):
+        get_method("ridge", window=10**400)
+    with pytest.raises(ParameterError, match="'alpha' expects value in"):
+        get_method("ridge", alpha=-10**400)

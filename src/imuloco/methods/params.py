@@ -74,9 +74,9 @@ def fits(value: Any, kind: Any) -> bool:
     flag = isinstance(value, (bool, np.bool_))
     if kind is bool:
         return flag
-    if kind in (int, float):
-        return (not flag and isinstance(value, Integral if kind is int else Real)
-                and math.isfinite(value))
+    if kind in (int, float):  # an int is finite however large (isfinite would overflow)
+        return not flag and (isinstance(value, Integral) or kind is float
+                             and isinstance(value, Real) and math.isfinite(value))
     return value is None if kind is type(None) else isinstance(value, kind)
 
 
@@ -90,6 +90,12 @@ def within(value: Any, interval: str) -> bool:
         return False
     return ((low <= v if interval[0] == "[" else low < v)
             and (v <= high if interval[-1] == "]" else v < high))
+
+
+def _show(value: Any) -> str:
+    """``repr(value)``, cut to 60 characters (a 400-digit number, a long list)."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _hints(function) -> dict[str, Any]:
@@ -132,7 +138,7 @@ def check_params(cls: type, name: str, params: Mapping[str, Any]) -> None:
         if found and not any(fits(value, k) for k in found):
             expected = " or ".join(KIND_NAMES[k] for k in found)
             raise ParameterError(key, f"method {name!r}: parameter {key!r} expects {expected}, "
-                                      f"got {value!r}")
+                                      f"got {_show(value)}")
         rule = table.get(key)
         if rule is None or value is None:  # an optional one left out (a rank: the fit's)
             continue
@@ -145,4 +151,4 @@ def check_params(cls: type, name: str, params: Mapping[str, Any]) -> None:
         if not items or not all(within(v, rule) for v in items):
             what = "items" if isinstance(value, (list, tuple)) else "value"
             raise ParameterError(key, f"method {name!r}: parameter {key!r} expects {what} in "
-                                      f"{rule}, got {value!r}")
+                                      f"{rule}, got {_show(value)}")
