@@ -29,8 +29,10 @@ import numpy as np
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import ImulocoError
+from imuloco.io.asf_amc import find_asf
 from imuloco.io.atomic import atomic_write
 from imuloco.io.bvh import cached_body_map
+from imuloco.io.motionfile import read_motion
 
 # The code whose output an entry holds (paths in the package).
 _SOURCES = ("io/bvh.py", "io/numtext.py", "io/asf_amc.py", "io/upaxis.py", "io/motionfile.py",
@@ -72,8 +74,6 @@ def read_motion_cached(path: str | Path, **options) -> Motion:
 
     ``options`` are read_motion's (``up``, ``skip_frames``); the Motion's name is the file's
     stem, as the readers name it."""
-    from imuloco.io.motionfile import read_motion
-
     path = Path(path)
     folder = cache_dir()
     if folder is None:
@@ -81,8 +81,6 @@ def read_motion_cached(path: str | Path, **options) -> Motion:
     # An AMC's skeleton is in its ASF: both files' bytes make the key.
     data = path.read_bytes()
     if path.suffix.lower() == ".amc":
-        from imuloco.io.asf_amc import find_asf
-
         data += b"\0" + find_asf(path).read_bytes()
     entry = folder / (cache_key(data, options) + ".clip")
     motion = _load(entry, path.stem)

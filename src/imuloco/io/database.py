@@ -28,6 +28,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from imuloco.core.motion import Motion, MotionDatabase
+from imuloco.core.retarget import Rig, resampled, retarget, same_family
+from imuloco.data import SAMPLE_DIR
 from imuloco.errors import FormatError, MissingInputError
 from imuloco.io.cache import read_motion_cached
 
@@ -184,8 +186,6 @@ def combine(dbs: Sequence[MotionDatabase], progress: bool = False) -> MotionData
     clips on other skeletons are retargeted (:func:`imuloco.core.retarget.retarget`; each
     other skeleton's rig is measured on all its clips, the target's on the first
     database's), every clip is resampled (:func:`imuloco.core.retarget.resampled`)."""
-    from imuloco.core.retarget import Rig, resampled, retarget, same_family
-
     first = dbs[0]
     target = first.skeleton
     fps = float(first.clips[0].fps)
@@ -229,6 +229,4 @@ def load_databases(folders: Sequence[str | Path], limit: int | None = None,
 
 def load_sample(progress: bool = False) -> MotionDatabase:
     """The small sample bundled with the package (16 clips, see ``data/sample/README.md``)."""
-    from imuloco.data import SAMPLE_DIR
-
     return load_database(SAMPLE_DIR, progress=progress)

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from imuloco.core.motion import Motion
 from imuloco.errors import FormatError
+from imuloco.io.asf_amc import find_asf, read_asf_amc
 from imuloco.io.bvh import read_bvh
 
 
@@ -19,8 +20,6 @@ def read_motion(path: str | Path, up: str = "auto", skip_frames: int = 0) -> Mot
     if suffix == ".bvh":
         return read_bvh(path, up=up, skip_frames=skip_frames)
     if suffix == ".amc":
-        from imuloco.io.asf_amc import find_asf, read_asf_amc
-
         return read_asf_amc(find_asf(path), path, up=up, skip_frames=skip_frames)
     raise FormatError(path, None, f"unsupported motion file type {suffix!r}; expected .bvh or "
                       ".amc")

@@ -28,7 +28,7 @@ def _arrow() -> tuple[ModuleType, ModuleType] | None:
     are called through ``pyarrow._compute.call_function``: ``pyarrow.compute`` and
     ``Array.to_numpy`` import pandas, which costs half a second.)"""
     try:
-        import pyarrow
+        import pyarrow  # the [dist] extra's, when installed
         import pyarrow._compute as kernels
     except ImportError:
         return None

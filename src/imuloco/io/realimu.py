@@ -32,6 +32,7 @@ from enum import Enum
 from pathlib import Path
 
 import numpy as np
+from scipy.io import loadmat
 
 from imuloco.core.recording import Recording
 from imuloco.errors import FormatError, UnknownNameError
@@ -194,8 +195,6 @@ def _loadmat(path: Path, **kw) -> dict:
     data comes back from it), which costs one more read (30 ms for a mobilise-d-lab file). A
     child still reading after :data:`LOADMAT_TIMEOUT_S` (plus 2 s a megabyte) is killed and the
     file refused, so that no file can hang the program."""
-    from scipy.io import loadmat
-
     if hasattr(os, "fork"):
         with warnings.catch_warnings():  # Python 3.12+ warns of fork in a threaded process:
             warnings.simplefilter("ignore", DeprecationWarning)  # the child takes no lock

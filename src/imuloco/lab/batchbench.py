@@ -40,10 +40,15 @@ from typing import Any
 
 import numpy as np
 
+from imuloco.app.batch import dask_client, run_batch
+from imuloco.app.pipeline import choose_method
 from imuloco.core.motion import Motion
 from imuloco.io.atomic import atomic_write
+from imuloco.io.database import load_sample
+from imuloco.io.sensorlog import write_generic_csv
 from imuloco.ops.heading import heading_from_hips
 from imuloco.ops.rotations import about_y, qmul, qrot
+from imuloco.sensors.simulate import simulate
 
 WALKING = ("walk", "walk-turn-left", "walk-turn-right")
 STARTUP_TIMEOUT_S = 60.0
@@ -79,10 +84,6 @@ def walker_motion(clips: list[Motion], seconds: float, seed: int) -> Motion:
 def make_crowd(n: int, out_dir: str | Path, seconds: float = 60.0,
                placement: str = "right_ankle", seed: int = 0) -> list[Path]:
     """Write ``n`` simulated walkers' phone logs (generic CSV) into ``out_dir``."""
-    from imuloco.io.database import load_sample
-    from imuloco.io.sensorlog import write_generic_csv
-    from imuloco.sensors.simulate import simulate
-
     db = load_sample()
     clips = [c for c, lab in zip(db.clips, db.labels) if lab.get("content") in WALKING]
     out = Path(out_dir)
@@ -115,8 +116,6 @@ def _run(logs: list[Path], out: Path, fitted, scheduler=None, jobs: int = 1
          ) -> dict[str, Any]:
     """One batch run on a cluster of ``jobs`` workers (started here unless ``scheduler``),
     with its figures."""
-    from imuloco.app.batch import dask_client, run_batch
-
     if out.exists():
         shutil.rmtree(out)  # the benchmark's own scratch output
     load_before = _load()
@@ -146,7 +145,7 @@ def _free_port() -> int:
 
 def _same_tables(a: Path, b: Path) -> dict[str, Any]:
     """Whether two batch outputs hold the same tables (the timing column aside)."""
-    import pyarrow.parquet as pq
+    import pyarrow.parquet as pq  # the [dist] extra's (batch writes parquet with it)
 
     result = {}
     for name, drop in (("walkers.parquet", ["seconds"]), ("strides.parquet", [])):
@@ -203,8 +202,6 @@ def batch_benchmark(n: int, out_dir: str | Path, seconds: float = 60.0, method: 
                     external: bool = True) -> dict[str, Any]:
     """Run the benchmark (see the module docstring); write ``batch_bench.json`` and
     ``batch_bench.md`` into ``out_dir`` and return the record."""
-    from imuloco.app.pipeline import choose_method
-
     out = Path(out_dir)
     logs = make_crowd(n, out / "crowd", seconds, placement)
     fitted, note = choose_method(method, None, placement)

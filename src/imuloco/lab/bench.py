@@ -63,10 +63,15 @@ from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
 from imuloco.core.motion import Motion, MotionDatabase
+from imuloco.core.retarget import resampled
 from imuloco.errors import UnknownNameError
 from imuloco.io.atomic import atomic_write, atomic_write_text
+from imuloco.io.database import combine, load_databases, load_sample, spread
 from imuloco.lab.protocols import MOTION_TYPES, PROTOCOL_VERSION, folds
+from imuloco.lab.report import write_report
 from imuloco.measures import metrics
+from imuloco.methods import get_method, method_class
+from imuloco.methods.registry import parse_method_spec
 from imuloco.methods.training import (
     TEST_SEED_OFFSET,
     Example,
@@ -94,8 +99,6 @@ def load_data(data: DataArg, limit: int | None = None, progress: bool = False,
     (:func:`imuloco.io.database.load_databases`; ``limit`` per folder), or the bundled
     sample when ``data`` is None (``up`` and ``skip_frames`` as for
     :func:`imuloco.io.bvh.read_bvh`)."""
-    from imuloco.io.database import load_databases, load_sample, spread
-
     if data is None:
         db = load_sample(progress=progress)
         return db.subset(spread(len(db), limit))
@@ -118,8 +121,6 @@ def cross_dataset_test(train_db: MotionDatabase, test: DataArg, limit: int | Non
     """``cross-dataset``'s test clips for an already loaded training database: resampled to
     its frame rate, and each one's ground truth on its skeleton
     (:func:`truth_on_training_rig`)."""
-    from imuloco.core.retarget import resampled
-
     fps = float(train_db.clips[0].fps)
     test_db = load_data(test, limit, progress, up, skip_frames)
     test_db = MotionDatabase([resampled(c, fps) for c in test_db.clips], test_db.labels)
@@ -184,8 +185,6 @@ def evaluate_method(
     (:func:`imuloco.measures.metrics.evaluate_parts`) and leave ``per_joint`` and ``curves``
     out (None / {}).
     """
-    from imuloco.methods import get_method, method_class
-
     params = dict(params or {})
     if "seed" in inspect.signature(method_class(name).__init__).parameters:
         params.setdefault("seed", seed)  # a method's own seed (initial weights) follows too
@@ -293,9 +292,6 @@ def run_bench(
     up, skip_frames : how motion files are read (see :func:`imuloco.io.bvh.read_bvh`).
     only_folds : run only these folds of ``heldout-contents`` (left-out contents).
     """
-    from imuloco.methods import get_method
-    from imuloco.methods.registry import parse_method_spec
-
     specs = {m: parse_method_spec(m) for m in methods}
     for name, params in specs.values():  # fail before any work on an unknown or uninstalled
         get_method(name, **params)  # method, or a parameter it does not take or cannot use
@@ -359,8 +355,6 @@ def truth_on_training_rig(train: MotionDatabase, test: MotionDatabase) -> dict[s
     """Test clip name -> its ground truth moved onto the training skeleton as a training
     clip of its rig would be (:func:`imuloco.io.database.combine`): what a perfect
     reconstruction on that skeleton would be."""
-    from imuloco.io.database import combine
-
     moved = combine([train, test]).clips[len(train):]
     return {lab["name"]: m for lab, m in zip(test.labels, moved)}
 
@@ -425,8 +419,6 @@ def slug(spec: str) -> str:
 def write_results(records: list[dict[str, Any]], details: dict[str, dict[str, Any]],
                   test: list[Example], out: Path) -> None:
     """``results.json`` (the records), ``per_clip.json`` and ``results.md`` with its plots."""
-    from imuloco.lab.report import write_report
-
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "results.json", json.dumps(records, indent=1) + "\n")
     per_clip = [{"method": m, **{k: (None if isinstance(v, float) and not np.isfinite(v) else v)

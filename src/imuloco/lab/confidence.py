@@ -159,7 +159,7 @@ def plot(rows: Rows, predictions: dict[str, np.ndarray], path: str | Path,
          by: str = "content") -> Path | None:
     """Predicted against actual rms error per ``by`` group, one marker series per prediction
     (a reliability plot; the diagonal is honest, the band +-30 %); None without matplotlib."""
-    try:
+    try:  # the [viz] extra's
         import matplotlib
 
         matplotlib.use("Agg")

@@ -17,11 +17,19 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import multiprocessing
+import os
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from imuloco.app.live.server import LiveServer
 from imuloco.app.live.session import Frame, LiveSession
+from imuloco.app.pipeline import choose_method
+from imuloco.core.motion import Motion
+from imuloco.io.database import load_sample
+from imuloco.measures.metrics import heading_of, joint_errors
+from imuloco.sensors.simulate import simulate
 
 
 @dataclass
@@ -71,9 +79,6 @@ def dropout_recovery(method, times: np.ndarray, acc: np.ndarray, gyro: np.ndarra
         raw samples (m/s^2, rad/s) as :meth:`LiveSession.push` takes them.
     window_s : seconds after the gap compared (the recording must reach that far).
     """
-    from imuloco.core.motion import Motion
-    from imuloco.measures.metrics import heading_of, joint_errors
-
     keep = (times < gap_start) | (times >= gap_start + gap_s)
     whole = _stream(method, times, acc, gyro, calibrate_s)
     gapped = _stream(method, times[keep], acc[keep], gyro[keep], calibrate_s)
@@ -116,8 +121,6 @@ def _rss_mb(pid: int) -> float:
 
 def _cpu_s(pid: int) -> float:
     """CPU seconds (user + system) a process has used (Linux /proc)."""
-    import os
-
     with open(f"/proc/{pid}/stat") as f:
         fields = f.read().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
@@ -137,9 +140,6 @@ class _Counter(logging.Handler):
 def _server_process(conn, calibrate_s: float) -> None:
     """Child process: a LiveServer on 127.0.0.1; sends its port, serves until told to stop,
     sends back its log lines."""
-    from imuloco.app.live.server import LiveServer
-    from imuloco.app.pipeline import choose_method
-
     counter = _Counter()
     logging.getLogger().addHandler(counter)
     logging.getLogger().setLevel(logging.INFO)
@@ -162,9 +162,6 @@ def _server_process(conn, calibrate_s: float) -> None:
 def walk_rows(seconds: float, seed: int = 0) -> np.ndarray:
     """Phone rows (N, 7) of the bundled sample's walks simulated at 100 Hz on the right shank
     (segment axes: no calibration needed), one after the other for ``seconds``."""
-    from imuloco.io.database import load_sample
-    from imuloco.sensors.simulate import simulate
-
     clips = [c for c in load_sample().clips if c.name.startswith("dataset-2_walk_")]
     parts, t0, i = [], 0.0, 0
     while t0 < seconds:
@@ -178,7 +175,7 @@ def walk_rows(seconds: float, seed: int = 0) -> np.ndarray:
 
 async def _load(port: int, pid: int, rows: np.ndarray, viewers: int, seconds: float,
                 abuse: bool) -> dict:
-    from websockets.asyncio.client import connect
+    from websockets.asyncio.client import connect  # the [live] extra's
     from websockets.exceptions import ConnectionClosed, InvalidStatus
 
     base = f"ws://127.0.0.1:{port}"
@@ -271,7 +268,7 @@ async def _load(port: int, pid: int, rows: np.ndarray, viewers: int, seconds: fl
 
 async def _drain(ws) -> None:
     """Read and drop a connection's incoming messages until it closes."""
-    from websockets.exceptions import ConnectionClosed
+    from websockets.exceptions import ConnectionClosed  # the [live] extra's
 
     try:
         async for _ in ws:
@@ -294,7 +291,7 @@ async def _abuse(what: str, ws, t: float, base: str, connect) -> None:
         for k in range(2000):
             await ws.send(json.dumps({"rows": [[t + 1e-3 * (k + 1)] + [0.0] * 6]}))
     else:
-        from websockets.exceptions import ConnectionClosed
+        from websockets.exceptions import ConnectionClosed  # the [live] extra's
 
         try:
             async with connect(base + "/ws/phone") as second:
@@ -317,8 +314,6 @@ def load_test(viewers: int = 100, seconds: float = 20.0, abuse: bool = True,
     2 s), the server's resident memory (MB: before the phone, its maximum over the first 30 %
     of the run before any abuse, its maximum, at the end; growth = maximum - warm), its log
     lines and how the phone's connections ended."""
-    import multiprocessing
-
     ctx = multiprocessing.get_context("spawn")
     parent, child = ctx.Pipe()
     proc = ctx.Process(target=_server_process, args=(child, calibrate_s), daemon=True)

@@ -49,6 +49,7 @@ from tqdm.auto import tqdm
 from imuloco.errors import FormatError, InputError, MissingInputError
 from imuloco.io.atomic import atomic_write
 from imuloco.io.bvh import read_bvh
+from imuloco.io.cache import read_motion_cached
 
 WAYS = ("numpy", "arrow", "old", "reader", "cold", "warm")
 _MOTION = re.compile(r"^\s*MOTION\s*$", re.MULTILINE)
@@ -65,7 +66,7 @@ def numpy_parse(path: Path) -> int:
 def arrow_parse(path: Path) -> int:
     """The MOTION block (as :func:`numpy_parse` cuts it) read by ``pyarrow.csv.read_csv``;
     returns the frame count."""
-    import pyarrow as pa
+    import pyarrow as pa  # the [dist] extra's
     import pyarrow.csv as pcsv
 
     text = path.read_text(encoding="latin-1")
@@ -183,8 +184,6 @@ def load_benchmark(folders: Sequence[str | Path], out: str | Path | None = None,
     """Time loading each folder (and all together) the ways of :data:`WAYS`; write
     ``load.json`` and ``load.md`` to ``out``. ``against``: the commit of the ``old`` reader
     (skipped when None)."""
-    from imuloco.io.cache import read_motion_cached
-
     old = old_reader(against) if against else None
     arrow = importlib.util.find_spec("pyarrow") is not None
     records = []

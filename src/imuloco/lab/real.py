@@ -41,6 +41,8 @@ physical bound or the tolerance below.
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import logging
 import math
@@ -50,9 +52,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm.auto import tqdm
 
+from imuloco.app.pipeline import choose_method, reconstruct_recording, shipped_model
+from imuloco.core.recording import Recording
+from imuloco.io.atomic import atomic_write
 from imuloco.io.realimu import GaitDefinition, GaitReference, RealTrial, find_datasets, read_trials
+from imuloco.measures.gait import to_height, to_json
 from imuloco.measures.sensorgait import SensorGait, not_measured, sensor_gait
+from imuloco.measures.strides import stride_rows
+from imuloco.phases import gait_phases
 
 log = logging.getLogger(__name__)
 
@@ -315,12 +324,6 @@ def reconstruction_gait(trial: RealTrial, placement: str, fitted) -> SensorGait:
     gait_parameters`): the sensor's signal reconstructed by ``fitted`` (a model of that
     placement, or the former path: a right-ankle model reading it as a shin phone), on the
     walker's height when the reference gives it."""
-    from imuloco.app.pipeline import reconstruct_recording
-    from imuloco.core.recording import Recording
-    from imuloco.measures.gait import to_height
-    from imuloco.measures.strides import stride_rows
-    from imuloco.phases import gait_phases
-
     rec = trial.recording.select([placement])
     rec = Recording(rec.times, rec.acc, rec.gyro, list(fitted.placements_))
     motion, _ = reconstruct_recording(rec, fitted)
@@ -357,14 +360,10 @@ def run_real(folder: str | Path, out: str | Path | None = None, limit: int | Non
         by the shipped ``learned`` model of the sensor's placement, else (the former path)
         the right-ankle one reading the sensor as a shin phone.
     """
-    from tqdm.auto import tqdm
-
     rows: list[dict[str, Any]] = []
     models: dict[str, Any] = {}
 
     def model_for(placement: str):
-        from imuloco.app.pipeline import choose_method, shipped_model
-
         if placement not in models:
             own = shipped_model("learned", placement) is not None
             models[placement] = choose_method(
@@ -512,12 +511,6 @@ def _mean_note(summary: list[dict[str, Any]]) -> str:
 
 def write_results(rows: list[dict[str, Any]], out: str | Path) -> None:
     """``real.json`` (rows, summary, anchors), ``real.csv`` (rows) and ``README.md``."""
-    import csv
-    import io
-
-    from imuloco.io.atomic import atomic_write
-    from imuloco.measures.gait import to_json
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summary = summarize(rows)

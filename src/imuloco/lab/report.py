@@ -156,7 +156,7 @@ def write_report(
 def _plots(out: Path, per_joint, joint_names, curves, curve_clip: str, fps: float) -> list[str]:
     if not per_joint and not curves:
         return []
-    try:
+    try:  # the [viz] extra's
         import matplotlib
 
         matplotlib.use("Agg")

@@ -50,8 +50,13 @@ from threadpoolctl import threadpool_limits
 
 from imuloco.core.motion import MotionDatabase
 from imuloco.io.atomic import atomic_write
+from imuloco.lab.bench import load_data
+from imuloco.lab.loadspeed import module_at
 from imuloco.lab.protocols import in_random_test
-from imuloco.methods.training import TEST_SEED_OFFSET, Example, synthesize
+from imuloco.measures import metrics
+from imuloco.methods import method_class
+from imuloco.methods.registry import parse_method_spec
+from imuloco.methods.training import TEST_SEED_OFFSET, Example, TrainingSet, synthesize
 
 DEFAULT_SIZES = (500, 1000, 2000, 5000, 10000, 20000, 50000, 100000)
 MIN_STEPS = 300
@@ -149,8 +154,6 @@ def _prefix(examples: list[Example], frames: int) -> tuple[list[Example], dict[s
 
 
 def _module_at(rev: str, module: str):
-    from imuloco.lab.loadspeed import module_at
-
     return module_at(rev, "src/" + module.replace(".", "/") + ".py",
                      f"imuloco_at_{rev}_{module.replace('.', '_')}")
 
@@ -160,8 +163,6 @@ def method_at(name: str, rev: str) -> type:
     commit run on today's package (a source checkout is needed), named ``NAME@REV``. When the
     method is a package (``imuloco.methods.mousas2017``), what its module takes from the
     package's other modules (stream, forward step, model) is taken from them at ``rev``."""
-    from imuloco.methods import method_class
-
     cls = method_class(name)
     module = _module_at(rev, cls.__module__)
     package = cls.__module__.rpartition(".")[0]
@@ -184,8 +185,6 @@ def _fit(cls: type, params: dict[str, Any], examples: list[Example], placements:
          noise: str):
     """A method of class ``cls`` fitted on already simulated examples
     (:meth:`Method.fit_set`), so that every size and method shares one simulation."""
-    from imuloco.methods.training import TrainingSet
-
     return cls(**params).fit_set(TrainingSet.from_examples(examples, placements, noise))
 
 
@@ -195,8 +194,6 @@ def time_offline(method, test: Example, min_frames: int = MIN_STEPS, warmup: int
     :meth:`reconstruct_signals` of the test example's signals, looped to ``min_frames``,
     after an untimed one of its first ``warmup`` frames (which builds what a method builds on
     first use); and ``test_mpjpe_cm``, the MPJPE of the test example's reconstruction."""
-    from imuloco.measures import metrics
-
     method.reconstruct_signals(test.signals[:warmup])
     rows = np.concatenate([test.signals] * int(np.ceil(min_frames / len(test.signals))))
     t0, c0 = time.perf_counter(), time.thread_time()
@@ -259,10 +256,6 @@ def speed_benchmark(
     ``load_avg``, ``states`` (the method's state count when it has one), ``offline_fps``,
     ``offline_fps_cpu`` and ``test_mpjpe_cm``.
     """
-    from imuloco.lab.bench import load_data
-    from imuloco.methods import method_class
-    from imuloco.methods.registry import parse_method_spec
-
     # fail before any work on an unknown or uninstalled method or commit
     runs: list[_Run] = []
     for spec in methods:

@@ -11,6 +11,8 @@ from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import numpy as np
+from sklearn.linear_model import Ridge
+from sklearn.neighbors import NearestNeighbors
 
 from imuloco.core.motion import Motion
 from imuloco.methods import pose
@@ -124,8 +126,6 @@ class RidgePose(_Windowed):
         self.alpha = alpha  # L2 penalty on standardized features; the paper uses none
 
     def learn(self, data: TrainingSet, progress: bool = False) -> None:
-        from sklearn.linear_model import Ridge
-
         x, y = _training_arrays(data.examples, self.window)
         self.x_mean_, self.x_scale_ = fit_standardizer(x)
         self.y_mean_, self.y_scale_ = fit_standardizer(y)
@@ -170,8 +170,6 @@ class KnnPose(_Windowed):
         self._build()
 
     def _build(self) -> None:
-        from sklearn.neighbors import NearestNeighbors
-
         self._k = min(self.k, len(self.features_))
         self._f = self.features_.astype(np.float64)
         self._sq = (self._f**2).sum(axis=1)

@@ -5,11 +5,23 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.signal import lfilter
+from scipy.signal.windows import gaussian
 
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
+from imuloco.ops.ik import two_bone
 from imuloco.ops.kinematics import fk
-from imuloco.ops.rotations import cross, normalize, qmul, qrot
+from imuloco.ops.rotations import (
+    continuous,
+    cross,
+    from_rotvec,
+    normalize,
+    qinv,
+    qmul,
+    qrot,
+    to_rotvec,
+)
+from imuloco.phases.contacts import foot_contacts
 
 
 def _check_smoothing(smoothing: float) -> None:
@@ -21,8 +33,6 @@ def pin_detected_contacts(motion: Motion) -> Motion:
     """:func:`pin_feet` on the foot contacts detected on ``motion`` itself
     (:func:`imuloco.phases.foot_contacts`: feet low and slow); motions under two frames are
     returned as they are."""
-    from imuloco.phases.contacts import foot_contacts
-
     if motion.num_frames < 2:
         return motion
     c = foot_contacts(motion)
@@ -300,8 +310,6 @@ class FootLock:
         from :meth:`targets` and turns (T, 2, 4) its :attr:`turn` (None: the feet keep their
         orientation); ``legs``: :meth:`legs` of the same frames when at hand -> the local
         rotations with the legs bent."""
-        from imuloco.ops.ik import two_bone
-
         glob, pos = self.legs(local, root) if legs is None else legs
         local = normalize(local)
         frame, leg = np.nonzero(self.moved(pos[:, self.sub_feet], targets, turns))
@@ -385,8 +393,6 @@ def laplacian_smooth_quaternions(q: np.ndarray, lam: float = 0.5, iterations: in
     -------
     ndarray, shape (T, ..., 4), unit quaternions in the hemisphere of the input.
     """
-    from imuloco.ops.rotations import continuous, from_rotvec, normalize, qinv, qmul, to_rotvec
-
     if not 0.0 <= lam <= 1.0:
         raise ValueError(f"laplacian_smooth_quaternions: lam must be in [0, 1], got {lam}")
     q = continuous(normalize(np.asarray(q, dtype=np.float64)), axis=0)
@@ -419,8 +425,6 @@ def laplacian_smooth(x: np.ndarray, lam: float = 0.5, iterations: int = 3) -> np
 def gaussian_weights(sigma: float) -> np.ndarray:
     """A centred Gaussian window of ``sigma`` frames, normalized to sum 1, shape (2 r + 1,)
     over scipy.ndimage's radius ``r = int(3 sigma + 0.5)``; ``[1.]`` for ``sigma`` 0."""
-    from scipy.signal.windows import gaussian
-
     if not 0.0 <= sigma < np.inf:
         raise ValueError(f"gaussian_weights: sigma must be finite and >= 0, got {sigma}")
     r = int(3.0 * sigma + 0.5)

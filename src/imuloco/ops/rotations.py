@@ -10,6 +10,7 @@ The products (:func:`qmul`, :func:`qrot`) are written out in numpy because scipy
 from __future__ import annotations
 
 import inspect
+import warnings
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -146,7 +147,6 @@ def euler_components(sin: np.ndarray, cos: np.ndarray, order: str
 def to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
     """Quaternions to intrinsic Euler angles in ``order``. q : (..., 4) -> (..., 3)."""
     def fn(x: np.ndarray) -> np.ndarray:
-        import warnings
         with warnings.catch_warnings():  # gimbal lock: scipy warns and picks a valid solution
             warnings.simplefilter("ignore", UserWarning)
             return Rotation.from_quat(x).as_euler(order.upper(), degrees=degrees)

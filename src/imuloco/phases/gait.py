@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imuloco.core.motion import Motion
+from imuloco.errors import InputError
 from imuloco.phases.contacts import SPEED_TOL, foot_contacts
 from imuloco.phases.events import (
     cadence,
@@ -250,8 +251,6 @@ def gait_phases(
     min_back_s : a phase that steps backwards in the cycle must last this long to count.
     **tolerances : contact tolerances, see :func:`imuloco.phases.contacts.part_contacts`.
     """
-    from imuloco.errors import InputError
-
     if reference not in ("left", "right"):
         raise ValueError(f"reference must be 'left' or 'right', got {reference!r}")
     if motion.num_frames < 2:

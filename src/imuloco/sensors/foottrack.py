@@ -19,16 +19,21 @@ and the foot's sensor-to-segment calibration (:mod:`imuloco.sensors.calibration`
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.ndimage import maximum_filter1d
+from scipy.spatial.transform import Rotation
+
+from imuloco.errors import MissingExtraError
+from imuloco.ops.filters import resample_uniform
+from imuloco.phases.contacts import runs
 
 if TYPE_CHECKING:
     import pandas as pd
-
-from imuloco.errors import MissingExtraError
 
 ZUPT_WINDOW_S, ZUPT_GYRO_DPS = 0.05, 34.0  # gaitmap RtsKalman's default ZUPT detector
 # the shortest swing: ~0.3 s even in sprinting (about 40 % of a 0.7 s stride; Novacheck 1998,
@@ -49,15 +54,13 @@ MIN_STRIDE_M = 0.15
 
 def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Starts and stops (exclusive) of the True runs of a 1-D mask."""
-    from imuloco.phases.contacts import runs
-
     starts, stops, vals = runs(mask)
     return starts[vals], stops[vals]
 
 
 def _gaitmap():
     try:
-        import gaitmap  # noqa: F401
+        import gaitmap  # noqa: F401  (the [gait] extra: is it installed?)
     except ImportError as e:
         raise MissingExtraError("foot-sensor gait", f"gaitmap ({e})", "gait") from None
 
@@ -85,8 +88,6 @@ def _bridged(starts: np.ndarray, stops: np.ndarray, max_gap: int, min_length: in
 
 def _energy(gyro_dps: np.ndarray, rate: float) -> np.ndarray:
     """The gyroscope norm's ZUPT-window maximum (deg/s), the ZUPT detector's measure."""
-    from scipy.ndimage import maximum_filter1d
-
     return maximum_filter1d(np.linalg.norm(gyro_dps, axis=1), max(1, round(ZUPT_WINDOW_S * rate)))
 
 
@@ -188,7 +189,7 @@ def _with_slow_swings(energy: np.ndarray, starts: np.ndarray, stops: np.ndarray,
 def _zupt_detector(mv: np.ndarray):
     """``RtsKalman``'s default ZUPT detector or-ed with one ZUPT at each stance's stillest moment
     ``mv`` (samples), and the stride list of ``min_vel`` events the latter reads."""
-    import pandas as pd
+    import pandas as pd  # the [gait] extra's (gaitmap's, and pandas with it)
     from gaitmap.zupt_detection import (
         ComboZuptDetector,
         NormZuptDetector,
@@ -253,19 +254,13 @@ def foot_track(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray) -> FootTrac
 def _track(times_b: bytes, acc_b: bytes, gyro_b: bytes) -> FootTrack:
     """:func:`foot_track` of signals given as float64 bytes."""
     _gaitmap()  # before pandas, which the [gait] extra brings too
-    import warnings
-
+    # the [gait] extra's (gaitmap, and pandas, which it brings): imported when used
     import pandas as pd
+    from gaitmap.preprocessing.sensor_alignment import align_dataset_to_gravity
+    from gaitmap.trajectory_reconstruction import RtsKalman
 
     times = np.frombuffer(times_b)
     acc, gyro = np.frombuffer(acc_b).reshape(-1, 3), np.frombuffer(gyro_b).reshape(-1, 3)
-
-    from gaitmap.preprocessing.sensor_alignment import align_dataset_to_gravity
-    from gaitmap.trajectory_reconstruction import RtsKalman
-    from scipy.spatial.transform import Rotation
-
-    from imuloco.ops.filters import resample_uniform
-
     if len(times) < 2 or times[-1] - times[0] < 2.0:
         raise NoWalking("the recording is shorter than 2 s, less than one stride")
     rate = (len(times) - 1) / (times[-1] - times[0])  # the mean rate

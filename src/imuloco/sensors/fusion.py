@@ -39,7 +39,7 @@ def madgwick(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, gain: float =
     -------
     ndarray, shape (T, 4), sensor-to-world quaternions x, y, z, w (world Y up, yaw arbitrary).
     """
-    try:
+    try:  # the [fusion] extra's
         from ahrs.common.orientation import acc2q
         from ahrs.filters import Madgwick
     except ImportError as exc:  # pragma: no cover - depends on the environment

@@ -21,7 +21,9 @@ from scipy.spatial.transform import Rotation, RotationSpline
 
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
-from imuloco.ops.rotations import continuous, qinv, qmul, qrot
+from imuloco.errors import InputError
+from imuloco.ops.filters import resample_linear
+from imuloco.ops.rotations import continuous, from_rotvec, qinv, qmul, qrot, slerp
 from imuloco.sensors.noise import (
     G,
     NoiseModel,
@@ -31,6 +33,7 @@ from imuloco.sensors.noise import (
     sample_times,
 )
 from imuloco.sensors.placement import Placement, anatomical_frame, get_placement
+from imuloco.sensors.strap import strapped
 
 if TYPE_CHECKING:
     from imuloco.sensors.strap import Strap
@@ -84,10 +87,6 @@ def strapped_signals(motion: Motion, placement: str | Placement, times: np.ndarr
                      strap: Strap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`ideal_signals` of a phone on a strap (:mod:`imuloco.sensors.strap`): the rigid
     sensor's signals on a uniform grid, through the strap, then at ``times``."""
-    from imuloco.ops.filters import resample_linear
-    from imuloco.ops.rotations import from_rotvec, qmul, slerp
-    from imuloco.sensors.strap import strapped
-
     grid = np.arange(0.0, motion.duration + 1.0 / STRAP_RATE, 1.0 / STRAP_RATE)
     grid = grid[grid <= motion.times[-1]]
     acc, gyro, q = ideal_signals(motion, placement, grid)
@@ -121,8 +120,6 @@ def simulate(
     Recording with timestamps (irregular when the noise model jitters or drops samples),
     specific force, angular velocity and the true orientation of every sensor.
     """
-    from imuloco.errors import InputError
-
     if motion.num_frames < 2 or not placements:
         raise InputError(f"motion {motion.name!r}: simulating sensors needs at least 2 frames "
                          f"and one placement, got {motion.num_frames} and {len(placements)}")

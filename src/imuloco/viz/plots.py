@@ -13,11 +13,13 @@ import numpy as np
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
 from imuloco.io.atomic import atomic_path, check_output
+from imuloco.measures.metrics import joint_errors, rmse_per_frame
+from imuloco.phases.contacts import runs
 from imuloco.phases.gait import GAIT8, GaitPhases
 
 
 def _figure(width: float, height: float):
-    import matplotlib
+    import matplotlib  # the [viz] extra's
 
     matplotlib.use("Agg")
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -38,8 +40,6 @@ def _save(fig, path: str | Path, overwrite: bool) -> Path:
 
 def _shade_contacts(ax, phases: GaitPhases, foot: str, color: str) -> None:
     """Shade the frames where ``foot`` is down (times in seconds)."""
-    from imuloco.phases.contacts import runs
-
     starts, stops, vals = runs(phases.contacts[f"{foot}_foot"])
     for a, b in zip(starts[vals], stops[vals]):
         ax.axvspan(a / phases.fps, b / phases.fps, color=color, alpha=0.12, lw=0)
@@ -107,9 +107,6 @@ def plot_errors(gt: Motion, rec: Motion, path: str | Path, overwrite: bool = Fal
     predicted_m : ndarray, shape (T,), optional: the method's predicted rms joint position
         error per frame, metres, drawn beside the actual one.
     unreliable : ndarray of bool, shape (T,), optional: frames the method flags, shaded."""
-    from imuloco.measures.metrics import joint_errors, rmse_per_frame
-    from imuloco.phases.contacts import runs
-
     err = joint_errors(gt, rec) * 100.0  # (T, J) cm
     per_joint = err[:, 1:].mean(axis=0)
     curve = rmse_per_frame(gt, rec)

@@ -12,10 +12,12 @@ from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.io.atomic import atomic_path, check_output
+from imuloco.ops.filters import gaussian_smooth
 from imuloco.ops.heading import heading_from_hips
 
 SIDE_COLORS = {"left": "#1f77b4", "right": "#d62728", "center": "#444444"}
@@ -77,8 +79,6 @@ def follow_azimuth(motion: Motion, offset_deg: float = 30.0, sigma_s: float = 1.
     """Per-frame camera azimuth (T,) that keeps seeing the figure from its left side, turned
     ``offset_deg`` towards its front, as it turns: the hip-line heading, unwrapped and
     smoothed over ``sigma_s`` seconds (so the camera does not sway with the pelvis)."""
-    from imuloco.ops.filters import gaussian_smooth
-
     pos = motion.part_positions(["left_hip", "right_hip"])
     theta = np.unwrap(heading_from_hips(pos[:, 0], pos[:, 1]))
     if motion.num_frames > 1:
@@ -107,7 +107,7 @@ class StickRenderer:
     def __init__(self, motions: Sequence[Motion], titles: Sequence[str] | None = None,
                  azimuth: float | None = None, elevation: float = 0.25,
                  panel_size: tuple[int, int] = PANEL_SIZE) -> None:
-        import matplotlib
+        import matplotlib  # the [viz] extra's
 
         matplotlib.use("Agg")
         from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -194,8 +194,6 @@ class StickRenderer:
                     progress: bool = False) -> Iterator[np.ndarray]:
         """Frames ``start:stop:step`` one at a time, each (H, W, 3) uint8 (a long recording's
         frames do not fit in memory together: 10 min at 30 fps is 7 GB)."""
-        from tqdm.auto import tqdm
-
         idx = range(start, self.num_frames if stop is None else min(stop, self.num_frames), step)
         for t in tqdm(idx, desc="rendering", unit="frame", disable=not progress, leave=False):
             yield self.frame(t)
@@ -215,7 +213,7 @@ def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path, fps
 
     Refuses to replace an existing file unless ``overwrite``.
     """
-    import imageio_ffmpeg
+    import imageio_ffmpeg  # the [viz] extra's
 
     path = Path(path)
     check_output(path, overwrite)
@@ -282,7 +280,7 @@ def frame_strip(motions: Sequence[Motion], times: Sequence[float], path: str | P
                 overwrite: bool = False) -> Path:
     """A PNG with the panels of :class:`StickRenderer` at ``times`` (seconds), ``columns``
     images per row, for looking at a few frames at once."""
-    import imageio.v3 as iio
+    import imageio.v3 as iio  # the [viz] extra's
 
     path = Path(path)
     check_output(path, overwrite)

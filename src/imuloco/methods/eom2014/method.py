@@ -85,6 +85,7 @@ from imuloco.ops.rotations import (
     qrot,
     to_rotvec,
 )
+from imuloco.phases import gait_phases
 
 VARIANTS = ("full", "mlp-no-hmm", "linear-latent")
 MAX_REGRESSION_FRAMES = 12000  # training frames per model given latent points for the MLPs
@@ -199,8 +200,6 @@ class Eom2014(Method):
 
     # ---- learning ------------------------------------------------------------------------
     def learn(self, data: TrainingSet, progress: bool = False) -> None:
-        from imuloco.phases import gait_phases
-
         t0 = time.perf_counter()
         j = data.skeleton.num_joints
         clips = []

@@ -133,7 +133,7 @@ def export_onnx(model: Learned, path: str | Path, overwrite: bool = False) -> Pa
     placements, fps, joint names and parents, and the contact order. Checked with
     :func:`onnx.checker.check_model`. Written atomically (:func:`imuloco.io.atomic.atomic_path`):
     a failed export leaves ``path`` as it was."""
-    import onnx
+    import onnx  # the [deep] extra's; only exporting needs it
 
     path = Path(path)
     check_output(path, overwrite)

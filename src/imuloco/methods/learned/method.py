@@ -30,6 +30,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 import torch
+from scipy.signal import lfilter
+from sklearn.covariance import LedoitWolf
 
 from imuloco.core.mirror import mirror, mirror_frames, mirror_pairs, mirror_rotations
 from imuloco.core.motion import Motion
@@ -53,6 +55,7 @@ from imuloco.methods.training import VALIDATION_SHARE, Example, TrainingSet, hel
 from imuloco.ops.kinematics import fk_matrices, joint_positions
 from imuloco.ops.rotations import from_6d, matrices_from_6d, to_6d
 from imuloco.phases.contacts import flat_foot_pitch
+from imuloco.sensors.simulate import simulate
 
 HEADING_REFLECTION = np.diag([-1.0, 1.0, 1.0])  # left is +X in the heading frame
 CONTACT_SWAP = [CONTACT_PARTS.index(p.replace("left", "#").replace("right", "left")
@@ -340,8 +343,6 @@ class Learned(Method):
         (:data:`NOVELTY_TAU_S`) and divided by its median on the validation clips (held-out
         clips of the training motions; the training clips when there are none). Frames above
         its :data:`FLAG_QUANTILE` quantile there are flagged unreliable."""
-        from sklearn.covariance import LedoitWolf
-
         feats = np.concatenate(self._clip_features(train_set))
         rows = np.random.default_rng(self.seed).permutation(len(feats))[:20000]
         lw = LedoitWolf().fit(feats[rows])
@@ -356,8 +357,6 @@ class Learned(Method):
     def _novelty(self, feats: np.ndarray, state: float | None = None) -> np.ndarray:
         """Smoothed, scaled novelty (T,) of features (T, W) (NaN for a model file from before
         novelty was measured); ``state``: the last value of a stream's previous frames."""
-        from scipy.signal import lfilter
-
         if self.novelty_mean_ is None:
             return np.full(len(feats), np.nan)
         p = self.novelty_precision_
@@ -516,8 +515,6 @@ class Learned(Method):
         per sensor, found by simulating both on ``motions`` (clean) and mirroring one; the
         mirror frames of the skeleton come from ``motions`` too (:func:`mirror_frames`).
         """
-        from imuloco.sensors.simulate import simulate
-
         other = [_partner(p) for p in self.placements_]
         frames = mirror_frames(motions)
         c = self.channels_

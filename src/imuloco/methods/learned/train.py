@@ -347,7 +347,7 @@ def evaluate(net: Reconstructor, fk: TorchFK, arrays: Arrays, ym: torch.Tensor,
 def plot_history(history: list[dict], path: str | Path) -> Path | None:
     """Training curves (loss terms and validation position error per epoch) as a PNG; None
     when matplotlib is not installed."""
-    try:
+    try:  # the [viz] extra's
         import matplotlib
 
         matplotlib.use("Agg")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from imuloco.ops.rotations import about_y, qrot
+from imuloco.sensors.fusion import madgwick
 from imuloco.sensors.simulate import GRAVITY
 
 
@@ -57,8 +58,6 @@ def world_acceleration(signals: np.ndarray, fps: float) -> np.ndarray:
     gravity, heading is integrated from the gyro, so every sensor has its own unknown heading
     and eq. 17 is minimized over one rotation about the vertical per sensor.
     """
-    from imuloco.sensors.fusion import madgwick
-
     t = len(signals)
     times = np.arange(t) / fps
     out = np.empty((t, signals.shape[1] // 6, 3))

@@ -37,13 +37,12 @@ from imuloco.ops.rotations import (
     slerp,
     to_rotvec,
 )
+from imuloco.phases import gait_phases
 
 
 def gait_cycles(motion: Motion) -> list[tuple[int, int]]:
     """``(start, stop)`` frames of complete gait cycles, right strike to next right strike
     (``stop`` is the next cycle's first frame)."""
-    from imuloco.phases import gait_phases
-
     strikes = gait_phases(motion).steps["right"]
     return [(int(a), int(b)) for a, b in itertools.pairwise(strikes) if b - a >= 4]
 
