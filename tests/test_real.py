@@ -75,13 +75,13 @@ def test_a_reconstruction_s_swings_end_at_its_strikes(demo_rec, demo_clip, monke
     """The reconstruction baseline's ``swings_m`` (what ipol-gait's definition sums) is each
     strike's ankle distance from that foot's previous strike: a right stride's length is the
     swing ending at its last strike, and the swings sum to both ankles' floor distance."""
-    from imuloco.app import pipeline
     from imuloco.io.realimu import GaitReference, RealTrial
+    from imuloco.lab import real
     from imuloco.lab.real import reconstruction_gait
     from imuloco.phases import gait_phases
 
     # the reconstruction is the clip itself, so the swings can be read off the clip
-    monkeypatch.setattr(pipeline, "reconstruct_recording", lambda rec, fitted: (demo_clip, {}))
+    monkeypatch.setattr(real, "reconstruct_recording", lambda rec, fitted: (demo_clip, {}))
     fitted = type("Stub", (), {"name": "stub", "placements_": ["right_ankle"]})()
     trial = RealTrial("ipol-gait", "t", demo_rec, GaitReference(initial_contacts={}, bouts=[]))
     g = reconstruction_gait(trial, "right_foot", fitted)
