@@ -22,78 +22,52 @@ from __future__ import annotations
 
 import json
 import os
-from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 import torch
-from scipy.signal import lfilter
-from sklearn.covariance import LedoitWolf
 
-from imuloco.core.mirror import mirror, mirror_frames, mirror_pairs, mirror_rotations
+from imuloco.core.mirror import mirror_pairs
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import InputError
 from imuloco.methods import pose
-from imuloco.methods.base import Method, Reconstruction, Stream, calibrated_error
-from imuloco.methods.features import PoseIntegrator
+from imuloco.methods.base import Method, Reconstruction
 from imuloco.methods.learned import train as tr
-from imuloco.methods.learned.model import CONTACT_PARTS, Ensemble, Reconstructor, TorchFK
+from imuloco.methods.learned.confidence import (  # noqa: F401  (their names here too)
+    FLAG_QUANTILE,
+    NOVELTY_TAU_S,
+    SCORES,
+    ConfidenceMixin,
+    Prediction,
+)
+from imuloco.methods.learned.mirroring import (  # noqa: F401
+    CONTACT_SWAP,
+    HEADING_REFLECTION,
+    MirrorMixin,
+)
+from imuloco.methods.learned.model import Ensemble, Reconstructor, TorchFK
+from imuloco.methods.learned.stream import (  # noqa: F401  (PIN_*: their names here too)
+    PIN_PARTS,
+    PIN_SMOOTHING,
+    LearnedStream,
+    lock,
+    pin,
+)
 from imuloco.methods.params import Constraint
 from imuloco.methods.postprocess import (
-    FootLock,
-    FootPinner,
     gaussian_weights,
-    lock_feet,
-    pin_feet,
     window_average,
 )
 from imuloco.methods.training import VALIDATION_SHARE, Example, TrainingSet, held_out
-from imuloco.ops.kinematics import fk_matrices, joint_positions
-from imuloco.ops.rotations import from_6d, matrices_from_6d, to_6d
+from imuloco.ops.kinematics import fk_matrices
+from imuloco.ops.rotations import matrices_from_6d
 from imuloco.phases.contacts import flat_foot_pitch
-from imuloco.sensors.simulate import simulate
-
-HEADING_REFLECTION = np.diag([-1.0, 1.0, 1.0])  # left is +X in the heading frame
-CONTACT_SWAP = [CONTACT_PARTS.index(p.replace("left", "#").replace("right", "left")
-                                    .replace("#", "right")) for p in CONTACT_PARTS]
 
 
-@dataclass
-class Prediction:
-    """Per-frame outputs of the network, decoded.
-
-    vectors : ndarray, shape (T, 6 J + 4), pose vectors (:mod:`imuloco.methods.pose`).
-    contacts : ndarray, shape (T, 4), contact probabilities of
-        :data:`imuloco.methods.learned.model.CONTACT_PARTS`.
-    sigma : ndarray, shape (T,), the network's predicted rms joint position error, metres.
-    novelty : ndarray, shape (T,), how unfamiliar the frame's features are (about 1 on the
-        motions the model was trained on; :meth:`Learned._fit_novelty`).
-    spread : ndarray, shape (T,), an ensemble's members' disagreement, metres
-        (:func:`member_spread`); None for one network.
-    """
-
-    vectors: np.ndarray
-    contacts: np.ndarray
-    sigma: np.ndarray
-    novelty: np.ndarray
-    spread: np.ndarray | None = None
-
-    def first(self, n: int) -> Prediction:
-        """The first ``n`` frames."""
-        return Prediction(self.vectors[:n], self.contacts[:n], self.sigma[:n],
-                          self.novelty[:n], None if self.spread is None else self.spread[:n])
-
-    def scores(self) -> dict[str, np.ndarray]:
-        """The uncalibrated per-frame scores a calibration maps, by name (:data:`SCORES`)."""
-        out = {"sigma_m": self.sigma, "novelty": self.novelty}
-        return out if self.spread is None else {**out, "spread_m": self.spread}
-
-
-class Learned(Method):
+class Learned(ConfidenceMixin, MirrorMixin, Method):
     """A causal GRU from sensor channels to pose vectors, contacts and confidence.
 
     Parameters
@@ -322,87 +296,6 @@ class Learned(Method):
         s = _hold_last(np.nan_to_num(e.signals), self.lookahead)[self.lookahead:]
         return Example(e.motion, s, e.labels)
 
-    # ---- confidence -------------------------------------------------------------------------
-    def _clip_features(self, arrays: tr.Arrays, max_clips: int = 400) -> list[np.ndarray]:
-        """The network's features (:meth:`Reconstructor.encode`) of up to ``max_clips`` clips
-        of ``arrays`` (evenly spaced), each run from a zero state."""
-        pick = np.unique(np.linspace(0, len(arrays.starts) - 1,
-                                     min(max_clips, len(arrays.starts))).astype(int))
-        out = []
-        with torch.no_grad():
-            for i in pick:
-                s, n = int(arrays.starts[i]), int(arrays.lengths[i])
-                out.append(self.net_.encode(torch.from_numpy(arrays.x[s:s + n])[None])[0][0]
-                           .numpy().astype(np.float64))
-        return out
-
-    def _fit_novelty(self, train_set: tr.Arrays, val_set: tr.Arrays | None, fps: float) -> None:
-        """How far a frame's features lie from the training data's: a Mahalanobis distance
-        (the feature-space detector of unfamiliar inputs of Lee et al. 2018) under a
-        Ledoit-Wolf covariance of training features, per feature, smoothed causally
-        (:data:`NOVELTY_TAU_S`) and divided by its median on the validation clips (held-out
-        clips of the training motions; the training clips when there are none). Frames above
-        its :data:`FLAG_QUANTILE` quantile there are flagged unreliable."""
-        feats = np.concatenate(self._clip_features(train_set))
-        rows = np.random.default_rng(self.seed).permutation(len(feats))[:20000]
-        lw = LedoitWolf().fit(feats[rows])
-        self.novelty_mean_, self.novelty_precision_ = lw.location_, lw.precision_
-        self.novelty_alpha_ = 1.0 / (NOVELTY_TAU_S * fps)
-        self.novelty_scale_ = 1.0
-        ref = val_set if val_set is not None and len(val_set.starts) else train_set
-        nov = np.concatenate([self._novelty(f) for f in self._clip_features(ref)])
-        self.novelty_scale_ = float(np.median(nov))
-        self.novelty_threshold_ = float(np.quantile(nov, FLAG_QUANTILE) / self.novelty_scale_)
-
-    def _novelty(self, feats: np.ndarray, state: float | None = None) -> np.ndarray:
-        """Smoothed, scaled novelty (T,) of features (T, W) (NaN for a model file from before
-        novelty was measured); ``state``: the last value of a stream's previous frames."""
-        if self.novelty_mean_ is None:
-            return np.full(len(feats), np.nan)
-        p = self.novelty_precision_
-        p = p if p.ndim == 3 else p[None]  # an ensemble's: one block per member
-        d = (feats - self.novelty_mean_).reshape(len(feats), len(p), -1).transpose(1, 0, 2)
-        # one product per member block (K, T, W) @ (K, W, W): a stream's step is a (1, W) row
-        # per block, which numpy's BLAS runs on one thread (over the side-by-side features, a
-        # (1, K W) @ (K W, K W) product took its threads and made a step 6 ms slower on a busy
-        # 2-core machine); np.einsum's own loops took 7 times as long a step, 17 offline
-        d2 = ((d @ p) * d).sum((0, 2)) / (d.shape[0] * d.shape[2])
-        a = self.novelty_alpha_
-        prev = d2[0] if state is None else state * self.novelty_scale_
-        if len(d2) == 1:  # a stream's step: the recursion below, without lfilter's overhead
-            return np.array([(a * d2[0] + (1 - a) * prev) / self.novelty_scale_])
-        zi = np.array([(1 - a) * prev])
-        return lfilter([a], [1, -(1 - a)], d2, zi=zi)[0] / self.novelty_scale_
-
-    def set_calibration(self, calibration: dict[str, Any]) -> None:
-        self.check_fitted()
-        names = list(calibration.get("scores", []))
-        known = self.score_names
-        if (not names or len(set(names)) != len(names) or set(names) - set(known)
-                or len(calibration.get("coef", [])) != len(names) + 1):
-            raise InputError(f"learned: a calibration must map some of this model's scores "
-                             f"{list(known)} (coef a, then one exponent each), got {calibration}"
-                             + ("" if "spread_m" in known else "; spread_m needs an ensemble"))
-        self.calibration_ = dict(calibration)
-
-    @property
-    def score_names(self) -> tuple[str, ...]:
-        """The per-frame scores this model gives (:data:`SCORES`; ``spread_m``: ensembles)."""
-        return SCORES if isinstance(self.net_, Ensemble) else SCORES[:2]
-
-    def confidence(self, out: Prediction) -> tuple[np.ndarray, np.ndarray | None, str]:
-        """Predicted rms joint position error (T,) in metres, unreliable flags (T,) and a
-        note, from a prediction's scores (:meth:`Prediction.scores`; see
-        :attr:`calibration_`); the flags from the novelty alone."""
-        flag = None if self.novelty_mean_ is None else out.novelty > self.novelty_threshold_
-        why = ("no frames flagged (a model file from before novelty was measured)"
-               if flag is None else "frames flagged where the features are farther from the "
-               f"training data than {FLAG_QUANTILE:.0%} of held-out training-motion frames'")
-        cal = self.calibration_
-        if cal is None:
-            return out.sigma, flag, "error_m: the network's own estimate, not calibrated; " + why
-        err = calibrated_error(cal, out.scores())
-        return err, flag, f"error_m calibrated on {cal['source']}; " + why
 
     def _arrays(self, x: np.ndarray, y: np.ndarray, c: np.ndarray, pos: np.ndarray,
                 lengths: np.ndarray) -> tr.Arrays:
@@ -496,49 +389,6 @@ class Learned(Method):
         return True
 
     # ---- the other leg ----------------------------------------------------------------------
-    def _mirror_vectors(self, vectors: np.ndarray) -> np.ndarray:
-        sk = self.skeleton_
-        j = sk.num_joints
-        rot = from_6d(vectors[..., : 6 * j].reshape(*vectors.shape[:-1], j, 6))
-        rot = mirror_rotations(rot, self.frames_, mirror_pairs(sk), sk.parents,
-                               HEADING_REFLECTION)
-        out = vectors.copy()
-        out[..., : 6 * j] = to_6d(rot).reshape(*vectors.shape[:-1], 6 * j)
-        out[..., 6 * j + 1] *= -1  # leftward velocity
-        out[..., 6 * j + 3] *= -1  # yaw rate
-        return out
-
-    def mirrored(self, motions: list[Motion]) -> Learned:
-        """This model for the mirror placements (``right_ankle`` -> ``left_ankle``).
-
-        The other leg's sensor axes relate to this leg's mirrored ones by a signed permutation
-        per sensor, found by simulating both on ``motions`` (clean) and mirroring one; the
-        mirror frames of the skeleton come from ``motions`` too (:func:`mirror_frames`).
-        """
-        other = [_partner(p) for p in self.placements_]
-        frames = mirror_frames(motions)
-        c = self.channels_
-        a, b = [], []
-        for m in motions:
-            rec_o = simulate(m, other, 100.0, "clean", 0)
-            rec_s = simulate(mirror(m, frames), self.placements_, 100.0, "clean", 0)
-            a.append(rec_o.channels())
-            b.append(rec_s.channels())
-        a, b = np.concatenate(a), np.concatenate(b)
-        fit = np.linalg.lstsq(a, b, rcond=None)[0].T          # b ≈ a @ fit.T
-        cmap = np.zeros((c, c))
-        rows = np.argmax(np.abs(fit), axis=1)
-        cmap[np.arange(c), rows] = np.sign(fit[np.arange(c), rows])
-        new = Learned(**self.get_params())
-        new.set_setup(self.skeleton_, self.fps_, other, self.noise_)
-        arrays, values = self.get_state()
-        new.set_state(arrays, values)
-        new.input_map_ = cmap @ self.input_map_
-        new.output_mirror_ = not self.output_mirror_
-        new.frames_ = frames
-        # what the weights were trained on, and that this model reads them mirrored
-        new.protocol_ = {**getattr(self, "protocol_", {}), "mirrored_from": self.placements_}
-        return new
 
     def write_training_report(self, model_path: str | Path) -> list[Path]:
         """The per-epoch losses as MODEL.history.json and, with matplotlib, MODEL.curves.png."""
@@ -694,116 +544,7 @@ def _mean_novelty(model: Learned, members: Sequence[Learned]) -> None:
     model.novelty_threshold_ = float(np.mean([m.novelty_threshold_ for m in members]))
 
 
-def _partner(placement: str) -> str:
-    for a, b in (("left", "right"), ("right", "left")):
-        if placement.startswith(a + "_"):
-            return b + placement[len(a):]
-    raise ValueError(f"placement {placement!r} has no left/right partner to mirror to")
-
-
 def _hold_last(s: np.ndarray, n: int) -> np.ndarray:
     """``s`` (T, C) followed by its last row ``n`` more times: the look-ahead's input past the
     end of a recording."""
     return np.concatenate([s, np.repeat(s[-1:], n, axis=0)])
-
-
-# the uncalibrated per-frame scores a calibration maps; the last, an ensemble's only
-SCORES = ("novelty", "sigma_m", "spread_m")
-NOVELTY_TAU_S = 1.0  # time constant (s) of the causal smoothing of the novelty
-FLAG_QUANTILE = 0.99  # frames above this quantile of held-out training-motion novelty: flagged
-PIN_PARTS = CONTACT_PARTS  # heel contact pins the ankle joint, toe contact the toe joint
-# Pinning corrections smoothed over a few frames (pin_feet's ``smoothing``): on 20 "exhausted"
-# clips (phone noise, test seeds; the shipped model saw these motions in training) its jitter
-# fell from 221 to 198 m/s^3 while foot skate rose from 9.9 to 11.4 cm/s (ground truth: 172
-# and 10.7; unpinned: 187 and 24.6; smoothing 0.5: 190 and 13.5).
-PIN_SMOOTHING = 0.7
-
-
-def pin(motion: Motion, contacts: np.ndarray) -> Motion:
-    """:func:`imuloco.methods.postprocess.pin_feet` with the predicted heel and toe contacts."""
-    return pin_feet(motion, contacts, PIN_PARTS, PIN_SMOOTHING)
-
-
-def lock(motion: Motion, contacts: np.ndarray, flat_pitch: float | None = None) -> Motion:
-    """:func:`imuloco.methods.postprocess.lock_feet` with the predicted heel and toe contacts
-    (:data:`CONTACT_PARTS` order: left and right heel, then toe), smoothed as the root's
-    pinning is; a flat foot held at ``flat_pitch`` (a model's ``flat_pitch_``, the
-    :func:`imuloco.phases.contacts.flat_foot_pitch` of the motions it learned from; None
-    in files from before it: the pitch the foot lands with)."""
-    return lock_feet(motion, contacts[:, :2], contacts[:, 2:], PIN_SMOOTHING,
-                     flat_pitch=flat_pitch)
-
-
-class LearnedStream(Stream):
-    """One frame in, one pose out: the GRU state, the pose integrator and the foot pinning
-    carried from frame to frame (bounded state), giving :meth:`Learned.reconstruct_signals`'s
-    frames ``delay_frames`` steps late (the model's ``lag``, then the radius of its
-    :attr:`Learned.height_weights`: a frame's height waits for its window); the steps before
-    that return the model's mean pose at the origin. After each step, ``contacts`` (4,) and
-    ``sigma`` (metres) hold the returned frame's contact probabilities and confidence."""
-
-    def __init__(self, model: Learned) -> None:
-        self.model = model
-        self.weights = model.height_weights
-        radius = len(self.weights) // 2
-        self.delay_frames = model.lookahead + radius
-        self.heights: deque[float] = deque(maxlen=2 * radius + 1)  # the root's, raw
-        self.waiting: deque[Prediction] = deque(maxlen=radius + 1)  # the window's centre on
-        self.height_index = pose.height_index(model.skeleton_)
-        self.seen = 0
-        mean = model.y_mean_[None]
-        self.rest = PoseIntegrator(model.skeleton_, model.fps_).step(
-            (model._mirror_vectors(mean) if model.output_mirror_ else mean)[0])
-        self.h = model.net_.initial_state(1)
-        self.integrator = PoseIntegrator(model.skeleton_, model.fps_)
-        self.feet = [model.skeleton_.part(p) for p in PIN_PARTS]
-        self.pinner = FootPinner(PIN_SMOOTHING)
-        self.lock = FootLock(model.skeleton_, model.fps_, PIN_SMOOTHING,
-                             flat_pitch=model.flat_pitch_)
-        if self.feet != self.lock.feet:  # step() hands the pinned feet to the lock as they are
-            raise ValueError(f"the foot lock reads joints {self.lock.feet}, pinning {self.feet}")
-        self.contacts = np.zeros(len(PIN_PARTS))
-        self.sigma = float("nan")
-        self.novelty: float | None = None  # the smoothed novelty of the last frame read
-
-    def step(self, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        m = self.model
-        with torch.inference_mode():
-            x = m._inputs(np.asarray(sample)[None])
-            feats, self.h = m.net_.encode(x[None], self.h)
-            p, logit, logvar, members = m._heads(feats)
-        nov = m._novelty(feats[0].numpy().astype(np.float64), self.novelty)
-        self.novelty = float(nov[-1])
-        self.seen += 1
-        if self.seen <= m.lookahead:  # frame 0 is not read yet
-            return self.rest[0].copy(), self.rest[1].copy()
-        # the novelty of the frame read, not of the (delayed) frame returned: it lags the
-        # offline result's by the look-ahead, within the smoothing's time constant
-        out = m._outputs(p[0], logit[0], logvar[0], nov, None if members is None else members[0])
-        h = self.height_index
-        if not self.heights:  # frames before the first are the first (window_average's edge)
-            self.heights.extend([out.vectors[0, h]] * (self.heights.maxlen // 2))
-        self.heights.append(out.vectors[0, h])
-        self.waiting.append(out)
-        if len(self.heights) < self.heights.maxlen:  # frame 0's window is not read yet
-            return self.rest[0].copy(), self.rest[1].copy()
-        out = self.waiting[0]
-        vectors = out.vectors.copy()
-        vectors[0, h] = np.dot(self.weights, self.heights)
-        out = replace(out, vectors=vectors)
-        self.contacts, self.sigma = out.contacts[0], float(out.sigma[0])
-        err, flag, _ = m.confidence(out)
-        self.error_m = float(err[0])
-        self.unreliable = bool(flag[0]) if flag is not None else False
-        rot, raw_root = self.integrator.step(out.vectors[0])
-        sk = m.skeleton_
-        # the feet only (a tenth of a whole-body fk's cost for one frame)
-        feet = joint_positions(rot, raw_root, sk.offsets, sk.parents, self.feet)
-        root = self.pinner.step(raw_root, feet - raw_root, self.contacts)
-        feet = feet - raw_root + root  # the lock's feet too (checked in __init__)
-        c = self.contacts
-        targets = self.lock.targets(feet, c[:2], c[2:])
-        turns = self.lock.turn
-        if not self.lock.moved(feet, targets, turns).any():  # no leg to bend
-            return rot, root
-        return self.lock.bend(rot[None], root[None], targets[None], turns=turns[None])[0], root
