@@ -146,7 +146,7 @@ def test_pieces_report_a_foot_sensors_own_gait(sample_db, tmp_path):
     pieces = reconstruct_to_bvh(log, tmp_path / "p.bvh", ridge, placement="right_foot",
                                 piece_s=10.0, height=1.8)
     assert pieces["pieces"]["count"] > 1 and one.gait_source.startswith("the right_foot sensor")
-    assert one.gait["steps"] > 10
-    assert pieces["gait_source"] == one.gait_source and pieces["strides"] == one.strides
+    assert one.gait.steps > 10
+    assert pieces.gait_source == one.gait_source and pieces.strides == one.strides
     for key in GAIT_KEYS:
-        assert pieces["gait"][key] == one.gait[key], key
+        assert getattr(pieces.gait, key) == getattr(one.gait, key), key

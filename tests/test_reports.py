@@ -35,7 +35,8 @@ def test_report_to_json_keeps_the_contract_keys(log_file, ridge_without_demo_cli
     assert list(data["motion"]) == ["frames", "fps", "duration_s"]
     assert data["method"] == report.method == "ridge"
     assert data["model"] == "given fitted method 'ridge'" and report.model.source == "given"
-    assert report["gait"] is report.gait  # the JSON view, for code written against the dict
+    assert report["gait"] == report.gait.to_json()  # the JSON view, for code written against
+    assert list(data["gait"]) == list(report.gait.to_dict())  # the dict (and its order)
     _, uncalibrated = pipeline.reconstruct_file(log_file, fitted=ridge_without_demo_clip,
                                                 calibrate=False)
     assert "calibration" not in uncalibrated.to_json()

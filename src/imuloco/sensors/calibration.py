@@ -153,9 +153,11 @@ def estimate_mounting(rec: Recording, placement: str | int | None = None,
         k = placement if isinstance(placement, int) else rec.placements.index(placement)
     name = rec.placements[k]
     if name not in CALIBRATED:
-        raise InputError(f"calibration needs a leg or lower-back placement "
-                         f"({', '.join(CALIBRATED)}), got {name!r}: the swing of the leg or the "
-                         "trunk's sway defines the axes")
+        legs = [n for n in CALIBRATED if PRESETS[n].side]
+        trunk = " or ".join(repr(n) for n in CALIBRATED if not PRESETS[n].side)
+        raise InputError(f"calibration needs a leg placement ({', '.join(legs)}) or {trunk}, "
+                         f"got {name!r}: the swing of the leg or the trunk's sway defines the "
+                         "axes")
     return MOUNTINGS[PRESETS[name].mounting](rec, k, min_still_s)
 
 
