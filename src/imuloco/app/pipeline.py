@@ -388,7 +388,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     from imuloco.io.bvh import write_bvh
     from imuloco.io.database import load_sample
     from imuloco.io.sensorlog import write_generic_csv
-    from imuloco.measures.gait import gait_parameters, plausibility, to_json
+    from imuloco.measures.gait import Gait, Plausibility, to_json
     from imuloco.measures.metrics import evaluate
     from imuloco.phases import gait_phases
     from imuloco.sensors.simulate import simulate
@@ -449,8 +449,9 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     report["clip"] = clip
     report["metrics"] = to_json(evaluate(gt_cut, rec_cut))
     report["confidence_check"] = confidence_check(gt_cut, rec_cut, conf)
-    report["gait_ground_truth"] = to_json(gait_parameters(gt_cut))
-    report["plausibility_ground_truth"] = to_json(plausibility(gt_cut))
+    truth = gait_phases(gt_cut)  # the ground truth's contacts: found once, read twice
+    report["gait_ground_truth"] = Gait.of(gt_cut, truth).to_json()
+    report["plausibility_ground_truth"] = Plausibility.of(gt_cut, truth.contacts).to_json()
     report["files"] = names
     report["seconds"] = round(time.perf_counter() - t0, 2)
     with atomic_write(paths["report.json"], "w") as f:

@@ -152,13 +152,14 @@ def estimate_mounting(rec: Recording, placement: str | int | None = None,
     else:
         k = placement if isinstance(placement, int) else rec.placements.index(placement)
     name = rec.placements[k]
-    if name not in CALIBRATED:
-        legs = [n for n in CALIBRATED if PRESETS[n].side]
-        trunk = " or ".join(repr(n) for n in CALIBRATED if not PRESETS[n].side)
-        raise InputError(f"calibration needs a leg placement ({', '.join(legs)}) or {trunk}, "
-                         f"got {name!r}: the swing of the leg or the trunk's sway defines the "
-                         "axes")
-    return MOUNTINGS[PRESETS[name].mounting](rec, k, min_still_s)
+    mounting = mounting_of(name)
+    if mounting is None:
+        calibrated = [n for n in PRESETS if mounting_of(n)]
+        legs = ", ".join(n for n in calibrated if PRESETS[n].side)
+        trunk = " or ".join(repr(n) for n in calibrated if not PRESETS[n].side)
+        raise InputError(f"calibration needs a leg placement ({legs}) or {trunk}, got {name!r}: "
+                         "the swing of the leg or the trunk's sway defines the axes")
+    return MOUNTINGS[mounting](rec, k, min_still_s)
 
 
 def _leg_mounting(rec: Recording, k: int, min_still_s: float) -> Mounting:
@@ -290,8 +291,13 @@ def _back_mounting(rec: Recording, k: int, min_still_s: float = 1.0) -> Mounting
 # the routines a placement's ``mounting`` names (imuloco.sensors.placement.PRESETS)
 MOUNTINGS = {"shank": _leg_mounting, "thigh": _leg_mounting, "foot": _foot_mounting,
              "lower_back": _back_mounting}
-# the placements calibrated
-CALIBRATED = tuple(name for name, p in PRESETS.items() if p.mounting is not None)
+
+
+def mounting_of(name: str) -> str | None:
+    """The mounting routine (:data:`MOUNTINGS`) of the placement ``name`` declares, None for
+    a placement not calibrated (or a name of no preset)."""
+    p = PRESETS.get(name)
+    return None if p is None else p.mounting
 
 
 def calibrate(rec: Recording, min_still_s: float = 1.0) -> tuple[Recording, list[Mounting]]:
@@ -308,7 +314,7 @@ def calibrate(rec: Recording, min_still_s: float = 1.0) -> tuple[Recording, list
     ori = None if rec.orientation is None else rec.orientation.copy()
     mounts = []
     for k, name in enumerate(rec.placements):
-        if name not in CALIBRATED:
+        if mounting_of(name) is None:
             log.info("%s: neither a leg nor the lower back, left uncalibrated", name)
             mounts.append(Mounting(np.array([0.0, 0.0, 0.0, 1.0]), "none", 0.0, 0, np.nan))
             continue
