@@ -49,9 +49,9 @@ forward backwards (all four running clips of the sample), so a lower-back sensor
 on walking.
 
 Shank, thigh, foot and lower-back placements are calibrated: a placement's ``mounting``
-(:data:`imuloco.sensors.placement.PRESETS`) names its routine in :data:`MOUNTINGS`. A recording rotated as a whole
-gives the same result rotated, so calibrating a phone strapped in any orientation yields the
-signals of one strapped in the anatomical frame.
+(:data:`imuloco.sensors.placement.PRESETS`) names its routine in :data:`MOUNTINGS`. A
+recording rotated as a whole gives the same result rotated, so calibrating a phone strapped in
+any orientation yields the signals of one strapped in the anatomical frame.
 """
 
 from __future__ import annotations
@@ -288,7 +288,8 @@ def _back_mounting(rec: Recording, k: int, min_still_s: float = 1.0) -> Mounting
     return Mounting(from_matrix(rows), "mean", 0.0, len(steps) // 2, float("nan"))
 
 
-# the routines a placement's ``mounting`` names (imuloco.sensors.placement.PRESETS)
+# the routines a placement's ``mounting`` names (imuloco.sensors.placement.PRESETS), each
+# (recording, sensor index, min_still_s) -> Mounting
 MOUNTINGS = {"shank": _leg_mounting, "thigh": _leg_mounting, "foot": _foot_mounting,
              "lower_back": _back_mounting}
 
