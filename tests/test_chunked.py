@@ -146,7 +146,27 @@ def test_pieces_report_a_foot_sensors_own_gait(sample_db, tmp_path):
     pieces = reconstruct_to_bvh(log, tmp_path / "p.bvh", ridge, placement="right_foot",
                                 piece_s=10.0, height=1.8)
     assert pieces["pieces"]["count"] > 1 and one.gait_source.startswith("the right_foot sensor")
-    assert one.gait["steps"] > 10
-    assert pieces["gait_source"] == one.gait_source and pieces["strides"] == one.strides
+    assert one.gait.steps > 10
+    assert pieces.gait_source == one.gait_source and pieces.strides == one.strides
     for key in GAIT_KEYS:
-        assert pieces["gait"][key] == one.gait[key], key
+        assert getattr(pieces.gait, key) == getattr(one.gait, key), key
+
+
+def test_pieces_report_what_one_piece_reports(sample_db, long_rec, tmp_path):
+    """The report in pieces has the one-piece report's keys (but the strides: the motion's are
+    per piece), the raw signal's cadence and swing as one piece reads them included."""
+    from imuloco.app.chunked import reconstruct_to_bvh
+    from imuloco.app.pipeline import reconstruct_file
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.methods import get_method
+
+    ridge = get_method("ridge").fit(sample_db.subset([0, 1, 2]), ["right_ankle"], "phone", 0)
+    log = write_generic_csv(long_rec, tmp_path / "long.csv")
+    pieces = reconstruct_to_bvh(log, tmp_path / "p.bvh", ridge, piece_s=10.0).to_json()
+    _, one = reconstruct_file(log, fitted=ridge)
+    one = one.to_json()
+    assert set(one) - set(pieces) == {"strides"} and set(pieces) - set(one) == {"pieces"}
+    for key in ("signal_cadence_spm", "signal_swing_deg", "feet_pinned_by", "calibration"):
+        assert pieces[key] == one[key] is not None, key
+    assert list(pieces["gait"]) == list(one["gait"])
+    assert list(pieces["plausibility"]) == list(one["plausibility"])

@@ -257,7 +257,8 @@ def test_pieces_report_the_confidence_of_one_piece(confident, sample_db, tmp_pat
 def test_cli_pieces_echo_the_confidence(confident, log_file, tmp_path, monkeypatch):
     from imuloco.app import pipeline
 
-    monkeypatch.setattr(pipeline, "choose_method", lambda *a, **k: (confident, "made up"))
+    monkeypatch.setattr(pipeline, "choose_model",
+                        lambda *a, **k: ModelChoice(confident, "given", "made up"))
     res = CliRunner().invoke(cli, ["reconstruct", str(log_file), "-o", str(tmp_path / "p.bvh"),
                                    "--piece-seconds", "10", "--report",
                                    str(tmp_path / "p.json")])

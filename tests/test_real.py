@@ -683,7 +683,7 @@ def test_gait_report_states_when_nothing_was_measured(demo_clip, demo_rec):
     still = demo_clip.slice(0, 1)
     still = type(still)(still.skeleton, np.repeat(still.rotations, 60, axis=0),
                         np.repeat(still.root, 60, axis=0), still.fps)
-    out = gait_report(still, demo_rec, "right_ankle")
+    out = gait_report(still, demo_rec, "right_ankle").to_json()
     assert out["gait_note"].startswith("no gait could be measured")
     assert out["gait"]["cadence_spm"] is None and out["gait"]["steps"] is None
 

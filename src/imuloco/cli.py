@@ -730,15 +730,14 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     accelerometer file and a gyroscope file, in either order (a RealWorld acc_*.csv finds its
     gyroscope_*.csv).
     """
-    from imuloco.app.pipeline import reconstruct_file, render_outputs
-    from imuloco.io.atomic import atomic_write, check_outputs
-    from imuloco.io.bvh import write_bvh
+    from imuloco.app.outputs import Outputs, write_outputs
+    from imuloco.app.pipeline import reconstruct_file
 
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
         raise click.BadParameter(f"{video}: expected a .mp4 or .gif file", param_hint="--video")
-    check_outputs([output, video, html_path, report_path], force,
-                  inputs=[*recording, *([model_path] if model_path else []),
-                          *([skeleton] if skeleton else [])])
+    outputs = Outputs(output, report_path, video, html_path, video_seconds, units)
+    outputs.check(force, inputs=[*recording, *([model_path] if model_path else []),
+                                 *([skeleton] if skeleton else [])])
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
         if video or html_path or skeleton:
@@ -750,33 +749,21 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                                     not no_calibrate, platform=platform, overwrite=True,
                                     piece_s=piece_seconds, progress=True, unit=units,
                                     height=height)
-        if report_path:
-            with atomic_write(report_path, "w") as f:
-                f.write(json.dumps(pieces, indent=2) + "\n")
-        m, c = pieces["motion"], pieces["confidence"]
-        click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
-                   f"{pieces['pieces']['count']} piece(s)" + _confidence_text(c) + "; wrote "
-                   + ", ".join(str(p) for p in (output, report_path) if p))
-        _echo_gait_source(pieces["gait_source"], pieces["gait_note"])
+        written = write_outputs(outputs, pieces)  # the report: the BVH is written
+        m, c = pieces.motion, pieces["confidence"]
+        click.echo(f"{m.frames} frames at {m.fps:g} fps ({m.duration_s:.1f} s) in "
+                   f"{pieces.pieces.count} piece(s)" + _confidence_text(c) + "; wrote "
+                   + ", ".join(str(p) for p in written))
+        _echo_gait_source(pieces.gait_source, pieces.gait_note)
         return
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
                                       progress=True, platform=platform, skeleton=skeleton,
                                       height=height)
     click.echo(f"model: {report.model}", err=True)
-    write_bvh(motion, output, unit=units, overwrite=True)  # checked above
-    written = [output]
-    if video or html_path:
-        written += render_outputs([motion], [f"{motion.name} ({report.method})"],
-                                  [video] if video else [], html_path, overwrite=True,
-                                  progress=True, max_seconds=video_seconds,
-                                  confidence=[report.confidence])
-    if report_path:
-        with atomic_write(report_path, "w") as f:
-            f.write(json.dumps(report.to_json(), indent=2) + "\n")
-        written.append(report_path)
-    g = report.gait
-    rhythm = (report.motion_gait or g)["cadence_rhythm_spm"]  # the reconstruction's legs
+    written = write_outputs(outputs, report, motion, progress=True)
+    g = report.gait.to_json()
+    rhythm = (report.motion_gait or report.gait).to_json()["cadence_rhythm_spm"]  # the legs'
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
                f"cadence {_num(rhythm, 1)} steps/min from the legs' rhythm "
                f"(raw signal: {_num(report.signal_cadence_spm, 1)}), "
@@ -784,7 +771,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                f"speed {_num(g['speed_mps'], 2)} m/s"
                + _confidence_text(report["confidence"]))
     if report.signal_swing_deg is not None:  # a shank sensor: how far its leg should swing
-        p = report.plausibility
+        p = report.plausibility.to_json()
         click.echo(f"shank swing a stride: right {_num(p['right_shank_swing_deg'], 0)} deg, "
                    f"left {_num(p['left_shank_swing_deg'], 0)} "
                    f"(raw signal: {_num(report.signal_swing_deg, 0)})")

@@ -43,6 +43,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from imuloco.app.outputs import Outputs, write_outputs
 from imuloco.app.walkers import Walkers, read_walkers
 from imuloco.errors import ImulocoError, MissingExtraError, OutputExistsError
 from imuloco.io.atomic import atomic_write, check_output
@@ -169,7 +170,6 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
     Returns ``{"row": ..., "strides": [...]}`` (see :func:`walker_rows`); errors are caught and
     reported in the row."""
     from imuloco.app.pipeline import reconstruct_file
-    from imuloco.io.bvh import write_bvh
 
     t0 = time.perf_counter()
     try:
@@ -178,14 +178,14 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
                                          calibrate=calibrate, fitted=fitted,
                                          platform=platform, skeleton=skeleton,
                                          height=height_m)
-        report = recon.to_json()
-        report["seconds"] = round(time.perf_counter() - t0, 3)
-        report["batch"] = {"recording": recording, "model_sha256": model_sha256,
-                           "placement": placement, "height_m": height_m, "unit": unit}
+        recon.seconds = round(time.perf_counter() - t0, 3)
+        recon.batch = {"recording": recording, "model_sha256": model_sha256,
+                       "placement": placement, "height_m": height_m, "unit": unit}
         out = Path(out_dir)
-        write_bvh(motion, out / f"{name}.bvh", unit=unit, overwrite=True)  # atomic
-        with atomic_write(out / f"{name}.json", "w") as f:  # last: marks the outputs complete
-            f.write(json.dumps(report, indent=2) + "\n")
+        # atomic, the JSON last: it marks the outputs complete
+        write_outputs(Outputs(out / f"{name}.bvh", out / f"{name}.json", unit=unit), recon,
+                      motion)
+        report = recon.to_json()
     except Exception as e:  # noqa: BLE001 - one bad recording must not stop the batch
         log.warning("%s: %s: %s", recording, type(e).__name__, e)
         return {"row": error_row(name, recording, e, time.perf_counter() - t0), "strides": []}

@@ -19,14 +19,17 @@ and summarised over the whole recording (a few bytes per frame).
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from imuloco.app.confidence import Confidence
+from imuloco.app.report import MotionInfo, Pieces, ReconstructionReport, build_report
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
+from imuloco.measures.gait import Gait, Plausibility
+from imuloco.measures.sensorgait import GaitReport
 from imuloco.methods.base import Reconstruction
 
 PIECE_SECONDS = 600.0  # 10 min: 18,000 frames at 30 fps, ~100 MB of analysis
@@ -110,21 +113,6 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
         start = stop
 
 
-def _sensor_gait(piece: Motion, rec: Recording, placement: str, height: float | None
-                 ) -> dict[str, Any]:
-    """A foot or lower-back sensor's own gait over the whole recording, as one piece reports
-    it (:func:`imuloco.measures.sensorgait.gait_report`; ``piece``, on the reported skeleton,
-    gives the stature when ``height`` is None): ``gait``, ``gait_source``, ``gait_note`` and
-    ``strides``; empty for other placements, whose gait is the motion's."""
-    from imuloco.measures.sensorgait import FOOT_PLACEMENTS, LOWER_BACK, gait_report
-
-    if placement not in (*FOOT_PLACEMENTS, LOWER_BACK):
-        return {}
-    report = gait_report(piece, rec, placement, height)
-    del report["motion_gait"]  # the last piece's: the caller combines every piece's
-    return report
-
-
 def combine(reports: list[dict[str, float]], frames: list[int]) -> dict[str, float]:
     """Per-piece values combined: counts (``steps``, ``duration_s``) summed, the rest averaged
     with each piece weighted by its frames (NaN pieces left out)."""
@@ -146,16 +134,16 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
                        platform: str | None = None, overwrite: bool = False,
                        piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS,
                        progress: bool = False, unit: str = "cm",
-                       height: float | None = None) -> dict[str, Any]:
+                       height: float | None = None) -> ReconstructionReport:
     """Import a log, reconstruct it in pieces and write the BVH to ``output`` piece by piece.
 
     Parameters as :func:`imuloco.app.pipeline.reconstruct_file` (``method`` a name, or a fitted
-    method); returns the report, with gait parameters and plausibility checks combined over
-    the pieces (:func:`combine`; for a foot or lower-back sensor, its own gait with
-    ``gait_source``, ``gait_note`` and ``strides`` as in one piece, the pieces' combined as
-    ``motion_gait``), ``pieces`` (their count and seconds) and
-    ``confidence`` (:meth:`imuloco.app.confidence.Confidence.to_json` over the whole
-    recording, scaled with ``height``). ``unit``: the BVH's length unit
+    method); returns the report (:func:`imuloco.app.report.build_report`), with gait
+    parameters and plausibility checks combined over the pieces (:func:`combine`; for a foot
+    or lower-back sensor, its own gait with ``gait_source``, ``gait_note`` and ``strides`` as
+    in one piece, the pieces' combined as ``motion_gait``), ``pieces`` (their count and
+    seconds) and ``confidence`` (:meth:`imuloco.app.confidence.Confidence.to_json` over the
+    whole recording, scaled with ``height``). ``unit``: the BVH's length unit
     (:func:`imuloco.io.bvh.write_bvh`).
     ``height``: the wearer's body height in metres; every piece is scaled to it
     (:func:`imuloco.measures.gait.to_height`, the same factor for all) before its gait is
@@ -165,16 +153,21 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
 
     from tqdm.auto import tqdm
 
-    from imuloco.app.pipeline import calibrated, choose_method, require_extras
+    from imuloco.app.pipeline import (
+        ModelChoice,
+        calibrated,
+        choose_model,
+        feet_pinned_by,
+        require_extras,
+    )
     from imuloco.io.bvh import write_bvh_pieces
     from imuloco.measures.gait import (
         gait_parameters,
         height_scale,
         plausibility,
         to_height,
-        to_json,
     )
-    from imuloco.measures.strides import with_confidence
+    from imuloco.measures.sensorgait import estimator_of, gait_report
     from imuloco.methods.training import frame_times
     from imuloco.phases import gait_phases
     from imuloco.sensors.reallog import read_log
@@ -183,18 +176,19 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     require_extras(placement)  # before reading a long log
     rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform)
     if method is None or isinstance(method, str):
-        fitted, note = choose_method(method, model, placement, progress=progress)
+        choice = choose_model(method, model, placement, progress=progress)
     else:
-        fitted, note = method, f"given fitted method {method.name!r}"
-    info: dict[str, Any] = {}
+        choice = ModelChoice(method, "given", f"given fitted method {method.name!r}")
+    fitted = choice.method
+    calibration = None
     raw = rec  # a foot or lower-back sensor's gait reads its own signal, as in one piece
     if calibrate:
-        rec, info["calibration"] = calibrated(rec.select(fitted.placements_))
+        rec, calibration = calibrated(rec.select(fitted.placements_))
     if pin is None:
         pin = not fitted.pins_feet
     frames = len(frame_times(rec, fitted.fps_))
     gait, checks, sizes, confidences = [], [], [], []
-    final: list[Motion] = []  # the last piece
+    final: list = []  # the last piece and its gait phases
     bar = tqdm(total=frames, desc="reconstruct", unit="frame", disable=not progress)
 
     def pieces() -> Iterator[Motion]:
@@ -205,33 +199,29 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
                 k = height_scale(piece.skeleton, height)
                 piece, conf = to_height(piece, height), conf.scaled(k)  # error_m is a length
             confidences.append(conf)
-            gait.append(gait_parameters(piece, gait_phases(piece)))
-            checks.append(plausibility(piece))
+            phases = gait_phases(piece)  # the piece's contacts: found once, read twice
+            gait.append(gait_parameters(piece, phases))
+            checks.append(plausibility(piece, phases.contacts))
             sizes.append(piece.num_frames)
             bar.update(piece.num_frames)
-            final[:] = [piece]
+            final[:] = [piece, phases]
             yield piece
 
     write_bvh_pieces(pieces(), frames, output, unit=unit, overwrite=overwrite)
     bar.close()
-    sensor = _sensor_gait(final[0], raw, placement, height)
-    confidence = Confidence.concatenate(confidences)
-    motion_gait = to_json(combine(gait, sizes))
-    if sensor:
-        sensor["strides"] = with_confidence(sensor["strides"], confidence.error_m, fitted.fps_)
-    return {
-        "recording": log_report.to_json(),
-        **info, "method": fitted.name, "model": note, "placement": placement,
-        "height_m": height,
-        "motion": {"frames": frames, "fps": fitted.fps_,
-                   "duration_s": round((frames - 1) / fitted.fps_, 3)},
-        "pieces": {"count": len(sizes), "seconds": piece_s, "warmup_seconds": warmup_s},
-        "gait": (sensor["gait"] | {"duration_s": motion_gait["duration_s"]} if sensor
-                 else motion_gait),
-        "gait_source": sensor.get("gait_source", "the reconstructed motion, per piece"),
-        "gait_note": sensor.get("gait_note"),
-        **({"strides": sensor["strides"], "motion_gait": motion_gait} if sensor else {}),
-        "plausibility": to_json(combine(checks, sizes)),
-        "confidence": confidence.to_json(),
-        "seconds": round(time.perf_counter() - t0, 2),
-    }
+    motion_gait = Gait(**combine(gait, sizes))
+    if estimator_of(placement) is None:
+        walk = GaitReport(motion_gait, "the reconstructed motion, per piece", None, None)
+    else:  # the sensor's own gait over the whole recording; ``final``, on the reported
+        # skeleton, gives the stature when ``height`` is None
+        sensor = gait_report(*final[:1], raw, placement, height, final[1])
+        walk = GaitReport(replace(sensor.gait, duration_s=motion_gait.duration_s),
+                          sensor.source, sensor.note, sensor.strides, motion_gait)
+    return build_report(
+        recording=log_report, raw=raw, model=choice, placement=placement,
+        calibration=calibration, feet_pinned_by=feet_pinned_by(pin, fitted),
+        motion=MotionInfo(frames, fitted.fps_, round((frames - 1) / fitted.fps_, 3)),
+        height_m=height, gait=walk, plausibility=Plausibility(**combine(checks, sizes)),
+        confidence=Confidence.concatenate(confidences), started=t0,
+        pieces=Pieces(len(sizes), piece_s, warmup_s))
+

@@ -9,7 +9,8 @@ checks (:mod:`imuloco.measures.gait`). :func:`demo` runs the same path on a phon
 simulated from a bundled clip and writes every output next to the ground truth.
 
 Which model reconstructs (:func:`choose_method`): a model file when given; otherwise the
-pretrained model shipped in ``imuloco/data/models/<method>_<placement>.npz`` (the ``learned``
+pretrained model shipped in ``imuloco/data/models/<method>_<model>.npz`` (``model`` the
+placement's, :data:`imuloco.sensors.placement.PRESETS`; the ``learned``
 method by default); when none is shipped or its method cannot be imported (torch missing), the
 best available baseline (``ridge``, then ``knn``, then ``mean``) fitted on the bundled sample
 on the fly, which the report says.
@@ -28,8 +29,10 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from imuloco.app.confidence import Confidence
+from imuloco.app.report import MotionInfo, ReconstructionReport, build_report
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
+from imuloco.sensors.placement import PRESETS
 
 if TYPE_CHECKING:
     from imuloco.methods.base import Method
@@ -47,30 +50,27 @@ DEMO_CLIP = "dataset-2_walk_normal_001"
 DEMO_SEED = 7
 
 
-# Placements whose pipeline needs the [gait] extra: a shoe sensor's calibration and gait read
-# its zero-velocity track (gaitmap), a lower-back sensor's gait Mobilise-D's pipeline (mobgap).
-GAIT_EXTRA = {"right_foot": "gaitmap", "left_foot": "gaitmap", "lower_back": "mobgap"}
+# Placements whose pipeline needs the [gait] extra, and the module of it each names (their
+# declarations' ``needs``, imuloco.sensors.placement.PRESETS).
+GAIT_EXTRA = {name: p.needs[0] for name, p in PRESETS.items() if p.needs}
 
 
 def require_extras(placement: str) -> None:
     """Raise :class:`~imuloco.errors.MissingExtraError` (``pip install 'imuloco[gait]'``)
     before any work when ``placement``'s pipeline needs a package that is not installed
-    (:data:`GAIT_EXTRA`)."""
-    from importlib.util import find_spec
-
-    from imuloco.errors import MissingExtraError
-
-    module = GAIT_EXTRA.get(placement)
-    if module is not None and (find_spec(module) is None or find_spec("pandas") is None):
-        raise MissingExtraError(f"a {placement} sensor's calibration and gait", module, "gait")
+    (:meth:`imuloco.sensors.placement.Placement.require_extra`)."""
+    if placement in PRESETS:
+        PRESETS[placement].require_extra()
 
 
 def shipped_model(method: str, placement: str) -> Path | None:
-    """Path of the pretrained model of ``method`` for ``placement`` shipped with the package."""
+    """Path of the pretrained model of ``method`` for ``placement`` shipped with the package
+    (``<method>_<model>.npz``, ``model`` the placement's declaration's)."""
     from imuloco.data import MODELS_DIR
 
-    path = MODELS_DIR / f"{method}_{placement}.npz"
-    return path if path.is_file() else None
+    model = PRESETS[placement].model if placement in PRESETS else None
+    path = None if model is None else MODELS_DIR / f"{method}_{model}.npz"
+    return path if path is not None and path.is_file() else None
 
 
 @dataclass(frozen=True)
@@ -153,83 +153,6 @@ def choose_method(method: str | None = None, model: str | Path | None = None,
     return choice.method, choice.description
 
 
-@dataclass
-class ReconstructionReport:
-    """What :func:`reconstruct_file` found, as typed fields; :meth:`to_json` gives the JSON
-    report (its keys are a contract: ``imuloco reconstruct --report``, ``batch``'s NAME.json).
-
-    recording : the import (:class:`imuloco.sensors.reallog.LogReport` as JSON).
-    calibration : per placement, the rotation found (``None``: not calibrated).
-    feet_pinned_by : ``"method"``, ``"pipeline"`` or ``"none"``.
-    model : where the model came from (:class:`ModelChoice`).
-    placement : the placement read.
-    motion : frames, fps and duration of the reconstruction.
-    height_m : the wearer's height given (``None``: the model skeleton's proportions).
-    gait, gait_source, gait_note, strides, motion_gait :
-        :func:`imuloco.measures.sensorgait.gait_report` (``motion_gait``: a foot or lower-back
-        sensor's reconstructed motion's own gait, None otherwise).
-    plausibility : :func:`imuloco.measures.gait.plausibility`, as JSON.
-    signal_cadence_spm : the cadence of the raw signal (Welch), steps per minute.
-    signal_swing_deg : for a sensor on the shank, the degrees the raw signal turns through in
-        a stride (:func:`imuloco.measures.gait.signal_swing`), against which ``plausibility``'s
-        ``{side}_shank_swing_deg`` reads the reconstruction's legs; None for other sensors.
-    skeleton : the user's rig the motion was retargeted onto (``None``: the model's).
-    seconds : wall time of the whole reconstruction.
-    confidence : the method's per-frame predicted error and unreliable flags
-        (:class:`imuloco.app.confidence.Confidence`, in metres of the reported motion: scaled
-        with ``height_m``, on the model's skeleton also when retargeted onto ``skeleton``);
-        the JSON's ``confidence`` is its summary.
-    """
-
-    recording: dict[str, Any]
-    calibration: list[dict[str, Any]] | None
-    feet_pinned_by: str
-    model: ModelChoice
-    placement: str
-    motion: dict[str, Any]
-    height_m: float | None
-    gait: dict[str, Any]
-    gait_source: str
-    gait_note: str | None
-    strides: list[dict[str, Any]]
-    signal_cadence_spm: float | None
-    plausibility: dict[str, Any]
-    signal_swing_deg: float | None = None
-    skeleton: dict[str, Any] | None = None
-    seconds: float = 0.0
-    confidence: Confidence | None = None
-    motion_gait: dict[str, Any] | None = None
-
-    @property
-    def method(self) -> str:
-        """The registry name of the method that reconstructed."""
-        return self.model.method.name
-
-    def to_json(self) -> dict[str, Any]:
-        """The JSON report (keys in this order; ``calibration`` only when calibrated)."""
-        out: dict[str, Any] = {"recording": self.recording}
-        if self.calibration is not None:
-            out["calibration"] = self.calibration
-        out.update(feet_pinned_by=self.feet_pinned_by, method=self.method,
-                   model=self.model.description, placement=self.placement, motion=self.motion,
-                   height_m=self.height_m, gait=self.gait, gait_source=self.gait_source,
-                   gait_note=self.gait_note, strides=self.strides,
-                   signal_cadence_spm=self.signal_cadence_spm,
-                   signal_swing_deg=self.signal_swing_deg, plausibility=self.plausibility)
-        if self.motion_gait is not None:
-            out["motion_gait"] = self.motion_gait
-        if self.skeleton is not None:
-            out["skeleton"] = self.skeleton
-        if self.confidence is not None:
-            out["confidence"] = self.confidence.to_json()
-        out["seconds"] = self.seconds
-        return out
-
-    def __getitem__(self, key: str) -> Any:
-        """``report[key]``: the JSON report's value (code written against the dict)."""
-        return self.to_json()[key]
-
-
 def calibrated(rec: Recording) -> tuple[Recording, list[dict[str, Any]]]:
     """``rec`` with its leg sensors turned into their segments' anatomical frames
     (:func:`imuloco.sensors.calibration.calibrate`) and, per placement, what was found (the
@@ -277,10 +200,16 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
     info["confidence"] = Confidence.of(full, motion.fps, f"method {method.name!r}")
     if pin is None:
         pin = not method.pins_feet
-    info["feet_pinned_by"] = "pipeline" if pin else ("method" if method.pins_feet else "none")
+    info["feet_pinned_by"] = feet_pinned_by(pin, method)
     if pin:
         motion = pin_detected_contacts(motion)
     return motion, info
+
+
+def feet_pinned_by(pin: bool, method) -> str:
+    """Who keeps the feet from sliding (the report's ``feet_pinned_by``): ``"pipeline"``
+    (``pin``), ``"method"`` (it pins them itself) or ``"none"``."""
+    return "pipeline" if pin else ("method" if method.pins_feet else "none")
 
 
 def load_rig(path: str | Path):
@@ -293,16 +222,17 @@ def load_rig(path: str | Path):
     return Rig.measure([read_motion(path)], where=str(path))
 
 
-def onto_rig(motion: Motion, rig) -> Motion:
+def onto_rig(motion: Motion, rig, contacts: dict[str, np.ndarray] | None = None) -> Motion:
     """``motion`` retargeted onto ``rig`` (:func:`imuloco.core.retarget.retarget`: global
     rotations per body part, root path scaled by leg length, feet on the floor), then its
     root moved so that feet in contact in ``motion`` do not slide on the rig either
-    (:func:`imuloco.methods.postprocess.pin_feet`): other proportions add no skating."""
+    (:func:`imuloco.methods.postprocess.pin_feet`): other proportions add no skating.
+    ``contacts``: ``motion``'s :func:`imuloco.phases.foot_contacts` when already found."""
     from imuloco.core.retarget import retarget
     from imuloco.methods.postprocess import pin_feet
     from imuloco.phases import foot_contacts
 
-    c = foot_contacts(motion)
+    c = foot_contacts(motion) if contacts is None else contacts
     return pin_feet(retarget(motion, rig), np.stack([c["left_foot"], c["right_foot"]], axis=1))
 
 
@@ -341,16 +271,9 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     """
     from tqdm.auto import tqdm
 
-    from imuloco.measures.gait import (
-        height_scale,
-        plausibility,
-        signal_rhythm,
-        to_height,
-        to_json,
-    )
+    from imuloco.measures.gait import Plausibility, height_scale, to_height
     from imuloco.measures.sensorgait import gait_report
-    from imuloco.measures.strides import with_confidence
-    from imuloco.sensors.placement import get_placement
+    from imuloco.phases import gait_phases
     from imuloco.sensors.reallog import read_log, recording_name
 
     require_extras(placement)  # before reading a long log
@@ -381,31 +304,22 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     motion.name = report_name
     bar.update()
     bar.set_postfix_str("gait")
-    k = rec.placements.index(fitted.placements_[0])
-    gait = gait_report(motion, rec, placement, height)
-    cadence, swing = signal_rhythm(rec, k)  # the raw signal's, beside the motion's
-    gait["strides"] = with_confidence(gait["strides"], confidence.error_m, motion.fps)
-    report = ReconstructionReport(
-        recording=log_report.to_json(),
-        calibration=info.get("calibration"), feet_pinned_by=info["feet_pinned_by"],
-        model=choice, placement=placement,
-        motion={"frames": motion.num_frames, "fps": motion.fps,
-                "duration_s": round(motion.duration, 3)},
-        height_m=height,
-        **gait,
-        signal_cadence_spm=to_json({"v": cadence})["v"],
-        signal_swing_deg=(to_json({"v": swing})["v"]
-                          if get_placement(rec.placements[k]).on_shank else None),
-        plausibility=to_json(plausibility(motion)), confidence=confidence,
-    )
+    phases = gait_phases(motion)  # the reported motion's contacts: found once, read thrice
+    gait = gait_report(motion, rec, placement, height, phases)
+    checks = Plausibility.of(motion, phases.contacts)
+    info_motion, rig_json = MotionInfo.of(motion), None
     if skeleton is not None:
         bar.set_postfix_str(f"retargeting onto {Path(skeleton).name}")
-        motion = onto_rig(motion, rig)
+        motion = onto_rig(motion, rig, phases.contacts)
         motion.name = report_name
-        report.skeleton = {"file": str(skeleton), "joints": motion.skeleton.num_joints}
+        rig_json = {"file": str(skeleton), "joints": motion.skeleton.num_joints}
+    report = build_report(
+        recording=log_report, raw=rec, model=choice, placement=placement,
+        calibration=info.get("calibration"), feet_pinned_by=info["feet_pinned_by"],
+        motion=info_motion, height_m=height, gait=gait, plausibility=checks,
+        confidence=confidence, started=t0, skeleton=rig_json)
     bar.update()
     bar.close()
-    report.seconds = round(time.perf_counter() - t0, 2)
     return motion, report
 
 
@@ -474,7 +388,7 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     from imuloco.io.bvh import write_bvh
     from imuloco.io.database import load_sample
     from imuloco.io.sensorlog import write_generic_csv
-    from imuloco.measures.gait import gait_parameters, plausibility, to_json
+    from imuloco.measures.gait import Gait, Plausibility, to_json
     from imuloco.measures.metrics import evaluate
     from imuloco.phases import gait_phases
     from imuloco.sensors.simulate import simulate
@@ -535,8 +449,9 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     report["clip"] = clip
     report["metrics"] = to_json(evaluate(gt_cut, rec_cut))
     report["confidence_check"] = confidence_check(gt_cut, rec_cut, conf)
-    report["gait_ground_truth"] = to_json(gait_parameters(gt_cut))
-    report["plausibility_ground_truth"] = to_json(plausibility(gt_cut))
+    truth = gait_phases(gt_cut)  # the ground truth's contacts: found once, read twice
+    report["gait_ground_truth"] = Gait.of(gt_cut, truth).to_json()
+    report["plausibility_ground_truth"] = Plausibility.of(gt_cut, truth.contacts).to_json()
     report["files"] = names
     report["seconds"] = round(time.perf_counter() - t0, 2)
     with atomic_write(paths["report.json"], "w") as f:

@@ -28,6 +28,8 @@ reconstruction). Values that need more strikes than the motion has are NaN (``No
 from __future__ import annotations
 
 import math
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -115,6 +117,42 @@ def gait_parameters(motion: Motion, phases: GaitPhases | None = None) -> dict[st
         "stance_swing_ratio": ratio,
         "double_support_pct": 100.0 * double,
     }
+
+
+@dataclass(frozen=True)
+class Gait:
+    """The gait parameters of one walk (:func:`gait_parameters`' keys, module docstring), as
+    a report carries them: floats, NaN where undefined; :meth:`to_json` rounds them (None for
+    NaN), in this order."""
+
+    duration_s: float
+    steps: float
+    cadence_spm: float
+    cadence_rhythm_spm: float
+    step_length_m: float
+    stride_length_m: float
+    ankle_step_length_m: float
+    ankle_stride_length_m: float
+    speed_mps: float
+    left_stance_pct: float
+    right_stance_pct: float
+    stance_pct: float
+    swing_pct: float
+    stance_swing_ratio: float
+    double_support_pct: float
+
+    @classmethod
+    def of(cls, motion: Motion, phases: GaitPhases | None = None) -> Gait:
+        """:func:`gait_parameters` of ``motion`` (``phases``: its gait phases if known)."""
+        return cls(**gait_parameters(motion, phases))
+
+    def to_dict(self) -> dict[str, float]:
+        """The parameters by name, as :func:`gait_parameters` returns them."""
+        return asdict(self)
+
+    def to_json(self) -> dict[str, float | None]:
+        """JSON-ready: rounded to 4 decimals, NaN as None (:func:`to_json`)."""
+        return to_json(self.to_dict())
 
 
 # Stature from the leg: hip joint (greater trochanter) at 0.530 and ankle at 0.039 of body
@@ -325,7 +363,8 @@ def _rhythm_cadence(pos: np.ndarray, fps: float, stride_hz: tuple[float, float])
     return _stride_cadence(ahead, fps, stride_hz, harmonics=(1,))
 
 
-def plausibility(motion: Motion) -> dict[str, float]:
+def plausibility(motion: Motion, contacts: dict[str, np.ndarray] | None = None
+                 ) -> dict[str, float]:
     """Checks of a reconstruction that need no ground truth.
 
     Returns
@@ -339,6 +378,9 @@ def plausibility(motion: Motion) -> dict[str, float]:
     and ``left_shank_swing_deg`` / ``right_shank_swing_deg`` (:func:`shank_swings`: in a
     walk both shanks swing alike, and a shank sensor's own swing, :func:`signal_swing`, says
     how far its leg's should).
+
+    ``contacts``: the motion's :func:`imuloco.phases.foot_contacts` when already found (a
+    :class:`~imuloco.phases.gait.GaitPhases`' ``contacts``).
     """
     from imuloco.measures.metrics import foot_skate
     from imuloco.phases import foot_contacts
@@ -347,7 +389,7 @@ def plausibility(motion: Motion) -> dict[str, float]:
     finite = bool(np.all(np.isfinite(pos)) and np.all(np.isfinite(motion.rotations)))
     knee = np.concatenate([knee_flexion(motion, s) for s in FEET])
     hip = np.concatenate([hip_angle(motion, s) for s in FEET])
-    contacts = foot_contacts(motion)
+    contacts = foot_contacts(motion) if contacts is None else contacts
     down = contacts["left_foot"] | contacts["right_foot"]
     out = lambda a, lim: 100.0 * float(np.mean((a < lim[0] - 1e-6) | (a > lim[1])))
     return {
@@ -359,3 +401,34 @@ def plausibility(motion: Motion) -> dict[str, float]:
         "contact_pct": 100.0 * float(np.mean(down)),
         **{f"{side}_shank_swing_deg": v for side, v in shank_swings(motion).items()},
     }
+
+
+@dataclass(frozen=True)
+class Plausibility:
+    """The checks of :func:`plausibility` (its keys, in order) as a report carries them;
+    :meth:`to_json` rounds them (None for NaN)."""
+
+    finite: float
+    knee_min_deg: float
+    knee_max_deg: float
+    knee_out_of_range_pct: float
+    hip_max_deg: float
+    hip_out_of_range_pct: float
+    foot_skate_cm_s: float
+    contact_pct: float
+    left_shank_swing_deg: float
+    right_shank_swing_deg: float
+
+    @classmethod
+    def of(cls, motion: Motion, contacts: dict[str, np.ndarray] | None = None
+           ) -> Plausibility:
+        """:func:`plausibility` of ``motion`` (``contacts``: its foot contacts if known)."""
+        return cls(**plausibility(motion, contacts))
+
+    def to_dict(self) -> dict[str, float]:
+        """The checks by name, as :func:`plausibility` returns them."""
+        return asdict(self)
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-ready: rounded to 4 decimals, NaN as None (:func:`to_json`)."""
+        return to_json(self.to_dict())

@@ -17,6 +17,9 @@
   pelvis's path over it (:func:`chord_factor`): the pendulum measures the travel along the
   path, a reference the displacement between two contacts of one foot.
 
+A placement's ``gait`` (:data:`imuloco.sensors.placement.PRESETS`) names its estimator in
+:data:`ESTIMATORS`; placements without one are measured on the reconstructed motion.
+
 Every figure is derived from the same strides, so they agree by construction:
 ``speed = stride length x cadence / 120`` and ``steps = 2 x strides`` for a foot sensor.
 A recording too short or without walking is :class:`SensorGait` with ``measured False`` and a
@@ -28,15 +31,21 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from imuloco.core.motion import Motion
 from imuloco.errors import MissingExtraError, UnknownNameError
+from imuloco.measures.gait import Gait, gait_parameters, stature, to_json
+from imuloco.measures.strides import stride_rows
 from imuloco.ops.filters import resample_uniform
+from imuloco.phases import gait_phases
+from imuloco.phases.gait import GaitPhases
 from imuloco.sensors.calibration import body_axes
 from imuloco.sensors.foottrack import NoWalking, foot_track
+from imuloco.sensors.placement import PRESETS
 
-FOOT_PLACEMENTS = ("right_foot", "left_foot")
 LOWER_BACK = "lower_back"
 # L5 sits at about the greater trochanter's height, 0.530 x body height (Winter 2009,
 # Biomechanics and Motor Control of Human Movement, Fig. 4.1), when the sensor's height is
@@ -118,8 +127,6 @@ class SensorGait:
 
     def to_json(self) -> dict:
         """JSON-ready: placement, method, measured, reason, summary and per-stride rows."""
-        from imuloco.measures.gait import to_json
-
         return {"placement": self.placement, "method": self.method,
                 "measured": self.measured, "reason": self.reason or None,
                 "summary": to_json(self.summary()),
@@ -353,6 +360,37 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
                       steps_per_contact=1)
 
 
+def _foot_sensor_gait(rec, k: int, height_m: float | None,
+                     sensor_height_m: float | None) -> SensorGait:
+    """:func:`foot_gait` of sensor ``k`` of a Recording (no height needed)."""
+    placement = rec.placements[k]
+    return foot_gait(rec.times, rec.acc[:, k], rec.gyro[:, k], PRESETS[placement].side,
+                     placement)
+
+
+def _back_sensor_gait(rec, k: int, height_m: float | None,
+                      sensor_height_m: float | None) -> SensorGait:
+    """:func:`lower_back_gait` of sensor ``k`` of a Recording, its height from the body's
+    (:data:`L5_HEIGHT_RATIO`) when not given."""
+    if sensor_height_m is None or not np.isfinite(sensor_height_m):
+        if height_m is None or not np.isfinite(height_m):
+            raise ValueError("lower-back gait needs the walker's height (--height) or the "
+                             "sensor's height above the floor")
+        sensor_height_m = L5_HEIGHT_RATIO * height_m
+    return lower_back_gait(rec.times, rec.acc[:, k], rec.gyro[:, k], sensor_height_m)
+
+
+# the estimators a placement's ``gait`` names (imuloco.sensors.placement.PRESETS)
+ESTIMATORS = {"foot": _foot_sensor_gait, "lower_back": _back_sensor_gait}
+
+
+def estimator_of(placement: str) -> str | None:
+    """The name of ``placement``'s sensor-level gait estimator (:data:`ESTIMATORS`), None for
+    a placement whose gait is the reconstructed motion's."""
+    p = PRESETS.get(placement)
+    return None if p is None else p.gait
+
+
 def sensor_gait(rec, placement: str, height_m: float | None = None,
                 sensor_height_m: float | None = None) -> SensorGait:
     """Gait of the sensor at ``placement`` of a Recording, by the method for that placement.
@@ -362,59 +400,69 @@ def sensor_gait(rec, placement: str, height_m: float | None = None,
     sensor-level method (the reconstruction's gait serves them).
     """
     k = rec.placements.index(placement)
-    if placement in FOOT_PLACEMENTS:
-        return foot_gait(rec.times, rec.acc[:, k], rec.gyro[:, k], placement.split("_")[0],
-                         placement)
-    if placement == LOWER_BACK:
-        if sensor_height_m is None or not np.isfinite(sensor_height_m):
-            if height_m is None or not np.isfinite(height_m):
-                raise ValueError("lower-back gait needs the walker's height (--height) or the "
-                                 "sensor's height above the floor")
-            sensor_height_m = L5_HEIGHT_RATIO * height_m
-        return lower_back_gait(rec.times, rec.acc[:, k], rec.gyro[:, k], sensor_height_m)
-    raise UnknownNameError(f"no sensor-level gait method for placement {placement!r}; have "
-                   f"{[*FOOT_PLACEMENTS, LOWER_BACK]}")
+    estimator = estimator_of(placement)
+    if estimator is None:
+        raise UnknownNameError(f"no sensor-level gait method for placement {placement!r}; have "
+                               f"{[n for n in PRESETS if estimator_of(n)]}")
+    return ESTIMATORS[estimator](rec, k, height_m, sensor_height_m)
 
 
 GAIT_KEYS = ("steps", "cadence_spm", "step_length_m", "stride_length_m", "speed_mps",
              "stance_pct", "swing_pct")
 
 
-def gait_report(motion, rec, placement: str, height_m: float | None = None) -> dict:
+@dataclass
+class GaitReport:
+    """The gait a study reads for a recording (:func:`gait_report`).
+
+    gait : the parameters (NaN where nothing could be measured: for a sensor, also what it
+        does not measure, such as the other foot's stance or the legs' rhythm, so that no
+        value mixes two sources).
+    source : what measured them; note : why nothing was measured, or None.
+    strides : one JSON-ready row per stride (:data:`imuloco.measures.strides.STRIDE_FIELDS`;
+        None: not listed).
+    motion_gait : for a sensor, the reconstructed motion's own parameters beside it (None
+        otherwise, where ``gait`` is that).
+    """
+
+    gait: Gait
+    source: str
+    note: str | None
+    strides: list[dict[str, Any]] | None
+    motion_gait: Gait | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """``gait``, ``gait_source``, ``gait_note``, ``strides`` and ``motion_gait``."""
+        return {"gait": self.gait.to_json(), "gait_source": self.source,
+                "gait_note": self.note, "strides": self.strides,
+                "motion_gait": None if self.motion_gait is None else self.motion_gait.to_json()}
+
+
+def gait_report(motion: Motion, rec, placement: str, height_m: float | None = None,
+                phases: GaitPhases | None = None) -> GaitReport:
     """The gait a study reads for a recording, from the best estimator for its placement:
     the sensor's own signal for a foot or the lower back (:func:`sensor_gait`), the
     reconstructed motion otherwise (:func:`imuloco.measures.gait.gait_parameters`).
-
-    Returns
-    -------
-    dict: ``gait`` (JSON-ready parameters; NaN/None where nothing could be measured: for a
-    sensor, also what it does not measure, such as the other foot's stance or the legs'
-    rhythm, so that no value mixes two sources), ``gait_source`` (what measured them),
-    ``gait_note`` (why nothing was measured, or None), ``strides`` (one row per stride,
-    :data:`imuloco.measures.strides.STRIDE_FIELDS`) and ``motion_gait``: for a sensor, the
-    reconstructed motion's own parameters beside it (None otherwise, where ``gait`` is that).
+    ``phases``: the motion's :func:`imuloco.phases.gait_phases` when already found.
     """
-    from imuloco.measures.gait import gait_parameters, stature, to_json
-    from imuloco.measures.strides import stride_rows
-    from imuloco.phases import gait_phases
-
-    phases = gait_phases(motion)
+    phases = gait_phases(motion) if phases is None else phases
     gait = gait_parameters(motion, phases)
     strides = stride_rows(motion, phases)
     source, note, motion_gait = "the reconstructed motion", None, None
-    if placement in (*FOOT_PLACEMENTS, LOWER_BACK):
+    estimator = estimator_of(placement)
+    if estimator is not None:
         if height_m is None:
             height_m = stature(motion.skeleton)
-            if placement == LOWER_BACK:
+            if estimator == "lower_back":
                 note = (f"no --height given: the skeleton's stature {height_m:.2f} m sets "
                         "the pendulum length")
         sg = sensor_gait(rec, placement, height_m=height_m)
         summary = sg.summary()
-        motion_gait = to_json(gait)
+        motion_gait = Gait(**gait)
         gait = {k: (v if k == "duration_s" else math.nan) for k, v in gait.items()}
         gait.update({k: summary[k] for k in GAIT_KEYS})
-        if placement in FOOT_PLACEMENTS:  # the worn foot's stance is the sensor's
-            gait[f"{placement.split('_')[0]}_stance_pct"] = summary["stance_pct"]
+        if estimator == "foot":  # the worn foot's stance is the sensor's
+            gait[f"{PRESETS[placement].side}_stance_pct"] = summary["stance_pct"]
         if summary["swing_pct"] > 0:
             gait["stance_swing_ratio"] = summary["stance_pct"] / summary["swing_pct"]
         strides, source = sg.strides, f"the {placement} sensor's signal: {sg.method}"
@@ -425,7 +473,6 @@ def gait_report(motion, rec, placement: str, height_m: float | None = None) -> d
                 "foot) in the reconstruction")
     if note and note.startswith("no gait"):
         gait = {k: (v if k == "duration_s" else math.nan) for k, v in gait.items()}
-    return {"gait": to_json(gait), "gait_source": source, "gait_note": note,
-            "strides": [{k: (v if isinstance(v, str) or v is None else
-                             to_json({"v": v})["v"]) for k, v in r.items()} for r in strides],
-            "motion_gait": motion_gait}
+    return GaitReport(Gait(**gait), source, note,
+                      [{k: (v if isinstance(v, str) or v is None else to_json({"v": v})["v"])
+                        for k, v in r.items()} for r in strides], motion_gait)

@@ -48,9 +48,10 @@ pendulum's sign holds for walking only: running (a spring, slowest at the bottom
 forward backwards (all four running clips of the sample), so a lower-back sensor is calibrated
 on walking.
 
-Shank, thigh, foot and lower-back placements are calibrated. A recording rotated as a whole
-gives the same result rotated, so calibrating a phone strapped in any orientation yields the
-signals of one strapped in the anatomical frame.
+Shank, thigh, foot and lower-back placements are calibrated: a placement's ``mounting``
+(:data:`imuloco.sensors.placement.PRESETS`) names its routine in :data:`MOUNTINGS`. A
+recording rotated as a whole gives the same result rotated, so calibrating a phone strapped in
+any orientation yields the signals of one strapped in the anatomical frame.
 """
 
 from __future__ import annotations
@@ -68,17 +69,14 @@ from imuloco.errors import InputError
 from imuloco.ops.filters import gaussian_smooth, resample_linear
 from imuloco.ops.rotations import from_matrix, qinv, qmul, qrot
 from imuloco.sensors.noise import G
+from imuloco.sensors.placement import PRESETS
 
 log = logging.getLogger(__name__)
 
-# placement names calibrated: shank and thigh by the swing of the leg, the foot by its walk
-LEG_PLACEMENTS = ("ankle", "thigh", "foot")
-LOWER_BACK = "lower_back"  # by the body's axes (gravity and the trunk's sway)
-CALIBRATED = (*LEG_PLACEMENTS, LOWER_BACK)
 # Mean forward inclination (degrees) of the segment's y axis while walking, from the average
 # specific force of clean virtual sensors on the bundled sample's walking clips (see module
 # docstring): the angle that average sits behind the segment's long axis.
-WALK_INCLINATION = {"ankle": 21.2, "thigh": -9.6}
+WALK_INCLINATION = {"shank": 21.2, "thigh": -9.6}
 # Slope (degrees) of the virtual foot sensor's y axis above the floor while the foot rests flat
 # (see module docstring): measured on the bundled sample's walking clips, both feet, with
 # imuloco's own foot track on clean virtual sensors.
@@ -154,14 +152,20 @@ def estimate_mounting(rec: Recording, placement: str | int | None = None,
     else:
         k = placement if isinstance(placement, int) else rec.placements.index(placement)
     name = rec.placements[k]
-    if not any(p in name for p in CALIBRATED):
-        raise InputError(f"calibration needs a leg placement ({', '.join(LEG_PLACEMENTS)}) or "
-                         f"{LOWER_BACK!r}, got {name!r}: the swing of the leg or the trunk's "
-                         "sway defines the axes")
-    if "foot" in name:
-        return _foot_mounting(rec, k)
-    if LOWER_BACK in name:
-        return _back_mounting(rec, k)
+    mounting = mounting_of(name)
+    if mounting is None:
+        calibrated = [n for n in PRESETS if mounting_of(n)]
+        legs = ", ".join(n for n in calibrated if PRESETS[n].side)
+        trunk = " or ".join(repr(n) for n in calibrated if not PRESETS[n].side)
+        raise InputError(f"calibration needs a leg placement ({legs}) or {trunk}, got {name!r}: "
+                         "the swing of the leg or the trunk's sway defines the axes")
+    return MOUNTINGS[mounting](rec, k, min_still_s)
+
+
+def _leg_mounting(rec: Recording, k: int, min_still_s: float) -> Mounting:
+    """Rotation from a shank or thigh sensor's axes to the segment's anatomical frame, from
+    the leg's swing and gravity (module docstring)."""
+    name = rec.placements[k]
     rate = 100.0
     _, acc = _uniform(rec.times, rec.acc[:, k], rate)
     _, gyro = _uniform(rec.times, rec.gyro[:, k], rate)
@@ -194,8 +198,7 @@ def estimate_mounting(rec: Recording, placement: str | int | None = None,
         if len(peaks) < 2:
             log.warning("%s: neither standing still nor walking (%d leg swings): the mounting "
                         "is unreliable", name, len(peaks))
-        segment = next(p for p in LEG_PLACEMENTS if p in name)
-        a = np.deg2rad(WALK_INCLINATION[segment])
+        a = np.deg2rad(WALK_INCLINATION[PRESETS[name].mounting])
         # turn the mean specific force forward about x by the mean inclination (Rodrigues)
         y = up * np.cos(a) + np.cross(x, up) * np.sin(a) + x * (x @ up) * (1 - np.cos(a))
     y = y - x * (y @ x)
@@ -206,7 +209,7 @@ def estimate_mounting(rec: Recording, placement: str | int | None = None,
     return Mounting(rot, source, still_s, len(peaks), float(sv[1] / sv[0]))
 
 
-def _foot_mounting(rec: Recording, k: int) -> Mounting:
+def _foot_mounting(rec: Recording, k: int, min_still_s: float = 1.0) -> Mounting:
     """Rotation from a shoe sensor's axes to the foot's anatomical frame (module docstring)."""
     from imuloco.sensors.foottrack import NoWalking, foot_track
 
@@ -260,10 +263,10 @@ def body_axes(acc: np.ndarray, rate: float) -> np.ndarray:
     return np.stack([up, np.cross(pa, up), pa])
 
 
-def _back_mounting(rec: Recording, k: int, rate: float = 100.0) -> Mounting:
+def _back_mounting(rec: Recording, k: int, min_still_s: float = 1.0) -> Mounting:
     """Rotation from a lower-back sensor's axes to the virtual L5 sensor's frame (module
     docstring)."""
-    name = rec.placements[k]
+    name, rate = rec.placements[k], 100.0
     _, acc = _uniform(rec.times, rec.acc[:, k], rate)
     if len(acc) < 3 * rate:
         raise InputError(f"{name}: a lower-back sensor is calibrated from walking, and the "
@@ -285,6 +288,19 @@ def _back_mounting(rec: Recording, k: int, rate: float = 100.0) -> Mounting:
     return Mounting(from_matrix(rows), "mean", 0.0, len(steps) // 2, float("nan"))
 
 
+# the routines a placement's ``mounting`` names (imuloco.sensors.placement.PRESETS), each
+# (recording, sensor index, min_still_s) -> Mounting
+MOUNTINGS = {"shank": _leg_mounting, "thigh": _leg_mounting, "foot": _foot_mounting,
+             "lower_back": _back_mounting}
+
+
+def mounting_of(name: str) -> str | None:
+    """The mounting routine (:data:`MOUNTINGS`) of the placement ``name`` declares, None for
+    a placement not calibrated (or a name of no preset)."""
+    p = PRESETS.get(name)
+    return None if p is None else p.mounting
+
+
 def calibrate(rec: Recording, min_still_s: float = 1.0) -> tuple[Recording, list[Mounting]]:
     """Rotate every leg or lower-back sensor of ``rec`` into its segment's anatomical frame.
 
@@ -299,7 +315,7 @@ def calibrate(rec: Recording, min_still_s: float = 1.0) -> tuple[Recording, list
     ori = None if rec.orientation is None else rec.orientation.copy()
     mounts = []
     for k, name in enumerate(rec.placements):
-        if not any(p in name for p in CALIBRATED):
+        if mounting_of(name) is None:
             log.info("%s: neither a leg nor the lower back, left uncalibrated", name)
             mounts.append(Mounting(np.array([0.0, 0.0, 0.0, 1.0]), "none", 0.0, 0, np.nan))
             continue

@@ -6,17 +6,27 @@ that presets mean the same on any skeleton: ``y`` runs along the segment towards
 end (up the shin for an ankle sensor, as a phone strapped on the shin reads +g on y at rest),
 ``z`` points forward (anterior, from the body's facing direction at rest) and ``x = y x z``
 (to the body's left). For the trunk and head, ``y`` is the body's up direction.
+
+Each preset is also the placement's one declaration for the rest of the package (the
+placement registry, :data:`PRESETS`): how a worn sensor there is calibrated (``mounting``, a
+routine of :data:`imuloco.sensors.calibration.MOUNTINGS`), which estimator measures its gait
+from its own signal (``gait``, one of :data:`imuloco.measures.sensorgait.ESTIMATORS`; none:
+the reconstructed motion's gait), the optional extra those need (``extra``, ``needs``), the
+shipped model's name (``imuloco/data/models/<method>_<model>.npz``) and the estimator of the
+walker's path (``path_estimator``, a name :mod:`imuloco.paths` resolves; none yet). The
+routines are named, not referenced: they live in the layers that read this one.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from importlib.util import find_spec
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from imuloco.core.skeleton import Skeleton
-from imuloco.errors import UnknownNameError
+from imuloco.errors import MissingExtraError, UnknownNameError
 from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import IDENTITY, from_matrix, qinv, qmul, qrot
 
@@ -34,6 +44,15 @@ class Placement:
     surface : offset from that point in the anatomical frame (x left, y up the segment,
         z forward), metres: how far the skin or pocket sits from the bone.
     rotation : quaternion x, y, z, w from the sensor frame to the anatomical frame.
+    mounting : how a worn sensor is turned into the anatomical frame, a routine of
+        :data:`imuloco.sensors.calibration.MOUNTINGS` (``None``: not calibrated).
+    gait : the estimator of gait from this sensor's own signal, a name of
+        :data:`imuloco.measures.sensorgait.ESTIMATORS` (``None``: the reconstructed motion's).
+    extra, needs : the optional extra (``pip install 'imuloco[extra]'``) and the modules of it
+        the calibration and gait need (:meth:`require_extra`).
+    model : name of the shipped pretrained models (``<method>_<model>.npz``; ``None``: none).
+    path_estimator : name of the estimator of the walker's path (:mod:`imuloco.paths`;
+        ``None``: the method's own root path).
     """
 
     name: str
@@ -42,6 +61,26 @@ class Placement:
     fraction: float = 0.0
     surface: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rotation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    mounting: str | None = None
+    gait: str | None = None
+    extra: str | None = None
+    needs: tuple[str, ...] = ()
+    model: str | None = None
+    path_estimator: str | None = None
+
+    @property
+    def side(self) -> str | None:
+        """``"left"`` or ``"right"`` for a limb's placement, ``None`` on the trunk and head."""
+        side = self.segment.split("_")[0]
+        return side if side in ("left", "right") else None
+
+    def require_extra(self) -> None:
+        """Raise :class:`~imuloco.errors.MissingExtraError` (``pip install 'imuloco[gait]'``)
+        when a module this placement's calibration and gait need (``needs``) is missing."""
+        missing = next((m for m in self.needs if find_spec(m) is None), None)
+        if missing is not None:
+            raise MissingExtraError(f"a {self.name} sensor's calibration and gait",
+                                    self.needs[0], self.extra or "gait")
 
     @property
     def on_shank(self) -> bool:
@@ -55,13 +94,22 @@ class Placement:
         return replace(self, rotation=tuple(rot), surface=tuple(np.add(self.surface, offset)))
 
 
+# A shoe sensor's calibration and gait read its zero-velocity track (gaitmap), a lower-back
+# sensor's gait Mobilise-D's pipeline (mobgap): the [gait] extra, with pandas.
+_FOOT = {"mounting": "foot", "gait": "foot", "extra": "gait", "needs": ("gaitmap", "pandas")}
+_BACK = {"mounting": "lower_back", "gait": "lower_back", "extra": "gait",
+         "needs": ("mobgap", "pandas")}
+
 PRESETS: dict[str, Placement] = {p.name: p for p in [
     # On the front of the shank just above the ankle, where Eom et al. 2014 strap the phone.
-    Placement("right_ankle", "right_knee", "right_ankle", 0.8, (0.0, 0.0, 0.045)),
-    Placement("left_ankle", "left_knee", "left_ankle", 0.8, (0.0, 0.0, 0.045)),
+    Placement("right_ankle", "right_knee", "right_ankle", 0.8, (0.0, 0.0, 0.045),
+              mounting="shank", model="right_ankle"),
+    Placement("left_ankle", "left_knee", "left_ankle", 0.8, (0.0, 0.0, 0.045),
+              mounting="shank", model="left_ankle"),
     # Front trouser pocket: upper third of the thigh, towards the outside.
-    Placement("right_thigh", "right_hip", "right_knee", 0.3, (-0.04, 0.0, 0.07)),
-    Placement("left_thigh", "left_hip", "left_knee", 0.3, (0.04, 0.0, 0.07)),
+    Placement("right_thigh", "right_hip", "right_knee", 0.3, (-0.04, 0.0, 0.07),
+              mounting="thigh"),
+    Placement("left_thigh", "left_hip", "left_knee", 0.3, (0.04, 0.0, 0.07), mounting="thigh"),
     # Belt buckle, in front of the pelvis.
     Placement("pelvis", "pelvis", None, 0.0, (0.0, 0.0, 0.12)),
     # Watch on the back of the forearm just above the wrist.
@@ -74,10 +122,13 @@ PRESETS: dict[str, Placement] = {p.name: p for p in [
     # On the shoe over the instep, where foot-worn gait sensors sit: half way from the ankle
     # joint to the toe joint, 4 cm above the bones. The foot's anatomical y runs back to the
     # heel and z up off the instep (dorsal), so a flat foot reads +g on z.
-    Placement("right_foot", "right_ankle", "right_toe", 0.5, (0.0, 0.0, 0.04)),
-    Placement("left_foot", "left_ankle", "left_toe", 0.5, (0.0, 0.0, 0.04)),
+    Placement("right_foot", "right_ankle", "right_toe", 0.5, (0.0, 0.0, 0.04), **_FOOT,
+              model="right_foot"),
+    Placement("left_foot", "left_ankle", "left_toe", 0.5, (0.0, 0.0, 0.04), **_FOOT,
+              model="left_foot"),
     # At L5, the back of the belt: behind the pelvis joint, y up the trunk.
-    Placement("lower_back", "pelvis", None, 0.0, (0.0, 0.0, -0.10)),
+    Placement("lower_back", "pelvis", None, 0.0, (0.0, 0.0, -0.10), **_BACK,
+              model="lower_back"),
     Placement("head", "head", None, 0.0, (0.0, 0.08, 0.1)),
 ]}
 

@@ -321,7 +321,7 @@ class LiveSession:
 
     def _calibrate(self, final: bool = False) -> bool:
         from imuloco.errors import MissingExtraError
-        from imuloco.sensors.calibration import CALIBRATED, calibrate
+        from imuloco.sensors.calibration import calibrate, mounting_of
 
         raw, s = self._raw[:self._n], self.num_sensors
         t = raw[:, 0]
@@ -332,8 +332,7 @@ class LiveSession:
         except (ValueError, np.linalg.LinAlgError, MissingExtraError) as e:  # e.g. no swing yet
             mounts, why = None, f"{type(e).__name__}: {e}"
         else:
-            walked = [m for p, m in zip(self.placements, mounts)
-                      if any(s in p for s in CALIBRATED)]
+            walked = [m for p, m in zip(self.placements, mounts) if mounting_of(p)]
             why = "fewer than two strides" if any(m.swings < 2 for m in walked) else ""
         span = t[-1] - t[0]
         if why and span < 3 * self.calibrate_s and not final:
