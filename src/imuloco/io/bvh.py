@@ -719,13 +719,15 @@ def write_bvh_pieces(pieces: Iterable[Motion], frames: int, path: str | Path, un
     check_output(path, overwrite)
     k = 1.0 / UNITS[unit]
     dec = _decimals(UNITS[unit])
-    written = 0
+    written, dfs = 0, None
     with atomic_write(path, "w") as f:
         for motion in pieces:
             if written == 0:
+                dfs = depth_first(motion.skeleton.parents)
                 f.write("\n".join(_hierarchy(motion.skeleton, k, dec, order)) + "\n")
                 f.write(f"MOTION\nFrames: {frames}\nFrame Time: {1.0 / motion.fps:.10g}\n")
-            eul = to_euler(motion.rotations, order).reshape(motion.num_frames, -1)
+            # the file's joints are in depth-first order, each its own rotation channels
+            eul = to_euler(motion.rotations[:, dfs], order).reshape(motion.num_frames, -1)
             f.writelines(" ".join(f"{x:.{dec}f}" for x in root) + " "
                          + " ".join(f"{a:.6f}" for a in angles) + "\n"
                          for root, angles in zip(motion.root * k, eul))
@@ -774,8 +776,18 @@ def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
     def vec(v: np.ndarray) -> str:
         return " ".join(f"{x:.{dec}f}" for x in v)
 
-    def emit(j: int, depth: int) -> None:
-        pad = "\t" * depth
+    def close(j: int) -> None:
+        pad = "\t" * len(open_)
+        if j in sk.end_sites or not sk.children(j):
+            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{",
+                        f"{pad}\t\tOFFSET {vec(end_site(sk, j) * k)}", f"{pad}\t}}"])
+        out.append(f"{pad}}}")
+
+    open_: list[int] = []  # a loop, not recursion: a long chain cannot overflow the stack
+    for j in depth_first(sk.parents):
+        while open_ and open_[-1] != sk.parents[j]:
+            close(open_.pop())
+        pad = "\t" * len(open_)
         out.append(f"{pad}{'ROOT' if j == 0 else 'JOINT'} {sk.names[j]}")
         out.append(f"{pad}{{")
         out.append(f"{pad}\tOFFSET {vec(sk.offsets[j] * k)}")
@@ -783,13 +795,21 @@ def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
             out.append(f"{pad}\tCHANNELS 6 Xposition Yposition Zposition {rot_channels}")
         else:
             out.append(f"{pad}\tCHANNELS 3 {rot_channels}")
-        kids = sk.children(j)
-        for c in kids:
-            emit(c, depth + 1)
-        if not kids or j in sk.end_sites:
-            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{",
-                        f"{pad}\t\tOFFSET {vec(end_site(sk, j) * k)}", f"{pad}\t}}"])
-        out.append(f"{pad}}}")
-
-    emit(0, 0)
+        open_.append(int(j))
+    while open_:
+        close(open_.pop())
     return out
+
+
+def depth_first(parents: np.ndarray) -> np.ndarray:
+    """The joints in depth-first order, children in index order (the order of a BVH file's
+    joints): (J,) joint indices. ``parents`` (J,), each before its children."""
+    kids: list[list[int]] = [[] for _ in parents]
+    for j in range(1, len(parents)):
+        kids[int(parents[j])].append(j)
+    out, stack = [], [0] if len(parents) else []
+    while stack:
+        j = stack.pop()
+        out.append(j)
+        stack.extend(reversed(kids[j]))
+    return np.array(out, dtype=np.int64)
