@@ -609,17 +609,16 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
     other contents). Prints the per-content table before and after; --check applies the
     calibration of all RESULTS to other folders; --model/-o writes it into a model file.
     """
-    from imuloco.io.atomic import atomic_write, check_output, check_outputs
+    from imuloco.io.atomic import atomic_write, check_outputs
     from imuloco.lab import confidence as conf
     from imuloco.lab.bench import slug
     from imuloco.methods.base import calibrated_error
 
     if (model_path is None) != (output is None):
         raise click.UsageError("--model and -o go together: -o is the calibrated copy")
-    check_outputs([output], force, inputs=[model_path] if model_path else [])
-    if out_dir is not None:
-        for name in ("confidence.md", "confidence.json", "confidence.png"):
-            check_output(out_dir / name, force)
+    check_outputs([output, *(() if out_dir is None else (
+        out_dir / n for n in ("confidence.md", "confidence.json", "confidence.png")))],
+        force, inputs=[model_path] if model_path else [])
     method = slug(method_spec) if method_spec else None
     rows = conf.load_rows(results, method)
     source = ", ".join(str(r) for r in results)
@@ -731,7 +730,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     gyroscope_*.csv).
     """
     from imuloco.app.pipeline import reconstruct_file, render_outputs
-    from imuloco.io.atomic import atomic_write, check_outputs
+    from imuloco.io.atomic import OutputSet, check_outputs
     from imuloco.io.bvh import write_bvh
 
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
@@ -746,13 +745,15 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                                    "only: drop --video/--html/--skeleton")
         from imuloco.app.chunked import reconstruct_to_bvh
 
-        pieces = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
-                                    not no_calibrate, platform=platform, overwrite=True,
-                                    piece_s=piece_seconds, progress=True, unit=units,
-                                    height=height)
-        if report_path:
-            with atomic_write(report_path, "w") as f:
-                f.write(json.dumps(pieces, indent=2) + "\n")
+        with OutputSet() as outs:  # the BVH and its report renamed together
+            pieces = reconstruct_to_bvh(source, outs.path(output), method_name, model_path,
+                                        placement, fmt, not no_calibrate, platform=platform,
+                                        overwrite=True, piece_s=piece_seconds, progress=True,
+                                        unit=units, height=height)
+            if report_path:
+                with outs.open(report_path, "w") as f:
+                    f.write(json.dumps({**pieces, "outputs": _outputs(outs, output)}, indent=2)
+                            + "\n")
         m, c = pieces["motion"], pieces["confidence"]
         click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
                    f"{pieces['pieces']['count']} piece(s)" + _confidence_text(c) + "; wrote "
@@ -764,17 +765,19 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                                       progress=True, platform=platform, skeleton=skeleton,
                                       height=height)
     click.echo(f"model: {report.model}", err=True)
-    write_bvh(motion, output, unit=units, overwrite=True)  # checked above
-    written = [output]
-    if video or html_path:
-        written += render_outputs([motion], [f"{motion.name} ({report.method})"],
-                                  [video] if video else [], html_path, overwrite=True,
-                                  progress=True, max_seconds=video_seconds,
-                                  confidence=[report.confidence])
-    if report_path:
-        with atomic_write(report_path, "w") as f:
-            f.write(json.dumps(report.to_json(), indent=2) + "\n")
-        written.append(report_path)
+    written = [p for p in (output, video, html_path, report_path) if p]
+    with OutputSet() as outs:  # all written, then renamed together, the report last
+        write_bvh(motion, outs.path(output), unit=units, overwrite=True)  # checked above
+        if video or html_path:
+            render_outputs([motion], [f"{motion.name} ({report.method})"],
+                           [outs.path(video)] if video else [],
+                           outs.path(html_path) if html_path else None, overwrite=True,
+                           progress=True, max_seconds=video_seconds,
+                           confidence=[report.confidence])
+        if report_path:
+            with outs.open(report_path, "w") as f:
+                f.write(json.dumps({**report.to_json(), "outputs": _outputs(outs, output)},
+                                   indent=2) + "\n")
     g = report.gait
     rhythm = (report.motion_gait or g)["cadence_rhythm_spm"]  # the reconstruction's legs
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
@@ -790,6 +793,12 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                    f"(raw signal: {_num(report.signal_swing_deg, 0)})")
     _echo_gait_source(report.gait_source, report.gait_note)
     click.echo("wrote " + ", ".join(str(p) for p in written))
+
+
+def _outputs(outs, bvh: Path) -> dict[str, str]:
+    """A report's ``outputs``: the BVH it belongs to, by name and SHA-256 (a run killed
+    between renaming the BVH and the report leaves a report that does not match)."""
+    return {"bvh": bvh.name, "bvh_sha256": outs.sha256(bvh)}
 
 
 def _echo_gait_source(source: str, note: str | None) -> None:
