@@ -454,3 +454,13 @@ def test_a_report_names_the_bvh_it_belongs_to(log, tmp_path):
     report = json.loads((tmp_path / "a.json").read_text())
     assert report["outputs"] == {"bvh": "a.bvh", "bvh_sha256": sha256_file(tmp_path / "a.bvh")}
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bvh", "a.json"]
+
+
+def test_reconstruct_refuses_a_fifo_as_its_recording(tmp_path):
+    """A FIFO named .csv was read for ever."""
+    import os
+
+    fifo = tmp_path / "walk.csv"
+    os.mkfifo(fifo)
+    code, out = run("reconstruct", fifo, "-o", tmp_path / "a.bvh", "--method", "mean")
+    assert code == 1 and "walk.csv: not a regular file" in out, out

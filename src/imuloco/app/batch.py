@@ -21,6 +21,16 @@ sensor's swings) and
   recording is complete when its JSON names the same recording, model, unit, height and
   placement. A re-run skips complete recordings (``force`` redoes them), redoes a walker
   whose height changed and refuses to replace another job's outputs.
+- One run at a time writes ``out_dir`` (:class:`imuloco.io.folderlock.FolderLock`: a second
+  gets an error naming the first's host, pid and start); temporary files of a run that was
+  killed are removed (:func:`imuloco.io.atomic.clean_stale`). A recording's BVH and JSON are
+  one :class:`imuloco.io.atomic.OutputSet`, the JSON naming the BVH's SHA-256: a BVH beside
+  another run's report is redone, not taken as complete.
+- Only regular files and folders are recordings (a FIFO named ``.csv`` hung the run); paths
+  are resolved and de-duplicated, and ``**`` does not follow links to folders (a link loop made
+  one recording into 41 walkers). A recording with no result after ``timeout_s`` (default
+  :data:`TIMEOUT_S`) becomes an error row (its worker thread is abandoned, not killed:
+  Python cannot stop a thread, and a worker process is the cluster's to restart).
 - A recording that fails becomes a row with status ``error`` and its error; the others go on.
   A task whose worker dies is rescheduled by Dask (up to ``distributed.scheduler.allowed-
   failures`` times), one that raises outside the reconstruction is retried ``retries`` times.
@@ -29,6 +39,7 @@ sensor's swings) and
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import csv
 import glob as globmod
 import hashlib
@@ -44,8 +55,9 @@ from pathlib import Path
 from typing import Any
 
 from imuloco.app.walkers import Walkers, read_walkers
-from imuloco.errors import ImulocoError, MissingExtraError, OutputExistsError
-from imuloco.io.atomic import atomic_write, check_output
+from imuloco.errors import ImulocoError, InputError, MissingExtraError, OutputExistsError
+from imuloco.io.atomic import OutputSet, atomic_write, check_output, clean_stale, sha256_file
+from imuloco.io.folderlock import FolderLock
 from imuloco.measures.strides import STRIDE_FIELDS
 
 log = logging.getLogger(__name__)
@@ -67,6 +79,9 @@ _STRINGS = {"name", "recording", "status", "error", "placement", "method", "mode
 _INTEGERS = {"frames", "steps"}
 RESERVED_NAMES = ("summary",)  # summary.json is the batch's: no recording's NAME.json
 CONNECT_TIMEOUT_S = 30.0  # waiting for a scheduler, then for its first worker
+# a recording's time limit: an hour-long log takes about a minute (docs/results/batch), so an
+# hour means stuck (a file that never ends, a pathological input), not slow
+TIMEOUT_S = 3600.0
 # no dashboard, and the scheduler's HTTP server (health, metrics) on a free port, not on 8787,
 # which another cluster on the machine may hold
 LOCAL_CLUSTER = {"dashboard_address": None, "scheduler_kwargs": {"dashboard_address": ":0"}}
@@ -83,11 +98,15 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
     from imuloco.sensors.reallog import realworld_accelerometer
 
     found: list[Path] = [Path(p) for p in paths]
+    for p in found:
+        if p.exists() and not (p.is_file() or p.is_dir()):
+            raise InputError(f"{p}: not a regular file or folder (a FIFO, a device, ...); "
+                             "expected a sensor log")
     for pattern in patterns:
-        matches = sorted(globmod.glob(str(pattern), recursive=True))
+        matches = [m for m in _glob(str(pattern)) if m.is_file() or m.is_dir()]
         if not matches:
             log.warning("no recording matches %r", pattern)
-        found += [Path(m) for m in matches]
+        found += matches
     members: dict[Path, set[str]] = {}  # per folder: the files of its app export
 
     def walker(p: Path) -> Path:
@@ -103,7 +122,7 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
         return p
 
     def key(p: Path) -> str:
-        return os.path.normpath(p.absolute())  # not resolve(): two links are two walkers
+        return os.path.realpath(p)  # one file reached through links is one walker
 
     found = [walker(p) for p in found]
     keys = {key(p) for p in found}
@@ -114,6 +133,30 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
             seen.add(key(p))
             out.append(p)
     return out
+
+
+def _glob(pattern: str) -> list[Path]:
+    """The paths matching a glob ``pattern`` (``**`` recurses), sorted, as ``glob.glob``
+    finds them but without following links to folders under ``**`` (``glob`` does: a link
+    loop repeats each file 40 times, two loops in one folder 2**40 times); hidden names are
+    matched only by a pattern that says so. (pathlib's ``glob`` before Python 3.13 does not
+    follow them under ``**``; it takes a relative pattern below a folder.)"""
+    parts = Path(pattern).parts
+    k = next((i for i, part in enumerate(parts) if globmod.has_magic(part)), len(parts))
+    base, rest = Path(*parts[:k]) if k else Path("."), parts[k:]
+    if not rest:
+        return [base] if base.exists() else []
+    hidden = [part.startswith(".") for part in rest]
+    out = []
+    for p in base.glob(str(Path(*rest))):
+        names = p.relative_to(base).parts
+        if len(names) == len(rest) and any(n.startswith(".") and not h
+                                           for n, h in zip(names, hidden)):
+            continue
+        if "**" in rest and any(n.startswith(".") for n in names):
+            continue  # glob.glob leaves hidden files and folders out of **
+        out.append(p if k else Path(os.path.relpath(p)))
+    return sorted(out)
 
 
 def output_names(paths: Sequence[Path]) -> list[str]:
@@ -162,12 +205,34 @@ def worker_model(sha256: str, data: bytes):
 def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
                     platform: str | None = None, height_m: float | None = None,
-                    unit: str = "cm", skeleton: str | None = None) -> dict[str, Any]:
+                    unit: str = "cm", skeleton: str | None = None,
+                    timeout_s: float | None = None) -> dict[str, Any]:
     """Reconstruct one recording (a path read here), write ``NAME.bvh`` (lengths in ``unit``)
-    then ``NAME.json``.
+    and ``NAME.json`` as one set, the JSON naming the BVH's SHA-256.
 
     Returns ``{"row": ..., "strides": [...]}`` (see :func:`walker_rows`); errors are caught and
-    reported in the row."""
+    reported in the row, as is no result after ``timeout_s`` seconds (None: no limit)."""
+    args = (recording, out_dir, name, model_sha256, model, placement, fmt, calibrate, platform,
+            height_m, unit, skeleton)
+    if timeout_s is None:
+        return _reconstruct_one(*args)
+    t0, result, context = time.perf_counter(), [], contextvars.copy_context()  # Dask's worker
+    thread = threading.Thread(target=lambda: result.append(context.run(_reconstruct_one, *args)),
+                              name=f"imuloco-batch-{name}", daemon=True)
+    thread.start()
+    thread.join(timeout_s)
+    if result:
+        return result[0]
+    log.warning("%s: no result after %g s: abandoned", recording, timeout_s)
+    error = TimeoutError(f"no result after {timeout_s:g} s (the time limit, --timeout)")
+    return {"row": error_row(name, recording, error, time.perf_counter() - t0), "strides": []}
+
+
+def _reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
+                     placement: str, fmt: str, calibrate: bool, platform: str | None,
+                     height_m: float | None, unit: str, skeleton: str | None
+                     ) -> dict[str, Any]:
+    """:func:`reconstruct_one` without its time limit."""
     from imuloco.app.pipeline import reconstruct_file
     from imuloco.io.bvh import write_bvh
 
@@ -182,10 +247,12 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
         report["seconds"] = round(time.perf_counter() - t0, 3)
         report["batch"] = {"recording": recording, "model_sha256": model_sha256,
                            "placement": placement, "height_m": height_m, "unit": unit}
-        out = Path(out_dir)
-        write_bvh(motion, out / f"{name}.bvh", unit=unit, overwrite=True)  # atomic
-        with atomic_write(out / f"{name}.json", "w") as f:  # last: marks the outputs complete
-            f.write(json.dumps(report, indent=2) + "\n")
+        bvh = Path(out_dir) / f"{name}.bvh"
+        with OutputSet() as outs:  # renamed together, the JSON last: it marks them complete
+            write_bvh(motion, outs.path(bvh), unit=unit, overwrite=True)
+            report["batch"]["bvh_sha256"] = outs.sha256(bvh)
+            with outs.open(bvh.with_suffix(".json"), "w") as f:
+                f.write(json.dumps(report, indent=2) + "\n")
     except Exception as e:  # noqa: BLE001 - one bad recording must not stop the batch
         log.warning("%s: %s: %s", recording, type(e).__name__, e)
         return {"row": error_row(name, recording, e, time.perf_counter() - t0), "strides": []}
@@ -222,9 +289,10 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
                      height_m: float | None = None, placement: str | None = None
                      ) -> dict | None | bool:
     """``NAME.json`` when it completes this recording with this model, BVH unit, height and
-    placement (``None``: any placement); ``None`` when there is no JSON or it has another
-    height (to do); ``False`` when outputs of another recording, model, unit, placement or
-    program are there."""
+    placement (``None``: any placement); ``None`` when there is no JSON, it has another
+    height or it does not name the BVH beside it by its SHA-256 (to do: a run killed between
+    writing the two, or a report of an older version); ``False`` when outputs of another
+    recording, model, unit, placement or program are there."""
     path = out / f"{name}.json"
     if not path.exists():
         return None
@@ -235,6 +303,8 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
                 and batch.get("unit", "cm") == unit
                 and placement in (None, batch.get("placement", placement))
                 and (out / f"{name}.bvh").is_file())
+        if same and batch.get("bvh_sha256") != sha256_file(out / f"{name}.bvh"):
+            return None
     except (OSError, ValueError, KeyError, TypeError):
         return False
     return False if not same else report if batch.get("height_m") == height_m else None
@@ -326,7 +396,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
               force: bool = False, progress: bool = False, fitted=None, scheduler=None,
               platform: str | None = None, height_m: float | None = None, retries: int = 2,
               unit: str = "cm", skeleton: str | Path | None = None,
-              walkers: str | Path | None = None) -> dict[str, Any]:
+              walkers: str | Path | None = None, timeout_s: float | None = TIMEOUT_S
+              ) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
     Parameters
@@ -351,6 +422,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     walkers : a CSV of the walkers' heights and the study's own columns, by output name, that
         may hold walkers of other batches (:func:`imuloco.app.walkers.read_walkers`; read
         before starting).
+    timeout_s : a recording's time limit in seconds (None: none); one with no result by then
+        is an error row.
 
     Returns
     -------
@@ -380,86 +453,89 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
 
         load_rig(skeleton)  # refuse a rig that cannot be mapped before any work
     out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    if fitted is None:
-        fitted, note = choose_method(method, model, placement, progress=progress)
-    else:
-        note = f"given fitted method {fitted.name!r}"
-    with tempfile.TemporaryDirectory(prefix="imuloco-batch-") as tmp:
-        # without its training's time: a model fitted on the fly (``--method mean``) resumes
-        fitted.check_fitted()
-        blob = save_model(fitted, Path(tmp) / "model.npz", timing=False).read_bytes()
-    sha = hashlib.sha256(blob).hexdigest()
-    model_seconds = time.perf_counter() - t0
-
-    reports = {n: _complete_report(out, n, r, sha, unit, heights[n], placement)
-               for n, r in zip(names, recs)}
-    foreign = [str(out / f"{n}.json") for n, rep in reports.items() if rep is False]
-    if foreign and not force:
-        raise OutputExistsError(f"{', '.join(foreign[:3])}{' ...' if len(foreign) > 3 else ''}"
-                                " hold(s) another recording's, model's, unit's or "
-                                "placement's outputs; pass --force "
-                                "(force=True) to replace them or choose another --out")
-    rows: dict[str, dict] = {}
-    strides: dict[str, Any] = {}  # pyarrow Tables
-    for n, rep in reports.items():
-        if rep and not force:
-            rows[n], table = walker_rows(n, rep)
-            strides[n] = stride_table(table)
-    skipped = len(rows)
-    todo = [(n, r) for n, r in zip(names, recs) if n not in rows]
-    for n, _ in todo:  # a walker redone for another height is incomplete until it is done
-        (out / f"{n}.json").unlink(missing_ok=True)
-    with dask_client(scheduler, jobs) as client:
-        from distributed import as_completed
-
+    with FolderLock(out):  # one run at a time: a second is refused before any work
+        clean_stale(out)  # temporaries of a run that was killed
         t0 = time.perf_counter()
-        workers = len(client.scheduler_info(n_workers=-1)["workers"])
-        futures, jobs_of = [], {}
-        if todo:
-            # a key of its own (hash=False): scattered under its content's hash, a model run
-            # again on the same cluster took the key the last run was releasing, and its
-            # recordings failed with "lost data" (seen in test_batch's re-runs, 2 in ~20)
-            shared = client.scatter(blob, broadcast=True, hash=False)
-            job = uuid.uuid4().hex[:8]
-            for n, r in todo:
-                fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
-                                    placement=placement, fmt=fmt, calibrate=calibrate,
-                                    platform=platform, height_m=heights[n], unit=unit,
-                                    skeleton=None if skeleton is None else str(skeleton),
-                                    key=f"imuloco-batch-{job}-{n}", retries=retries,
-                                    pure=False)
-                futures.append(fut)
-                jobs_of[fut.key] = (n, r)
-        bar = tqdm(total=len(names), initial=skipped, desc="batch", unit="rec",
-                   disable=not progress)
-        for fut in as_completed(futures):
-            n, r = jobs_of[fut.key]
-            if fut.status == "finished":
-                res = fut.result()
-                rows[n], strides[n] = res["row"], stride_table(res["strides"])
-            else:  # lost more often than Dask allows, or raised more than ``retries`` times
-                rows[n], strides[n] = error_row(n, r, fut.exception(), 0.0), stride_table([])
-            fut.release()
-            bar.set_postfix_str(f"{n}: {rows[n]['status']}")
-            bar.update()
-        bar.close()
-    seconds = time.perf_counter() - t0
-    ordered = [{k: rows[n].get(k) for k in WALKER_FIELDS}
-               | {"height_m": heights[n], "method": fitted.name, "model": note}
-               | study.columns(n) for n in names]
-    all_strides = [strides[n] for n in names]
-    write_tables(out, ordered, all_strides, inputs=inputs, extra=study.fields)
-    failed = sum(r["status"] != "ok" for r in ordered)
-    summary = {"model": note, "method": fitted.name, "model_sha256": sha, "jobs": workers,
-               "scheduler": scheduler if isinstance(scheduler, str) else None,
-               "model_seconds": round(model_seconds, 2), "seconds": round(seconds, 2),
-               "done": len(names) - skipped - failed, "skipped": skipped,
-               "ok": len(names) - failed, "failed": failed,
-               "frames": sum(r["frames"] or 0 for r in ordered),
-               "strides": sum(t.num_rows for t in all_strides),
-               "recordings": [{k: r[k] for k in (*COLUMNS, *(x.name for x in study.fields))}
-                              for r in ordered]}
-    with atomic_write(check_output(out / "summary.json", force=True, inputs=inputs), "w") as f:
-        f.write(json.dumps(summary, indent=2) + "\n")
-    return summary
+        if fitted is None:
+            fitted, note = choose_method(method, model, placement, progress=progress)
+        else:
+            note = f"given fitted method {fitted.name!r}"
+        with tempfile.TemporaryDirectory(prefix="imuloco-batch-") as tmp:
+            # without its training's time: a model fitted on the fly (``--method mean``) resumes
+            fitted.check_fitted()
+            blob = save_model(fitted, Path(tmp) / "model.npz", timing=False).read_bytes()
+        sha = hashlib.sha256(blob).hexdigest()
+        model_seconds = time.perf_counter() - t0
+
+        reports = {n: _complete_report(out, n, r, sha, unit, heights[n], placement)
+                   for n, r in zip(names, recs)}
+        foreign = [str(out / f"{n}.json") for n, rep in reports.items() if rep is False]
+        if foreign and not force:
+            raise OutputExistsError(f"{', '.join(foreign[:3])}{' ...' if len(foreign) > 3 else ''}"
+                                    " hold(s) another recording's, model's, unit's or "
+                                    "placement's outputs; pass --force "
+                                    "(force=True) to replace them or choose another --out")
+        rows: dict[str, dict] = {}
+        strides: dict[str, Any] = {}  # pyarrow Tables
+        for n, rep in reports.items():
+            if rep and not force:
+                rows[n], table = walker_rows(n, rep)
+                strides[n] = stride_table(table)
+        skipped = len(rows)
+        todo = [(n, r) for n, r in zip(names, recs) if n not in rows]
+        for n, _ in todo:  # a walker redone for another height is incomplete until it is done
+            (out / f"{n}.json").unlink(missing_ok=True)
+        with dask_client(scheduler, jobs) as client:
+            from distributed import as_completed
+
+            t0 = time.perf_counter()
+            workers = len(client.scheduler_info(n_workers=-1)["workers"])
+            futures, jobs_of = [], {}
+            if todo:
+                # a key of its own (hash=False): scattered under its content's hash, a model run
+                # again on the same cluster took the key the last run was releasing, and its
+                # recordings failed with "lost data" (seen in test_batch's re-runs, 2 in ~20)
+                shared = client.scatter(blob, broadcast=True, hash=False)
+                job = uuid.uuid4().hex[:8]
+                for n, r in todo:
+                    fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
+                                        placement=placement, fmt=fmt, calibrate=calibrate,
+                                        platform=platform, height_m=heights[n], unit=unit,
+                                        skeleton=None if skeleton is None else str(skeleton),
+                                        timeout_s=timeout_s,
+                                        key=f"imuloco-batch-{job}-{n}", retries=retries,
+                                        pure=False)
+                    futures.append(fut)
+                    jobs_of[fut.key] = (n, r)
+            bar = tqdm(total=len(names), initial=skipped, desc="batch", unit="rec",
+                       disable=not progress)
+            for fut in as_completed(futures):
+                n, r = jobs_of[fut.key]
+                if fut.status == "finished":
+                    res = fut.result()
+                    rows[n], strides[n] = res["row"], stride_table(res["strides"])
+                else:  # lost more often than Dask allows, or raised more than ``retries`` times
+                    rows[n], strides[n] = error_row(n, r, fut.exception(), 0.0), stride_table([])
+                fut.release()
+                bar.set_postfix_str(f"{n}: {rows[n]['status']}")
+                bar.update()
+            bar.close()
+        seconds = time.perf_counter() - t0
+        ordered = [{k: rows[n].get(k) for k in WALKER_FIELDS}
+                   | {"height_m": heights[n], "method": fitted.name, "model": note}
+                   | study.columns(n) for n in names]
+        all_strides = [strides[n] for n in names]
+        write_tables(out, ordered, all_strides, inputs=inputs, extra=study.fields)
+        failed = sum(r["status"] != "ok" for r in ordered)
+        summary = {"model": note, "method": fitted.name, "model_sha256": sha, "jobs": workers,
+                   "scheduler": scheduler if isinstance(scheduler, str) else None,
+                   "model_seconds": round(model_seconds, 2), "seconds": round(seconds, 2),
+                   "done": len(names) - skipped - failed, "skipped": skipped,
+                   "ok": len(names) - failed, "failed": failed,
+                   "frames": sum(r["frames"] or 0 for r in ordered),
+                   "strides": sum(t.num_rows for t in all_strides),
+                   "recordings": [{k: r[k] for k in (*COLUMNS, *(x.name for x in study.fields))}
+                                  for r in ordered]}
+        with atomic_write(check_output(out / "summary.json", force=True, inputs=inputs), "w") as f:
+            f.write(json.dumps(summary, indent=2) + "\n")
+        return summary
