@@ -712,7 +712,9 @@ def test_fast_and_line_by_line_readings_agree(values, fmt: str, sep: str, crlf: 
     path = Path("fast.bvh")
     joints, fps, fast = reader.parse_bvh(path, text)
     lines = text.splitlines()
-    slow_fps, slow = reader._parse_motion(path, lines, lines.index("MOTION"), joints)
+    at = lines.index("MOTION") + 1
+    slow_fps, slow = reader._parse_motion(path, iter(list(enumerate(lines, 1))[at:]), at,
+                                          joints)
     assert fps == slow_fps == 100.0
     np.testing.assert_array_equal(fast, slow)
 
@@ -936,3 +938,46 @@ def test_any_valid_joint_order_round_trips(tmp_path_factory, tree, seed: int, or
     back = read_bvh(path, unit="cm", up="y", fold_static_root=False, root_offset="replace")
     at = [back.skeleton.names.index(n) for n in names]
     np.testing.assert_allclose(back.positions()[:, at], m.positions(), atol=1e-6, rtol=0)
+
+
+def _peak_bytes(read) -> int:
+    """Peak bytes Python and numpy allocated while ``read()`` ran (tracemalloc)."""
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        read()
+    except FormatError:
+        pass
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak
+
+
+@pytest.mark.parametrize("where", ["offset", "name", "motion"])
+def test_a_huge_line_is_refused_within_a_few_times_the_file(tmp_path: Path, where: str):
+    """An 80 MB header line of '0 ' tokens took 3.4 GB (a list of its tokens); a line is read
+    token by token, and a MOTION line longer than its channels can be is refused unsplit."""
+    zeros = "0 " * 200_000
+    text = {"offset": TWO_JOINT.replace("OFFSET 0 0 0", f"OFFSET {zeros}", 1),
+            "name": TWO_JOINT.replace("JOINT child", f"JOINT {zeros}"),
+            "motion": TWO_JOINT.replace("0 0 0 0 0 0 0 0 0", zeros, 1)}[where]
+    path = tmp_path / "huge.bvh"
+    path.write_text(text)
+    with pytest.raises(FormatError, match=r"huge\.bvh:\d+: "):
+        read_bvh(path)
+    assert _peak_bytes(lambda: read_bvh(path)) < 12 * len(text)
+
+
+def test_frames_times_joints_are_bounded(tmp_path: Path, monkeypatch):
+    from imuloco.io import bvh
+
+    path = tmp_path / "m.bvh"
+    path.write_text(TWO_JOINT)
+    assert read_bvh(path).num_frames == 4
+    monkeypatch.setattr(bvh, "MAX_JOINT_FRAMES", 7)
+    for text in (TWO_JOINT, TWO_JOINT.replace("\n", "\r")):  # the fast and the line reading
+        path.write_text(text)
+        with pytest.raises(FormatError, match=r"m\.bvh:17: 4 frames of 2 joints, more than the "
+                                              r"7 frames x joints"):
+            read_bvh(path)

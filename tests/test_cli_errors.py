@@ -464,3 +464,21 @@ def test_reconstruct_refuses_a_fifo_as_its_recording(tmp_path):
     os.mkfifo(fifo)
     code, out = run("reconstruct", fifo, "-o", tmp_path / "a.bvh", "--method", "mean")
     assert code == 1 and "walk.csv: not a regular file" in out, out
+
+
+def test_calibrate_a_confidence_file_declaring_a_huge_array(tmp_path):
+    """An array header declaring shape (1e6, 1e7) made np.load allocate 72.8 TiB: declared
+    shapes are checked against the file before anything is allocated."""
+    import io
+    import zipfile
+
+    import numpy as np
+
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buf, {"descr": "<f8", "fortran_order": False,
+                                               "shape": (1_000_000, 10_000_000)})
+    with zipfile.ZipFile(tmp_path / "confidence-x.npz", "w") as z:
+        z.writestr("actual_m.npy", buf.getvalue() + b"\0" * 64)
+    code, out = run("calibrate", tmp_path)
+    assert code == 1 and "confidence-x.npz" in out and "'actual_m' declares float64 of shape " \
+        "(1000000, 10000000) (80,000,000,000,000 bytes)" in out, out
