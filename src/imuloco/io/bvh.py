@@ -392,11 +392,28 @@ def _parse_motion_fast(path: Path, text: str, start: int, motion_line: int,
         return None  # more text than the values can take: the line reading says where
     data = read_grid(text, frames, width, start=h.end())
     if data is None:
+        _check_frame_count(path, text, start, h.end(), motion_line, frames, width)
         return None
     high, low = data.max(axis=0), data.min(axis=0)
     if not (high.max() <= _MAX_ABS and low.min() >= -_MAX_ABS):
         return None  # NaN fails the comparisons too
     return fps, data, (high, low)
+
+
+def _check_frame_count(path: Path, text: str, start: int, rows_at: int, motion_line: int,
+                       frames: int, width: int) -> None:
+    """Say it when the MOTION block from ``text[rows_at]`` is a clean grid of another count of
+    rows than ``frames`` (as the line reading would, which took 17 s for 40,000 rows of 132
+    channels)."""
+    found = text.count("\n", rows_at) + (not text.endswith("\n"))
+    if found == frames or found < 1 or read_grid(text, found, width, start=rows_at) is None:
+        return
+    first = motion_line + text.count("\n", start, rows_at)  # the first row's line
+    if found < frames:
+        raise FormatError(path, first + found - 1, f"truncated MOTION block: header says "
+                          f"{frames} frames, found {found}")
+    raise FormatError(path, first + frames, f"header says {frames} frames but the MOTION "
+                      "block goes on")
 
 
 def _frame_count(path: Path, line: int, token: str) -> int:
