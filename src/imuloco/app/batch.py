@@ -146,6 +146,8 @@ def _glob(pattern: str) -> list[Path]:
     base, rest = Path(*parts[:k]) if k else Path("."), parts[k:]
     if not rest:
         return [base] if base.exists() else []
+    if rest[-1] == "**":  # glob's "**" at the end also matches files; pathlib's folders only
+        rest = (*rest, "*")
     hidden = [part.startswith(".") for part in rest]
     out = []
     for p in base.glob(str(Path(*rest))):
