@@ -126,7 +126,8 @@ def check_output(path: str | Path, force: bool = False,
             tempfile.TemporaryFile(dir=path.parent).close()
         except OSError as e:
             raise ImulocoError(f"{path}: cannot write there ({e.strerror or e})") from None
-        clean_stale(path.parent, path.name)
+        if _TEMP.match(path.name) is None:  # not a staged temporary (OutputSet.path)
+            clean_stale(path.parent, path.name)
     return path
 
 
