@@ -41,6 +41,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import csv
+import functools
 import glob as globmod
 import hashlib
 import json
@@ -50,7 +51,7 @@ import tempfile
 import threading
 import time
 import uuid
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -392,6 +393,21 @@ def dask_client(scheduler=None, jobs: int | None = None):
         yield client
 
 
+def _one_run_at_a_time(run: Callable[..., dict[str, Any]]) -> Callable[..., dict[str, Any]]:
+    """``run(recordings, out_dir, ...)`` holding ``out_dir``'s :class:`FolderLock` (a second
+    run is refused before any work), after removing a killed run's temporaries there."""
+    @functools.wraps(run)
+    def locked(recordings: Sequence[str | Path], out_dir: str | Path, *args: Any,
+               **kwargs: Any) -> dict[str, Any]:
+        out = Path(out_dir).absolute()
+        out.mkdir(parents=True, exist_ok=True)
+        with FolderLock(out):
+            clean_stale(out)
+            return run(recordings, out_dir, *args, **kwargs)
+    return locked
+
+
+@_one_run_at_a_time
 def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int | None = None,
               model: str | Path | None = None, method: str | None = None,
               placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
@@ -455,89 +471,87 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
 
         load_rig(skeleton)  # refuse a rig that cannot be mapped before any work
     out.mkdir(parents=True, exist_ok=True)
-    with FolderLock(out):  # one run at a time: a second is refused before any work
-        clean_stale(out)  # temporaries of a run that was killed
+    t0 = time.perf_counter()
+    if fitted is None:
+        fitted, note = choose_method(method, model, placement, progress=progress)
+    else:
+        note = f"given fitted method {fitted.name!r}"
+    with tempfile.TemporaryDirectory(prefix="imuloco-batch-") as tmp:
+        # without its training's time: a model fitted on the fly (``--method mean``) resumes
+        fitted.check_fitted()
+        blob = save_model(fitted, Path(tmp) / "model.npz", timing=False).read_bytes()
+    sha = hashlib.sha256(blob).hexdigest()
+    model_seconds = time.perf_counter() - t0
+
+    reports = {n: _complete_report(out, n, r, sha, unit, heights[n], placement)
+               for n, r in zip(names, recs)}
+    foreign = [str(out / f"{n}.json") for n, rep in reports.items() if rep is False]
+    if foreign and not force:
+        raise OutputExistsError(f"{', '.join(foreign[:3])}{' ...' if len(foreign) > 3 else ''}"
+                                " hold(s) another recording's, model's, unit's or "
+                                "placement's outputs; pass --force "
+                                "(force=True) to replace them or choose another --out")
+    rows: dict[str, dict] = {}
+    strides: dict[str, Any] = {}  # pyarrow Tables
+    for n, rep in reports.items():
+        if rep and not force:
+            rows[n], table = walker_rows(n, rep)
+            strides[n] = stride_table(table)
+    skipped = len(rows)
+    todo = [(n, r) for n, r in zip(names, recs) if n not in rows]
+    for n, _ in todo:  # a walker redone for another height is incomplete until it is done
+        (out / f"{n}.json").unlink(missing_ok=True)
+    with dask_client(scheduler, jobs) as client:
+        from distributed import as_completed
+
         t0 = time.perf_counter()
-        if fitted is None:
-            fitted, note = choose_method(method, model, placement, progress=progress)
-        else:
-            note = f"given fitted method {fitted.name!r}"
-        with tempfile.TemporaryDirectory(prefix="imuloco-batch-") as tmp:
-            # without its training's time: a model fitted on the fly (``--method mean``) resumes
-            fitted.check_fitted()
-            blob = save_model(fitted, Path(tmp) / "model.npz", timing=False).read_bytes()
-        sha = hashlib.sha256(blob).hexdigest()
-        model_seconds = time.perf_counter() - t0
-
-        reports = {n: _complete_report(out, n, r, sha, unit, heights[n], placement)
-                   for n, r in zip(names, recs)}
-        foreign = [str(out / f"{n}.json") for n, rep in reports.items() if rep is False]
-        if foreign and not force:
-            raise OutputExistsError(f"{', '.join(foreign[:3])}{' ...' if len(foreign) > 3 else ''}"
-                                    " hold(s) another recording's, model's, unit's or "
-                                    "placement's outputs; pass --force "
-                                    "(force=True) to replace them or choose another --out")
-        rows: dict[str, dict] = {}
-        strides: dict[str, Any] = {}  # pyarrow Tables
-        for n, rep in reports.items():
-            if rep and not force:
-                rows[n], table = walker_rows(n, rep)
-                strides[n] = stride_table(table)
-        skipped = len(rows)
-        todo = [(n, r) for n, r in zip(names, recs) if n not in rows]
-        for n, _ in todo:  # a walker redone for another height is incomplete until it is done
-            (out / f"{n}.json").unlink(missing_ok=True)
-        with dask_client(scheduler, jobs) as client:
-            from distributed import as_completed
-
-            t0 = time.perf_counter()
-            workers = len(client.scheduler_info(n_workers=-1)["workers"])
-            futures, jobs_of = [], {}
-            if todo:
-                # a key of its own (hash=False): scattered under its content's hash, a model run
-                # again on the same cluster took the key the last run was releasing, and its
-                # recordings failed with "lost data" (seen in test_batch's re-runs, 2 in ~20)
-                shared = client.scatter(blob, broadcast=True, hash=False)
-                job = uuid.uuid4().hex[:8]
-                for n, r in todo:
-                    fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
-                                        placement=placement, fmt=fmt, calibrate=calibrate,
-                                        platform=platform, height_m=heights[n], unit=unit,
-                                        skeleton=None if skeleton is None else str(skeleton),
-                                        timeout_s=timeout_s,
-                                        key=f"imuloco-batch-{job}-{n}", retries=retries,
-                                        pure=False)
-                    futures.append(fut)
-                    jobs_of[fut.key] = (n, r)
-            bar = tqdm(total=len(names), initial=skipped, desc="batch", unit="rec",
-                       disable=not progress)
-            for fut in as_completed(futures):
-                n, r = jobs_of[fut.key]
-                if fut.status == "finished":
-                    res = fut.result()
-                    rows[n], strides[n] = res["row"], stride_table(res["strides"])
-                else:  # lost more often than Dask allows, or raised more than ``retries`` times
-                    rows[n], strides[n] = error_row(n, r, fut.exception(), 0.0), stride_table([])
-                fut.release()
-                bar.set_postfix_str(f"{n}: {rows[n]['status']}")
-                bar.update()
-            bar.close()
-        seconds = time.perf_counter() - t0
-        ordered = [{k: rows[n].get(k) for k in WALKER_FIELDS}
-                   | {"height_m": heights[n], "method": fitted.name, "model": note}
-                   | study.columns(n) for n in names]
-        all_strides = [strides[n] for n in names]
-        write_tables(out, ordered, all_strides, inputs=inputs, extra=study.fields)
-        failed = sum(r["status"] != "ok" for r in ordered)
-        summary = {"model": note, "method": fitted.name, "model_sha256": sha, "jobs": workers,
-                   "scheduler": scheduler if isinstance(scheduler, str) else None,
-                   "model_seconds": round(model_seconds, 2), "seconds": round(seconds, 2),
-                   "done": len(names) - skipped - failed, "skipped": skipped,
-                   "ok": len(names) - failed, "failed": failed,
-                   "frames": sum(r["frames"] or 0 for r in ordered),
-                   "strides": sum(t.num_rows for t in all_strides),
-                   "recordings": [{k: r[k] for k in (*COLUMNS, *(x.name for x in study.fields))}
-                                  for r in ordered]}
-        with atomic_write(check_output(out / "summary.json", force=True, inputs=inputs), "w") as f:
-            f.write(json.dumps(summary, indent=2) + "\n")
-        return summary
+        workers = len(client.scheduler_info(n_workers=-1)["workers"])
+        futures, jobs_of = [], {}
+        if todo:
+            # a key of its own (hash=False): scattered under its content's hash, a model run
+            # again on the same cluster took the key the last run was releasing, and its
+            # recordings failed with "lost data" (seen in test_batch's re-runs, 2 in ~20)
+            shared = client.scatter(blob, broadcast=True, hash=False)
+            job = uuid.uuid4().hex[:8]
+            for n, r in todo:
+                fut = client.submit(reconstruct_one, r, str(out), n, sha, shared,
+                                    placement=placement, fmt=fmt, calibrate=calibrate,
+                                    platform=platform, height_m=heights[n], unit=unit,
+                                    skeleton=None if skeleton is None else str(skeleton),
+                                    timeout_s=timeout_s,
+                                    key=f"imuloco-batch-{job}-{n}", retries=retries,
+                                    pure=False)
+                futures.append(fut)
+                jobs_of[fut.key] = (n, r)
+        bar = tqdm(total=len(names), initial=skipped, desc="batch", unit="rec",
+                   disable=not progress)
+        for fut in as_completed(futures):
+            n, r = jobs_of[fut.key]
+            if fut.status == "finished":
+                res = fut.result()
+                rows[n], strides[n] = res["row"], stride_table(res["strides"])
+            else:  # lost more often than Dask allows, or raised more than ``retries`` times
+                rows[n], strides[n] = error_row(n, r, fut.exception(), 0.0), stride_table([])
+            fut.release()
+            bar.set_postfix_str(f"{n}: {rows[n]['status']}")
+            bar.update()
+        bar.close()
+    seconds = time.perf_counter() - t0
+    ordered = [{k: rows[n].get(k) for k in WALKER_FIELDS}
+               | {"height_m": heights[n], "method": fitted.name, "model": note}
+               | study.columns(n) for n in names]
+    all_strides = [strides[n] for n in names]
+    write_tables(out, ordered, all_strides, inputs=inputs, extra=study.fields)
+    failed = sum(r["status"] != "ok" for r in ordered)
+    summary = {"model": note, "method": fitted.name, "model_sha256": sha, "jobs": workers,
+               "scheduler": scheduler if isinstance(scheduler, str) else None,
+               "model_seconds": round(model_seconds, 2), "seconds": round(seconds, 2),
+               "done": len(names) - skipped - failed, "skipped": skipped,
+               "ok": len(names) - failed, "failed": failed,
+               "frames": sum(r["frames"] or 0 for r in ordered),
+               "strides": sum(t.num_rows for t in all_strides),
+               "recordings": [{k: r[k] for k in (*COLUMNS, *(x.name for x in study.fields))}
+                              for r in ordered]}
+    with atomic_write(check_output(out / "summary.json", force=True, inputs=inputs), "w") as f:
+        f.write(json.dumps(summary, indent=2) + "\n")
+    return summary
