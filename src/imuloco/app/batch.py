@@ -400,10 +400,16 @@ def _one_run_at_a_time(run: Callable[..., dict[str, Any]]) -> Callable[..., dict
     def locked(recordings: Sequence[str | Path], out_dir: str | Path, *args: Any,
                **kwargs: Any) -> dict[str, Any]:
         out = Path(out_dir).absolute()
+        made = not out.exists()
         out.mkdir(parents=True, exist_ok=True)
-        with FolderLock(out):
-            clean_stale(out)
-            return run(recordings, out_dir, *args, **kwargs)
+        try:
+            with FolderLock(out):
+                clean_stale(out)
+                return run(recordings, out_dir, *args, **kwargs)
+        except BaseException:
+            if made and not any(out.iterdir()):  # refused before any work: no folder left
+                out.rmdir()
+            raise
     return locked
 
 
