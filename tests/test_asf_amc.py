@@ -389,3 +389,27 @@ def test_bone_limits(tmp_path: Path, n: int, chain: bool, words: str):
     with pytest.raises(FormatError, match=words) as e:
         read_asf_amc(a, b)
     assert e.value.path == str(a)
+
+
+def test_a_long_amc_takes_memory_in_proportion_and_is_bounded(tmp_path: Path, leg,
+                                                              monkeypatch):
+    """A 1M-frame AMC took 1.9 GB (a dict of lists per frame) and a 185 MB one ended in
+    MemoryError: values are kept as read, 8 bytes each, within MAX_JOINT_FRAMES."""
+    import tracemalloc
+
+    from imuloco.io import bvh
+
+    asf, _ = leg
+    frame = "root 0 18 0 0 0 0\nlfemur 0 0 0\nltibia 0\nlfoot 0 0\n"
+    amc = write(tmp_path, "long.amc", ":DEGREES\n" + "".join(f"{k}\n{frame}"
+                                                             for k in range(1, 20_001)))
+    tracemalloc.start()
+    motion = read_asf_amc(asf, amc)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert motion.num_frames == 20_000
+    assert peak < 3 * amc.stat().st_size + 40 * motion.rotations.size  # text + arrays
+    monkeypatch.setattr(bvh, "MAX_JOINT_FRAMES", 4 * 100)
+    with pytest.raises(FormatError, match=r"long\.amc:\d+: 101 frames of 4 joints, more than "
+                                          r"the 400 frames x joints"):
+        read_asf_amc(asf, amc)

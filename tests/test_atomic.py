@@ -107,3 +107,127 @@ def test_outputs_are_flushed_to_disk_cache_entries_not(tmp_path, monkeypatch):
     assert len(synced) == 1 and len(list((tmp_path / "cache").glob("*.clip"))) == 1
     again = read_motion_cached(clip)  # from the entry
     assert again.rotations.tobytes() == first.rotations.tobytes()
+
+
+def test_force_replaces_only_regular_files(tmp_path):
+    """A FIFO, a link (to /proc/self/fd/1, or to a file) and a device node are never replaced,
+    even with --force (they were replaced by a regular file)."""
+    import os
+
+    fifo = tmp_path / "fifo.bvh"
+    os.mkfifo(fifo)
+    out = tmp_path / "stdout.bvh"
+    out.symlink_to("/proc/self/fd/1")
+    kept = tmp_path / "kept.txt"
+    kept.write_text("kept")
+    link = tmp_path / "link.txt"
+    link.symlink_to(kept)
+    for target, kind in ((fifo, "FIFO"), (out, "symbolic link"), (link, "symbolic link")):
+        with pytest.raises(ImulocoError, match=f"is a {kind}, not a regular file"):
+            check_output(target, force=True)
+        with pytest.raises(ImulocoError, match="not a regular file"), \
+                atomic_write(target, "w") as f:
+            f.write("x")
+    assert fifo.is_fifo() and out.is_symlink() and link.is_symlink()
+    assert kept.read_text() == "kept"
+    with pytest.raises(ImulocoError, match="/dev/null is a device"):
+        check_output("/dev/null", force=True)  # checked only: never written in a test
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo.bvh", "kept.txt", "link.txt",
+                                                           "stdout.bvh"]
+
+
+def test_two_outputs_at_one_path_are_refused(tmp_path):
+    """-o same.bvh --report same.bvh replaced the BVH with the JSON; also through .. and a
+    linked folder."""
+    from imuloco.io.atomic import check_outputs
+
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "alias").symlink_to(tmp_path / "sub")
+    a = tmp_path / "sub" / "a.bvh"
+    for other in (a, tmp_path / "sub" / ".." / "sub" / "a.bvh", tmp_path / "alias" / "a.bvh"):
+        with pytest.raises(ImulocoError, match="are one file"):
+            check_outputs([a, tmp_path / "b.html", other], force=True)
+    assert check_outputs([a, tmp_path / "a.json"]) == [a, tmp_path / "a.json"]
+
+
+_KILLED_WRITE = """
+import os, signal, sys
+from imuloco.io.atomic import atomic_write
+with atomic_write(sys.argv[1], "wb") as f:
+    f.write(b"x" * 100_000)
+    f.flush()
+    os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_temporaries_of_a_killed_run_are_removed_by_the_next(tmp_path):
+    """kill -9 during a write left a hidden temporary file (12-22 MB for a BVH) for ever; the
+    next check of that output removes those of dead processes on this host, not others'."""
+    import os
+    import subprocess
+    import sys
+
+    target = tmp_path / "walk.bvh"
+    proc = subprocess.Popen([sys.executable, "-c", _KILLED_WRITE, str(target)])
+    assert proc.wait() == -9
+    left = [p for p in tmp_path.iterdir()]
+    assert len(left) == 1 and left[0].name.startswith(".walk.bvh.")
+    alive = tmp_path / left[0].name.replace(f"-{proc.pid}-", f"-{os.getppid()}-")
+    alive.write_bytes(b"a live run's")  # another run, still writing
+    other = tmp_path / ".walk.bvh.notours.bvh"
+    other.write_bytes(b"someone else's")
+    past = os.stat(left[0]).st_mtime - 10
+    for p in (left[0], alive):
+        os.utime(p, (past, past))
+    check_output(target)
+    assert sorted(tmp_path.iterdir()) == sorted([alive, other])
+
+
+_KILLED_SET = """
+import os, signal, sys
+from pathlib import Path
+from imuloco.io import atomic
+from imuloco.io.atomic import OutputSet
+out = Path(sys.argv[1])
+replace = os.replace
+def replace_then_die(src, dst):
+    replace(src, dst)
+    if str(dst).endswith(".bvh"):
+        os.kill(os.getpid(), signal.SIGKILL)
+atomic.os.replace = replace_then_die
+with OutputSet() as s:
+    s.path(out / "a.bvh").write_text("new motion")
+    with s.open(out / "a.json", "w") as f:
+        f.write('{"bvh_sha256": "%s"}' % s.sha256(out / "a.bvh"))
+"""
+
+
+def test_an_output_set_is_renamed_together_and_detectably_consistent(tmp_path):
+    """An OutputSet writes nothing when its block fails, all of its files when it succeeds;
+    killed between two renames, its last file (the report) is the old one, whose hash of the
+    BVH does not match the new BVH."""
+    import json
+    import subprocess
+    import sys
+
+    from imuloco.io.atomic import OutputSet, sha256_file
+
+    (tmp_path / "a.bvh").write_text("old motion")
+    with pytest.raises(RuntimeError), OutputSet() as s:
+        s.path(tmp_path / "a.bvh").write_text("new motion")
+        raise RuntimeError("interrupted")
+    assert [p.name for p in tmp_path.iterdir()] == ["a.bvh"]
+    with OutputSet() as s:
+        s.path(tmp_path / "a.bvh").write_text("old motion 2")
+        with s.open(tmp_path / "a.json", "w") as f:
+            f.write(json.dumps({"bvh_sha256": s.sha256(tmp_path / "a.bvh")}))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bvh", "a.json"]
+    report = json.loads((tmp_path / "a.json").read_text())
+    assert report["bvh_sha256"] == sha256_file(tmp_path / "a.bvh")
+    proc = subprocess.run([sys.executable, "-c", _KILLED_SET, str(tmp_path)], check=False)
+    assert proc.returncode == -9
+    assert (tmp_path / "a.bvh").read_text() == "new motion"
+    assert json.loads((tmp_path / "a.json").read_text())["bvh_sha256"] != sha256_file(
+        tmp_path / "a.bvh")
+    check_output(tmp_path / "a.json", force=True)  # the next run cleans the set's temporary
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bvh", "a.json"]

@@ -326,18 +326,18 @@ def test_a_walker_redone_for_another_height_is_incomplete_until_done(logs, fitte
                                                                     tmp_path, monkeypatch):
     """Its BVH written, its report not: the earlier height's report must not mark it
     complete (a re-run at that height would keep the BVH of the other)."""
-    from imuloco.app import outputs
+    from imuloco.io.atomic import OutputSet
 
     paths, _ = logs
     run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=client, height_m=1.6)
-    real = outputs.atomic_write
+    real = OutputSet.open
 
-    def no_report(path, *args, **kwargs):  # workers are threads of this process
+    def no_report(self, path, *args, **kwargs):  # workers are threads of this process
         if Path(path).suffix == ".json":
             raise OSError(28, "No space left on device")
-        return real(path, *args, **kwargs)
+        return real(self, path, *args, **kwargs)
 
-    monkeypatch.setattr(outputs, "atomic_write", no_report)  # the writer of a reconstruction
+    monkeypatch.setattr(OutputSet, "open", no_report)
     assert run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=client,
                      height_m=1.8)["failed"] == 1
     monkeypatch.undo()
@@ -463,3 +463,95 @@ def test_a_worker_lost_mid_task_is_retried_elsewhere(logs, fitted, tmp_path, mon
     assert len(calls) == 2 and calls[0] != calls[1]
     assert summary["done"] == 1 and summary["failed"] == 0
     assert read_bvh(tmp_path / f"{summary['recordings'][0]['name']}.bvh").num_frames > 0
+
+
+def test_a_second_run_on_one_folder_is_refused_naming_the_first(logs, fitted, client, tmp_path,
+                                                                caplog):
+    """Two runs on one --out both reported "8 done" with their units mixed; the second is
+    refused before any work, and a dead run's lock is taken over with a warning."""
+    import os
+    import socket
+    import subprocess
+    import sys
+
+    from imuloco.errors import ImulocoError
+    from imuloco.io.folderlock import LOCK_NAME, FolderLock
+
+    paths, _ = logs
+    holder = rf"another run \(host {socket.gethostname()}, pid {os.getpid()}, started"
+    with FolderLock(tmp_path), pytest.raises(ImulocoError, match=holder):
+        run_batch(paths, tmp_path, fitted=fitted, scheduler=client)
+    assert [p.name for p in tmp_path.iterdir()] == []  # released: the lock file is gone
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (tmp_path / LOCK_NAME).write_text(json.dumps({"host": socket.gethostname(),
+                                                  "pid": dead.pid, "started": "then"}))
+    summary = run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=client)
+    assert summary["done"] == 1 and "taking over the lock of a run that died" in caplog.text
+    (tmp_path / LOCK_NAME).write_text(json.dumps({"host": "elsewhere", "pid": 1,
+                                                  "started": "now"}))
+    with pytest.raises(ImulocoError, match=r"host elsewhere, pid 1.*remove .*\.imuloco\.lock"):
+        run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=client)
+
+
+def test_a_new_bvh_beside_an_old_report_is_not_complete(logs, fitted, client, tmp_path):
+    """kill -9 between writing a recording's BVH and its report left a new BVH beside an old
+    report, which a re-run took as complete: the report names its BVH's SHA-256."""
+    from imuloco.io.atomic import sha256_file
+
+    paths, _ = logs
+    first = run_batch(paths[:2], tmp_path, fitted=fitted, scheduler=client)
+    name = first["recordings"][0]["name"]
+    report = json.loads((tmp_path / f"{name}.json").read_text())
+    assert report["batch"]["bvh_sha256"] == sha256_file(tmp_path / f"{name}.bvh")
+    other = tmp_path / f"{first['recordings'][1]['name']}.bvh"
+    (tmp_path / f"{name}.bvh").write_bytes(other.read_bytes())  # another run's BVH
+    again = run_batch(paths[:2], tmp_path, fitted=fitted, scheduler=client)
+    assert (again["done"], again["skipped"]) == (1, 1)
+    assert json.loads((tmp_path / f"{name}.json").read_text())["batch"]["bvh_sha256"] == \
+        sha256_file(tmp_path / f"{name}.bvh") != sha256_file(other)
+
+
+def test_only_regular_files_and_no_link_loops(logs, tmp_path):
+    """A FIFO named .csv hung batch for ever; a link loop under --glob '**' made one recording
+    into 41 walkers (two loops in one folder: 2**40 paths)."""
+    import os
+
+    from imuloco.errors import InputError
+
+    paths, _ = logs
+    study = tmp_path / "study"
+    (study / "a").mkdir(parents=True)
+    (study / "a" / "walk.csv").write_bytes(paths[0].read_bytes())
+    (study / "a" / "loop").symlink_to(study)
+    (study / "a" / "loop2").symlink_to(study / "a")
+    (study / "same.csv").symlink_to(study / "a" / "walk.csv")
+    os.mkfifo(study / "stuck.csv")
+    found = find_recordings([], [str(study / "**" / "*.csv")])
+    assert found == [study / "a" / "walk.csv"]
+    with pytest.raises(InputError, match="stuck.csv: not a regular file"):
+        find_recordings([study / "stuck.csv"])
+
+
+def test_a_stuck_recording_becomes_an_error_row(logs, fitted, client, tmp_path, monkeypatch):
+    """A recording that never finishes is an error row after the time limit; the others are
+    done."""
+    import threading
+
+    from imuloco.app import pipeline
+
+    paths, _ = logs
+    release = threading.Event()
+    real = pipeline.reconstruct_file
+
+    def stuck_on_the_first(recording, **kw):
+        if Path(recording) == paths[0].absolute() and release.wait(60):
+            raise RuntimeError("released")  # as a read from a FIFO that never ends
+        return real(recording, **kw)
+
+    monkeypatch.setattr(pipeline, "reconstruct_file", stuck_on_the_first)
+    summary = run_batch(paths[:2], tmp_path, fitted=fitted, scheduler=client, timeout_s=2.0)
+    release.set()
+    rows = summary["recordings"]
+    assert [r["status"] for r in rows] == ["error", "ok"]
+    assert "TimeoutError: no result after 2 s" in rows[0]["error"]

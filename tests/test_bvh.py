@@ -712,7 +712,9 @@ def test_fast_and_line_by_line_readings_agree(values, fmt: str, sep: str, crlf: 
     path = Path("fast.bvh")
     joints, fps, fast = reader.parse_bvh(path, text)
     lines = text.splitlines()
-    slow_fps, slow = reader._parse_motion(path, lines, lines.index("MOTION"), joints)
+    at = lines.index("MOTION") + 1
+    slow_fps, slow = reader._parse_motion(path, iter(list(enumerate(lines, 1))[at:]), at,
+                                          joints)
     assert fps == slow_fps == 100.0
     np.testing.assert_array_equal(fast, slow)
 
@@ -904,3 +906,78 @@ def test_blender_imports_the_written_bvh(sample_db, tmp_path: Path, unit: str, s
         np.testing.assert_allclose(res["bones"][name][0], [x, -z, y], atol=1e-4)
     head, tail = np.array(res["bones"]["Head"])
     assert 0.15 < np.linalg.norm(tail - head) < 0.3
+
+
+@st.composite
+def random_trees(draw) -> tuple[list[int], np.ndarray]:
+    """A valid joint order that is not depth-first in general (as SMPL's is not): each joint's
+    parent any earlier joint; offsets (J, 3) in metres."""
+    n = draw(st.integers(2, 9))
+    parents = [-1] + [draw(st.integers(0, j - 1)) for j in range(1, n)]
+    offsets = np.array(draw(st.lists(st.lists(st.floats(-0.5, 0.5), min_size=3, max_size=3),
+                                     min_size=n, max_size=n)))
+    return parents, offsets
+
+
+@settings(SETTINGS, max_examples=40)
+@given(tree=random_trees(), seed=st.integers(0, 2**31 - 1), order=st.sampled_from(ORDERS))
+def test_any_valid_joint_order_round_trips(tmp_path_factory, tree, seed: int, order: str):
+    """A skeleton whose joints are in any valid order (parents first, not depth-first) is
+    written in depth-first order with each joint's own rotation: every joint's world position
+    comes back (a later branch carried other joints' rotations: 0.74 m off on SMPL's order)."""
+    from imuloco.core.skeleton import Skeleton
+
+    parents, offsets = tree
+    names = [f"j{k}" for k in range(len(parents))]
+    offsets[0] = 0.0
+    rng = np.random.default_rng(seed)
+    rotations = normalize(rng.normal(size=(3, len(names), 4)))
+    m = Motion(Skeleton(names, np.array(parents), offsets), rotations,
+               rng.uniform(-1, 1, size=(3, 3)), 30.0)
+    path = write_bvh(m, tmp_path_factory.mktemp("order") / "m.bvh", unit="cm", order=order)
+    back = read_bvh(path, unit="cm", up="y", fold_static_root=False, root_offset="replace")
+    at = [back.skeleton.names.index(n) for n in names]
+    np.testing.assert_allclose(back.positions()[:, at], m.positions(), atol=1e-6, rtol=0)
+
+
+def _peak_bytes(read) -> int:
+    """Peak bytes Python and numpy allocated while ``read()`` ran (tracemalloc)."""
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        read()
+    except FormatError:
+        pass
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak
+
+
+@pytest.mark.parametrize("where", ["offset", "name", "motion"])
+def test_a_huge_line_is_refused_within_a_few_times_the_file(tmp_path: Path, where: str):
+    """An 80 MB header line of '0 ' tokens took 3.4 GB (a list of its tokens); a line is read
+    token by token, and a MOTION line longer than its channels can be is refused unsplit."""
+    zeros = "0 " * 200_000
+    text = {"offset": TWO_JOINT.replace("OFFSET 0 0 0", f"OFFSET {zeros}", 1),
+            "name": TWO_JOINT.replace("JOINT child", f"JOINT {zeros}"),
+            "motion": TWO_JOINT.replace("0 0 0 0 0 0 0 0 0", zeros, 1)}[where]
+    path = tmp_path / "huge.bvh"
+    path.write_text(text)
+    with pytest.raises(FormatError, match=r"huge\.bvh:\d+: "):
+        read_bvh(path)
+    assert _peak_bytes(lambda: read_bvh(path)) < 12 * len(text)
+
+
+def test_frames_times_joints_are_bounded(tmp_path: Path, monkeypatch):
+    from imuloco.io import bvh
+
+    path = tmp_path / "m.bvh"
+    path.write_text(TWO_JOINT)
+    assert read_bvh(path).num_frames == 4
+    monkeypatch.setattr(bvh, "MAX_JOINT_FRAMES", 7)
+    for text in (TWO_JOINT, TWO_JOINT.replace("\n", "\r")):  # the fast and the line reading
+        path.write_text(text)
+        with pytest.raises(FormatError, match=r"m\.bvh:17: 4 frames of 2 joints, more than the "
+                                              r"7 frames x joints"):
+            read_bvh(path)

@@ -403,3 +403,82 @@ def test_the_height_range_has_one_source(monkeypatch, tmp_path, two_joint_skelet
     assert code == 2 and "2.1 is not in the range 0.5<=x<=2.0" in out
     with pytest.raises(ValueError, match=r"\(0.5 to 2\), got 2.1"):
         gait.height_scale(two_joint_skeleton, 2.1)
+
+
+@pytest.mark.parametrize("other", ["--report", "--html", "--video"])
+def test_two_outputs_at_one_path_are_refused_before_any_work(log, tmp_path, other):
+    """reconstruct -o same.bvh --report same.bvh exited 0 with the JSON in place of the BVH."""
+    same = tmp_path / ("same.gif" if other == "--video" else "same.bvh")
+    alias = tmp_path / "sub" / ".." / same.name
+    (tmp_path / "sub").mkdir()
+    code, out = run("reconstruct", log, "-o", same, other, alias, "--method", "mean")
+    assert code == 1 and "are one file" in out, out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sub"]
+
+
+def test_render_and_demo_refuse_two_outputs_at_one_path(tmp_path):
+    (tmp_path / "d").mkdir()
+    code, out = run("render", BVH, "--out", tmp_path / "d", "-o",
+                    tmp_path / "d" / f"{BVH.stem}.html")
+    assert code == 1 and "are one file" in out, out
+    (tmp_path / "demo").mkdir()
+    (tmp_path / "demo" / "demo.gif").symlink_to("demo.mp4")
+    code, out = run("demo", "--out", tmp_path / "demo", "--method", "mean", "--force")
+    assert code == 1 and "demo.gif is a symbolic link" in out, out
+    assert sorted(p.name for p in (tmp_path / "demo").iterdir()) == ["demo.gif"]
+
+
+def test_force_never_replaces_a_fifo_or_a_link_to_stdout(log, tmp_path):
+    import os
+
+    fifo = tmp_path / "out.bvh"
+    os.mkfifo(fifo)
+    code, out = run("reconstruct", log, "-o", fifo, "--force", "--method", "mean")
+    assert code == 1 and "is a FIFO, not a regular file" in out, out
+    stdout = tmp_path / "stdout.json"
+    stdout.symlink_to("/proc/self/fd/1")
+    code, out = run("reconstruct", log, "-o", tmp_path / "a.bvh", "--report", stdout,
+                    "--force", "--method", "mean")
+    assert code == 1 and "is a symbolic link" in out, out
+    assert fifo.is_fifo() and stdout.is_symlink() and not (tmp_path / "a.bvh").exists()
+
+
+def test_a_report_names_the_bvh_it_belongs_to(log, tmp_path):
+    import json
+
+    from imuloco.io.atomic import sha256_file
+
+    code, out = run("reconstruct", log, "-o", tmp_path / "a.bvh", "--report",
+                    tmp_path / "a.json", "--method", "mean")
+    assert code == 0, out
+    report = json.loads((tmp_path / "a.json").read_text())
+    assert report["outputs"] == {"bvh": "a.bvh", "bvh_sha256": sha256_file(tmp_path / "a.bvh")}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bvh", "a.json"]
+
+
+def test_reconstruct_refuses_a_fifo_as_its_recording(tmp_path):
+    """A FIFO named .csv was read for ever."""
+    import os
+
+    fifo = tmp_path / "walk.csv"
+    os.mkfifo(fifo)
+    code, out = run("reconstruct", fifo, "-o", tmp_path / "a.bvh", "--method", "mean")
+    assert code == 1 and "walk.csv: not a regular file" in out, out
+
+
+def test_calibrate_a_confidence_file_declaring_a_huge_array(tmp_path):
+    """An array header declaring shape (1e6, 1e7) made np.load allocate 72.8 TiB: declared
+    shapes are checked against the file before anything is allocated."""
+    import io
+    import zipfile
+
+    import numpy as np
+
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buf, {"descr": "<f8", "fortran_order": False,
+                                               "shape": (1_000_000, 10_000_000)})
+    with zipfile.ZipFile(tmp_path / "confidence-x.npz", "w") as z:
+        z.writestr("actual_m.npy", buf.getvalue() + b"\0" * 64)
+    code, out = run("calibrate", tmp_path)
+    assert code == 1 and "confidence-x.npz" in out and "'actual_m' declares float64 of shape " \
+        "(1000000, 10000000) (80,000,000,000,000 bytes)" in out, out

@@ -623,3 +623,52 @@ def test_a_second_file_with_a_one_file_log_is_refused(walk_rec, tmp_path):
         read_log((a, b))
     with pytest.raises(ValueError, match="got 3 files"):  # the third was dropped
         read_log((a, b, a))
+
+
+def test_a_zip_bomb_member_is_refused_unread(tmp_path):
+    """A few hundred bytes of bzip2 that unzip to MiBs of line breaks were looked through line
+    by line (64 MiB: 105 s); a member unzipping to over 100 times its size is refused, named."""
+    import zipfile
+
+    bomb = tmp_path / "bomb.zip"
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_BZIP2) as z:
+        z.writestr("export/Raw Data.csv", b"\n" * (4 << 20))
+    assert bomb.stat().st_size < 1000
+    with pytest.raises(FormatError, match=r"bomb\.zip/export/Raw Data\.csv: .* more than 100 "
+                                          r"times as many"):
+        read_log(bomb)
+
+
+def test_header_sniffing_skips_a_bounded_number_of_blank_lines(walk_rec, tmp_path,
+                                                               monkeypatch):
+    from imuloco.io import sensorlog
+
+    path = write_generic_csv(walk_rec, tmp_path / "walk.csv")
+    text = path.read_text()
+    samples = read_log(path)[0].num_samples
+    monkeypatch.setattr(sensorlog, "MAX_PREAMBLE_LINES", 5)
+    path.write_text("\n" * 5 + text)
+    assert read_log(path)[0].num_samples == samples
+    path.write_text("\n" * 6 + text)
+    with pytest.raises(FormatError, match=r"walk\.csv:6: no header in the first 5 lines"):
+        read_log(path)
+
+
+def test_blank_lines_between_rows_are_read_without_the_line_loop(walk_rec, tmp_path,
+                                                                 monkeypatch):
+    """Runs of line breaks in a table (a zip bomb's GiB of them) take the fast reading, with
+    each row's own line number."""
+    from imuloco.io import sensorlog
+
+    path = write_generic_csv(walk_rec, tmp_path / "walk.csv")
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join([lines[0], "", *lines[1:3], "\r", "", *lines[3:]]) + "\n\n\n")
+
+    def line_loop(*args):
+        raise AssertionError("read line by line")
+
+    monkeypatch.setattr(sensorlog, "_parse_lines", line_loop)
+    _, table, rows = sensorlog._read_table(path)
+    assert len(table) == len(lines) - 1
+    assert list(rows[:4]) == [3, 4, 7, 8] and rows[-1] == len(lines) + 3
+    np.testing.assert_array_equal(table[0], [float(x) for x in lines[1].split(",")])

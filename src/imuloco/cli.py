@@ -609,17 +609,16 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
     other contents). Prints the per-content table before and after; --check applies the
     calibration of all RESULTS to other folders; --model/-o writes it into a model file.
     """
-    from imuloco.io.atomic import atomic_write, check_output, check_outputs
+    from imuloco.io.atomic import atomic_write, check_outputs
     from imuloco.lab import confidence as conf
     from imuloco.lab.bench import slug
     from imuloco.methods.base import calibrated_error
 
     if (model_path is None) != (output is None):
         raise click.UsageError("--model and -o go together: -o is the calibrated copy")
-    check_outputs([output], force, inputs=[model_path] if model_path else [])
-    if out_dir is not None:
-        for name in ("confidence.md", "confidence.json", "confidence.png"):
-            check_output(out_dir / name, force)
+    check_outputs([output, *(() if out_dir is None else (
+        out_dir / n for n in ("confidence.md", "confidence.json", "confidence.png")))],
+        force, inputs=[model_path] if model_path else [])
     method = slug(method_spec) if method_spec else None
     rows = conf.load_rows(results, method)
     source = ", ".join(str(r) for r in results)
@@ -779,6 +778,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     click.echo("wrote " + ", ".join(str(p) for p in written))
 
 
+
 def _echo_gait_source(source: str, note: str | None) -> None:
     """Say where the gait came from when it is not the reconstructed motion (a foot or
     lower-back sensor's own signal), and the report's note on it (e.g. no --height)."""
@@ -923,12 +923,15 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
                    "without a row (a typo).")
 @click.option("--force", is_flag=True,
               help="Redo recordings whose outputs are complete (a re-run skips them).")
+@click.option("--timeout", type=_Range(0, min_open=True), default=None, metavar="SECONDS",
+              help="A recording with no result after this long is an error row (a stuck "
+                   "input) [default: 3600].")
 @_units_option
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path,
           jobs: int | None, scheduler: str | None, model_path: Path | None,
           method_name: str | None, placement: str, fmt: str, skeleton: Path | None,
           no_calibrate: bool, platform: str | None, height: float | None,
-          walkers_file: Path | None, force: bool, units: str) -> None:
+          walkers_file: Path | None, force: bool, timeout: float | None, units: str) -> None:
     """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
     recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
     finished recordings, redoes walkers whose height changed).
@@ -936,7 +939,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     A recording's NAME is its file name without extension (acc_X for a RealWorld pair, the
     folder's or zip's name for a Sensor Logger or phyphox export), with its folder's name
     prepended where names repeat (also in case alone) or where it is 'summary'."""
-    from imuloco.app.batch import find_recordings, run_batch
+    from imuloco.app.batch import TIMEOUT_S, find_recordings, run_batch
 
     paths = find_recordings(recordings, patterns)
     if not paths:
@@ -944,7 +947,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
                         calibrate=not no_calibrate, force=force, progress=True,
                         scheduler=scheduler, platform=platform, unit=units,
-                        skeleton=skeleton, height_m=height, walkers=walkers_file)
+                        skeleton=skeleton, height_m=height, walkers=walkers_file,
+                        timeout_s=TIMEOUT_S if timeout is None else timeout)
     click.echo(f"model: {summary['model']}", err=True)
     click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
     for r in summary["recordings"]:

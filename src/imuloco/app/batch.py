@@ -21,6 +21,16 @@ sensor's swings) and
   recording is complete when its JSON names the same recording, model, unit, height and
   placement. A re-run skips complete recordings (``force`` redoes them), redoes a walker
   whose height changed and refuses to replace another job's outputs.
+- One run at a time writes ``out_dir`` (:class:`imuloco.io.folderlock.FolderLock`: a second
+  gets an error naming the first's host, pid and start); temporary files of a run that was
+  killed are removed (:func:`imuloco.io.atomic.clean_stale`). A recording's BVH and JSON are
+  one :class:`imuloco.io.atomic.OutputSet`, the JSON naming the BVH's SHA-256: a BVH beside
+  another run's report is redone, not taken as complete.
+- Only regular files and folders are recordings (a FIFO named ``.csv`` hung the run); paths
+  are resolved and de-duplicated, and ``**`` does not follow links to folders (a link loop made
+  one recording into 41 walkers). A recording with no result after ``timeout_s`` (default
+  :data:`TIMEOUT_S`) becomes an error row (its worker thread is abandoned, not killed:
+  Python cannot stop a thread, and a worker process is the cluster's to restart).
 - A recording that fails becomes a row with status ``error`` and its error; the others go on.
   A task whose worker dies is rescheduled by Dask (up to ``distributed.scheduler.allowed-
   failures`` times), one that raises outside the reconstruction is retried ``retries`` times.
@@ -29,7 +39,9 @@ sensor's swings) and
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import csv
+import functools
 import glob as globmod
 import hashlib
 import json
@@ -39,14 +51,15 @@ import tempfile
 import threading
 import time
 import uuid
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from imuloco.app.outputs import Outputs, write_outputs
 from imuloco.app.walkers import Walkers, read_walkers
-from imuloco.errors import ImulocoError, MissingExtraError, OutputExistsError
-from imuloco.io.atomic import atomic_write, check_output
+from imuloco.errors import ImulocoError, InputError, MissingExtraError, OutputExistsError
+from imuloco.io.atomic import atomic_write, check_output, clean_stale, sha256_file
+from imuloco.io.folderlock import FolderLock
 from imuloco.measures.strides import STRIDE_FIELDS
 
 log = logging.getLogger(__name__)
@@ -68,6 +81,9 @@ _STRINGS = {"name", "recording", "status", "error", "placement", "method", "mode
 _INTEGERS = {"frames", "steps"}
 RESERVED_NAMES = ("summary",)  # summary.json is the batch's: no recording's NAME.json
 CONNECT_TIMEOUT_S = 30.0  # waiting for a scheduler, then for its first worker
+# a recording's time limit: an hour-long log takes about a minute (docs/results/batch), so an
+# hour means stuck (a file that never ends, a pathological input), not slow
+TIMEOUT_S = 3600.0
 # no dashboard, and the scheduler's HTTP server (health, metrics) on a free port, not on 8787,
 # which another cluster on the machine may hold
 LOCAL_CLUSTER = {"dashboard_address": None, "scheduler_kwargs": {"dashboard_address": ":0"}}
@@ -84,11 +100,15 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
     from imuloco.sensors.reallog import realworld_accelerometer
 
     found: list[Path] = [Path(p) for p in paths]
+    for p in found:
+        if p.exists() and not (p.is_file() or p.is_dir()):
+            raise InputError(f"{p}: not a regular file or folder (a FIFO, a device, ...); "
+                             "expected a sensor log")
     for pattern in patterns:
-        matches = sorted(globmod.glob(str(pattern), recursive=True))
+        matches = [m for m in _glob(str(pattern)) if m.is_file() or m.is_dir()]
         if not matches:
             log.warning("no recording matches %r", pattern)
-        found += [Path(m) for m in matches]
+        found += matches
     members: dict[Path, set[str]] = {}  # per folder: the files of its app export
 
     def walker(p: Path) -> Path:
@@ -104,7 +124,7 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
         return p
 
     def key(p: Path) -> str:
-        return os.path.normpath(p.absolute())  # not resolve(): two links are two walkers
+        return os.path.realpath(p)  # one file reached through links is one walker
 
     found = [walker(p) for p in found]
     keys = {key(p) for p in found}
@@ -115,6 +135,32 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
             seen.add(key(p))
             out.append(p)
     return out
+
+
+def _glob(pattern: str) -> list[Path]:
+    """The paths matching a glob ``pattern`` (``**`` recurses), sorted, as ``glob.glob``
+    finds them but without following links to folders under ``**`` (``glob`` does: a link
+    loop repeats each file 40 times, two loops in one folder 2**40 times); hidden names are
+    matched only by a pattern that says so. (pathlib's ``glob`` before Python 3.13 does not
+    follow them under ``**``; it takes a relative pattern below a folder.)"""
+    parts = Path(pattern).parts
+    k = next((i for i, part in enumerate(parts) if globmod.has_magic(part)), len(parts))
+    base, rest = Path(*parts[:k]) if k else Path("."), parts[k:]
+    if not rest:
+        return [base] if base.exists() else []
+    if rest[-1] == "**":  # glob's "**" at the end also matches files; pathlib's folders only
+        rest = (*rest, "*")
+    hidden = [part.startswith(".") for part in rest]
+    out = []
+    for p in base.glob(str(Path(*rest))):
+        names = p.relative_to(base).parts
+        if len(names) == len(rest) and any(n.startswith(".") and not h
+                                           for n, h in zip(names, hidden)):
+            continue
+        if "**" in rest and any(n.startswith(".") for n in names):
+            continue  # glob.glob leaves hidden files and folders out of **
+        out.append(p if k else Path(os.path.relpath(p)))
+    return sorted(out)
 
 
 def output_names(paths: Sequence[Path]) -> list[str]:
@@ -163,12 +209,34 @@ def worker_model(sha256: str, data: bytes):
 def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
                     platform: str | None = None, height_m: float | None = None,
-                    unit: str = "cm", skeleton: str | None = None) -> dict[str, Any]:
+                    unit: str = "cm", skeleton: str | None = None,
+                    timeout_s: float | None = None) -> dict[str, Any]:
     """Reconstruct one recording (a path read here), write ``NAME.bvh`` (lengths in ``unit``)
-    then ``NAME.json``.
+    and ``NAME.json`` as one set, the JSON naming the BVH's SHA-256.
 
     Returns ``{"row": ..., "strides": [...]}`` (see :func:`walker_rows`); errors are caught and
-    reported in the row."""
+    reported in the row, as is no result after ``timeout_s`` seconds (None: no limit)."""
+    args = (recording, out_dir, name, model_sha256, model, placement, fmt, calibrate, platform,
+            height_m, unit, skeleton)
+    if timeout_s is None:
+        return _reconstruct_one(*args)
+    t0, result, context = time.perf_counter(), [], contextvars.copy_context()  # Dask's worker
+    thread = threading.Thread(target=lambda: result.append(context.run(_reconstruct_one, *args)),
+                              name=f"imuloco-batch-{name}", daemon=True)
+    thread.start()
+    thread.join(timeout_s)
+    if result:
+        return result[0]
+    log.warning("%s: no result after %g s: abandoned", recording, timeout_s)
+    error = TimeoutError(f"no result after {timeout_s:g} s (the time limit, --timeout)")
+    return {"row": error_row(name, recording, error, time.perf_counter() - t0), "strides": []}
+
+
+def _reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
+                     placement: str, fmt: str, calibrate: bool, platform: str | None,
+                     height_m: float | None, unit: str, skeleton: str | None
+                     ) -> dict[str, Any]:
+    """:func:`reconstruct_one` without its time limit."""
     from imuloco.app.pipeline import reconstruct_file
 
     t0 = time.perf_counter()
@@ -222,9 +290,10 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
                      height_m: float | None = None, placement: str | None = None
                      ) -> dict | None | bool:
     """``NAME.json`` when it completes this recording with this model, BVH unit, height and
-    placement (``None``: any placement); ``None`` when there is no JSON or it has another
-    height (to do); ``False`` when outputs of another recording, model, unit, placement or
-    program are there."""
+    placement (``None``: any placement); ``None`` when there is no JSON, it has another
+    height or it does not name the BVH beside it by its SHA-256 (to do: a run killed between
+    writing the two, or a report of an older version); ``False`` when outputs of another
+    recording, model, unit, placement or program are there."""
     path = out / f"{name}.json"
     if not path.exists():
         return None
@@ -235,6 +304,8 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
                 and batch.get("unit", "cm") == unit
                 and placement in (None, batch.get("placement", placement))
                 and (out / f"{name}.bvh").is_file())
+        if same and batch.get("bvh_sha256") != sha256_file(out / f"{name}.bvh"):
+            return None
     except (OSError, ValueError, KeyError, TypeError):
         return False
     return False if not same else report if batch.get("height_m") == height_m else None
@@ -320,13 +391,35 @@ def dask_client(scheduler=None, jobs: int | None = None):
         yield client
 
 
+def _one_run_at_a_time(run: Callable[..., dict[str, Any]]) -> Callable[..., dict[str, Any]]:
+    """``run(recordings, out_dir, ...)`` holding ``out_dir``'s :class:`FolderLock` (a second
+    run is refused before any work), after removing a killed run's temporaries there."""
+    @functools.wraps(run)
+    def locked(recordings: Sequence[str | Path], out_dir: str | Path, *args: Any,
+               **kwargs: Any) -> dict[str, Any]:
+        out = Path(out_dir).absolute()
+        made = not out.exists()
+        out.mkdir(parents=True, exist_ok=True)
+        try:
+            with FolderLock(out):
+                clean_stale(out)
+                return run(recordings, out_dir, *args, **kwargs)
+        except BaseException:
+            if made and not any(out.iterdir()):  # refused before any work: no folder left
+                out.rmdir()
+            raise
+    return locked
+
+
+@_one_run_at_a_time
 def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int | None = None,
               model: str | Path | None = None, method: str | None = None,
               placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
               force: bool = False, progress: bool = False, fitted=None, scheduler=None,
               platform: str | None = None, height_m: float | None = None, retries: int = 2,
               unit: str = "cm", skeleton: str | Path | None = None,
-              walkers: str | Path | None = None) -> dict[str, Any]:
+              walkers: str | Path | None = None, timeout_s: float | None = TIMEOUT_S
+              ) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
     Parameters
@@ -351,6 +444,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     walkers : a CSV of the walkers' heights and the study's own columns, by output name, that
         may hold walkers of other batches (:func:`imuloco.app.walkers.read_walkers`; read
         before starting).
+    timeout_s : a recording's time limit in seconds (None: none); one with no result by then
+        is an error row.
 
     Returns
     -------
@@ -427,6 +522,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                                     placement=placement, fmt=fmt, calibrate=calibrate,
                                     platform=platform, height_m=heights[n], unit=unit,
                                     skeleton=None if skeleton is None else str(skeleton),
+                                    timeout_s=timeout_s,
                                     key=f"imuloco-batch-{job}-{n}", retries=retries,
                                     pure=False)
                 futures.append(fut)

@@ -1,9 +1,10 @@
 """The files of one reconstruction, written as one set: ``imuloco reconstruct`` and ``batch``.
 
 :meth:`Outputs.check` refuses, before any work, to replace a file without ``--force`` (or an
-input); :func:`write_outputs` then writes the BVH, the video and viewer when asked, and the
-JSON report last, each atomically (:mod:`imuloco.io.atomic`): a report beside its BVH marks the
-set complete (``batch`` resumes on it).
+input); :func:`write_outputs` then stages the BVH, the video and viewer when asked, and the
+JSON report, and renames them together, the report last (:class:`imuloco.io.atomic.OutputSet`).
+The report names its BVH by SHA-256 (``outputs``; in ``batch`` also ``batch.bvh_sha256``), so a
+run killed between two renames leaves a report that does not match: ``batch`` redoes it.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from typing import Any
 from imuloco.app.pipeline import render_outputs
 from imuloco.app.report import ReconstructionReport
 from imuloco.core.motion import Motion
-from imuloco.io.atomic import atomic_write, check_outputs
+from imuloco.io.atomic import OutputSet, atomic_write, check_outputs, sha256_file
 from imuloco.io.bvh import write_bvh
 
 
@@ -58,17 +59,30 @@ def write_outputs(outputs: Outputs, report: ReconstructionReport, motion: Motion
     the BVH of ``motion`` (None: it was written piece by piece already,
     :func:`imuloco.app.chunked.reconstruct_to_bvh`), the video and viewer (which need
     ``motion``), then the report. Returns the paths written, in that order."""
-    written = [Path(outputs.bvh)]
-    if motion is not None:
-        write_bvh(motion, outputs.bvh, unit=outputs.unit, overwrite=True)
-        if outputs.video or outputs.html:
-            written += render_outputs([motion], [f"{motion.name} ({report.method})"],
-                                      [outputs.video] if outputs.video else [], outputs.html,
-                                      overwrite=True, progress=progress,
-                                      max_seconds=outputs.video_seconds,
-                                      confidence=[report.confidence])
-    elif outputs.video or outputs.html:
+    bvh = Path(outputs.bvh)
+    written = [bvh]
+    if motion is None and (outputs.video or outputs.html):
         raise ValueError("a video or viewer needs the motion")
-    if outputs.report is not None:
-        written.append(write_json(outputs.report, report.to_json()))
+    with OutputSet() as outs:  # all staged, then renamed together, the report last
+        if motion is not None:
+            write_bvh(motion, outs.path(bvh), unit=outputs.unit, overwrite=True)
+            digest = outs.sha256(bvh)
+            if outputs.video or outputs.html:
+                render_outputs([motion], [f"{motion.name} ({report.method})"],
+                               [outs.path(outputs.video)] if outputs.video else [],
+                               outs.path(outputs.html) if outputs.html else None,
+                               overwrite=True, progress=progress,
+                               max_seconds=outputs.video_seconds,
+                               confidence=[report.confidence])
+                written += [p for p in (outputs.video, outputs.html) if p]
+        else:  # written piece by piece before: its report names what is there
+            digest = sha256_file(bvh)
+        if getattr(report, "batch", None) is not None:
+            report.batch["bvh_sha256"] = digest  # batch's resume checks it there
+        if outputs.report is not None:
+            with outs.open(outputs.report, "w") as f:
+                f.write(json.dumps({**report.to_json(),
+                                    "outputs": {"bvh": bvh.name, "bvh_sha256": digest}},
+                                   indent=2) + "\n")
+            written.append(Path(outputs.report))
     return written

@@ -399,7 +399,8 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     names = ["recording.csv", "reconstruction.bvh", "demo.mp4", "demo.gif", "demo.html",
              "signals.png", "phases.png", "errors.png", "report.md", "report.json"]
     paths = {n: out / n for n in names}
-    check_outputs(paths.values(), overwrite)
+    check_outputs(paths.values(), overwrite,
+                  inputs=[p for p in (model, skeleton) if p is not None])
     bar = tqdm(total=5, desc="demo", unit="step", disable=not progress)
 
     db = load_sample()

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import re
+from array import array
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +36,7 @@ import numpy as np
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import FormatError, MissingInputError
-from imuloco.io.bvh import MAX_DEPTH, MAX_JOINTS
+from imuloco.io.bvh import MAX_DEPTH, MAX_JOINTS, check_size, iter_lines
 from imuloco.io.upaxis import check_skip, check_up, to_y_up
 from imuloco.ops.rotations import IDENTITY, from_euler, qinv, qmul
 
@@ -43,6 +44,7 @@ INCH = 0.0254
 CMU_FPS = 120.0
 LENGTH_UNITS = (1e-3, 1e3)  # plausible ':units length L' (file values per inch)
 MAX_BONE = 10.0  # metres: longer bones are corrupt data
+MAX_LINE_CHARS = 1 << 16  # a bone's line holds a name and at most 6 numbers
 _ROOT_CHANNELS = ("TX", "TY", "TZ", "RX", "RY", "RZ")
 _BONE_DOF = ("rx", "ry", "rz")
 
@@ -84,7 +86,11 @@ def _lines(path: Path) -> Iterator[tuple[int, list[str]]]:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         text = raw.decode("latin-1")
-    for i, ln in enumerate(text.splitlines()):
+    del raw
+    for i, ln in enumerate(iter_lines(text)):
+        if len(ln) > MAX_LINE_CHARS:  # its tokens would take 30 times its length
+            raise FormatError(path, i + 1, f"a line of {len(ln):,} characters, more than "
+                              f"{MAX_LINE_CHARS:,}: not an ASF/AMC line")
         toks = ln.split("#", 1)[0].split()
         if toks:
             yield i + 1, toks
@@ -313,9 +319,22 @@ def read_asf(path: str | Path, length_unit: float | None = None) -> Skeleton:
 
 def _parse_amc(path: Path, channels: dict[str, list[str]], degrees: bool
                ) -> tuple[dict[str, np.ndarray], bool, int]:
-    """Per bone, its values (T, n_dof); whether angles are degrees; the frame count T."""
-    frames: list[tuple[int, dict[str, list[float]]]] = []
-    frames_start = 0
+    """Per bone, its values (T, n_dof); whether angles are degrees; the frame count T. Values
+    are kept as read, 8 bytes each (a list of dicts per frame took 1.9 GB for 1M frames), and
+    at most :data:`imuloco.io.bvh.MAX_JOINT_FRAMES` frames x joints."""
+    starts, width = {}, 0  # each bone's first column in a frame's row
+    for name, want in channels.items():
+        starts[name], width = width, width + len(want)
+    values, count, frames_start = array("d"), 0, 0
+    row, seen, frame_line = np.empty(width), set(), 0
+
+    def end_frame() -> None:
+        for name, want in channels.items():
+            if want and name not in seen:
+                raise FormatError(path, frame_line, f"frame has no values for bone {name!r} "
+                                  f"({' '.join(want)})")
+        values.frombytes(row.tobytes())
+
     for line, toks in _lines(path):
         key = toks[0]
         if key.startswith(":"):
@@ -327,39 +346,40 @@ def _parse_amc(path: Path, channels: dict[str, list[str]], degrees: bool
                 raise FormatError(path, line, f"expected a frame number below 1e9, found "
                                   f"{key[:40]!r}")
             number = int(key)
-            if frames and number != frames_start + len(frames):
-                raise FormatError(path, line, f"expected frame {frames_start + len(frames)}, "
+            if count and number != frames_start + count:
+                raise FormatError(path, line, f"expected frame {frames_start + count}, "
                                   f"found frame {number}")
-            if not frames:
+            if count:
+                end_frame()
+            else:
                 frames_start = number
-            frames.append((line, {}))
+            count += 1
+            check_size(path, line, count, len(channels))
+            seen.clear()
+            frame_line = line
             continue
-        if not frames:
+        if not count:
             raise FormatError(path, line, f"expected a frame number before bone values, "
                               f"found {key!r}")
         if key not in channels:
             raise FormatError(path, line, f"unknown bone {key!r}; the ASF has "
                               f"{list(channels)}")
-        values = frames[-1][1]
-        if key in values:
+        if key in seen:
             raise FormatError(path, line, f"bone {key!r} appears twice in one frame")
         want = channels[key]
         if len(toks) - 1 != len(want):
             raise FormatError(path, line, f"expected {len(want)} values for {key!r} "
                               f"({' '.join(want)}), found {len(toks) - 1}")
-        values[key] = [_num(path, line, t, f"{key} {w}") for t, w in zip(toks[1:], want)]
-    if not frames:
+        row[starts[key]:starts[key] + len(want)] = [
+            _num(path, line, t, f"{key} {w}") for t, w in zip(toks[1:], want)]
+        seen.add(key)
+    if not count:
         raise FormatError(path, None, "expected at least one frame, found none")
-    out = {}
-    for name, want in channels.items():
-        if not want:
-            continue
-        for line, values in frames:
-            if name not in values:
-                raise FormatError(path, line, f"frame has no values for bone {name!r} "
-                                  f"({' '.join(want)})")
-        out[name] = np.array([values[name] for _, values in frames])
-    return out, degrees, len(frames)
+    end_frame()
+    table = np.frombuffer(values, dtype=np.float64).reshape(count, width)
+    out = {name: table[:, starts[name]:starts[name] + len(want)].copy()
+           for name, want in channels.items() if want}
+    return out, degrees, count
 
 
 def _fixed_axes(angles: np.ndarray, order: str, degrees: bool) -> np.ndarray:

@@ -29,7 +29,8 @@ import decimal
 import functools
 import math
 import re
-from collections.abc import Iterable
+from array import array
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -83,30 +84,37 @@ class _Joint:
 
 
 class _Tokens:
-    """Whitespace tokens with their line numbers, for error messages."""
+    """Whitespace tokens with their line numbers, for error messages, found as they are read:
+    a huge line (80 MB of ``0 ``) costs no memory beyond the text (a list of its tokens took
+    3.4 GB)."""
 
-    def __init__(self, path: Path, lines: list[str]) -> None:
+    def __init__(self, path: Path, lines: Iterable[str] | Iterable[tuple[int, str]]) -> None:
         self.path = path
-        self.items = [(tok, i + 1) for i, ln in enumerate(lines) for tok in ln.split()]
-        self.pos = 0
+        self._items = ((m.group(), i) for i, ln in _numbered(lines)
+                       for m in _TOKEN.finditer(ln))
+        self._next: tuple[str, int] | None = next(self._items, None)
+        self.line = 1  # the line of the last token read
 
     def peek(self) -> str | None:
-        return self.items[self.pos][0] if self.pos < len(self.items) else None
+        return None if self._next is None else self._next[0]
 
     def next(self, expected: str) -> tuple[str, int]:
-        if self.pos >= len(self.items):
-            last = self.items[-1][1] if self.items else 1
-            raise FormatError(self.path, last, f"file ends early: expected {expected}")
-        tok = self.items[self.pos]
-        self.pos += 1
+        if self._next is None:
+            raise FormatError(self.path, self.line, f"file ends early: expected {expected}")
+        tok = self._next
+        self._next = next(self._items, None)
+        self.line = tok[1]
         return tok
 
     def rest_of_line(self, line: int) -> list[str]:
-        """The remaining tokens on ``line`` (joint names may contain spaces)."""
+        """The remaining tokens on ``line`` (joint names may contain spaces), at most
+        :data:`MAX_NAME_WORDS`."""
         out = []
-        while self.pos < len(self.items) and self.items[self.pos][1] == line:
-            out.append(self.items[self.pos][0])
-            self.pos += 1
+        while self._next is not None and self._next[1] == line:
+            if len(out) == MAX_NAME_WORDS:
+                raise FormatError(self.path, line, f"more than {MAX_NAME_WORDS} words after "
+                                  "ROOT/JOINT; expected a joint name")
+            out.append(self.next("a joint name")[0])
         return out
 
     def expect(self, word: str) -> int:
@@ -118,6 +126,40 @@ class _Tokens:
     def number(self, what: str) -> float:
         tok, line = self.next(what)
         return _number(self.path, line, tok, what)
+
+
+_TOKEN = re.compile(r"\S+")
+MAX_NAME_WORDS = 64  # words of a joint name (names may contain spaces)
+# frames x joints of a motion read: its rotations alone take 32 bytes each (1.6 GB here), 3.7 h
+# of a 31-joint CMU skeleton at 120 fps; a file's rows must be there, so memory also stays
+# within a few times the file's size
+MAX_JOINT_FRAMES = 50_000_000
+_VALUE_CHARS = 64  # characters a channel value and its spaces may take on a MOTION line
+_LINE_BREAKS = re.compile("\r\n|[\n\r" + _ODD_BREAKS + "]")
+
+
+def _numbered(lines: Iterable[str] | Iterable[tuple[int, str]]) -> Iterator[tuple[int, str]]:
+    """(1-based line number, text) of ``lines`` (texts, or already numbered)."""
+    for i, ln in enumerate(lines, 1):
+        yield ln if isinstance(ln, tuple) else (i, ln)
+
+
+def iter_lines(text: str) -> Iterator[str]:
+    """``text.splitlines()`` one line at a time (a list of a large file's short lines takes
+    25 times the text)."""
+    pos = 0
+    for m in _LINE_BREAKS.finditer(text):
+        yield text[pos:m.start()]
+        pos = m.end()
+    if pos < len(text):
+        yield text[pos:]
+
+
+def check_size(path: Path, line: int | None, frames: int, joints: int) -> None:
+    """Refuse a motion of more than :data:`MAX_JOINT_FRAMES` frames x joints."""
+    if frames * joints > MAX_JOINT_FRAMES:
+        raise FormatError(path, line, f"{frames:,} frames of {joints} joints, more than the "
+                          f"{MAX_JOINT_FRAMES:,} frames x joints read at once: split the file")
 
 
 def _number(path: Path, line: int, tok: str, what: str) -> float:
@@ -179,8 +221,7 @@ def _parse_hierarchy(tk: _Tokens) -> list[_Joint]:
                               "'OFFSET x y z' after its '{'")
         joints.append(j)
 
-    _, line = tk.items[tk.pos - 1]
-    open_joint(-1, line)
+    open_joint(-1, tk.line)
     stack = [0]  # open joints; a loop, not recursion, so deep nesting cannot overflow the stack
     while stack:
         tok, line = tk.next("JOINT, End Site or '}'")
@@ -278,13 +319,22 @@ def _parse(path: Path, text: str
         parsed = _parse_motion_fast(path, text, m.end(), motion_line, joints)
         if parsed is not None:
             return joints, *parsed
-    lines = text.splitlines()
-    motion_at = next((i for i, ln in enumerate(lines) if ln.strip() == "MOTION"), None)
-    if motion_at is None:  # parse what there is, to say where MOTION was expected
-        _parse_hierarchy(_Tokens(path, lines))
-        raise FormatError(path, max(len(lines), 1), "file ends early: expected a MOTION line "
-                          "after the HIERARCHY")
-    joints = _parse_hierarchy(_Tokens(path, lines[:motion_at]))
+    lines = enumerate(iter_lines(text), 1)  # read once, lazily: the hierarchy, then MOTION
+    motion_at, last = None, 1
+
+    def head() -> Iterator[tuple[int, str]]:
+        nonlocal motion_at, last
+        for i, ln in lines:
+            last = i
+            if ln.strip() == "MOTION":
+                motion_at = i
+                return
+            yield i, ln
+
+    joints = _parse_hierarchy(_Tokens(path, head()))  # says where MOTION was expected
+    if motion_at is None:
+        raise FormatError(path, last, "file ends early: expected a MOTION line after the "
+                          "HIERARCHY")
     return joints, *_parse_motion(path, lines, motion_at, joints), None
 
 
@@ -335,14 +385,35 @@ def _parse_motion_fast(path: Path, text: str, start: int, motion_line: int,
         return None
     frames_line = motion_line + text.count("\n", start, h.start(1))
     frames = _frame_count(path, frames_line, h.group(1))
+    check_size(path, frames_line, frames, len(joints))
     fps = frame_rate(path, motion_line + text.count("\n", start, h.start(2)), h.group(2))
-    data = read_grid(text, frames, _width(path, motion_line, joints), start=h.end())
+    width = _width(path, motion_line, joints)
+    if len(text) - h.end() > frames * (width * _VALUE_CHARS + 2):
+        return None  # more text than the values can take: the line reading says where
+    data = read_grid(text, frames, width, start=h.end())
     if data is None:
+        _check_frame_count(path, text, start, h.end(), motion_line, frames, width)
         return None
     high, low = data.max(axis=0), data.min(axis=0)
     if not (high.max() <= _MAX_ABS and low.min() >= -_MAX_ABS):
         return None  # NaN fails the comparisons too
     return fps, data, (high, low)
+
+
+def _check_frame_count(path: Path, text: str, start: int, rows_at: int, motion_line: int,
+                       frames: int, width: int) -> None:
+    """Say it when the MOTION block from ``text[rows_at]`` is a clean grid of another count of
+    rows than ``frames`` (as the line reading would, which took 17 s for 40,000 rows of 132
+    channels)."""
+    found = text.count("\n", rows_at) + (not text.endswith("\n"))
+    if found == frames or found < 1 or read_grid(text, found, width, start=rows_at) is None:
+        return
+    first = motion_line + text.count("\n", start, rows_at)  # the first row's line
+    if found < frames:
+        raise FormatError(path, first + found - 1, f"truncated MOTION block: header says "
+                          f"{frames} frames, found {found}")
+    raise FormatError(path, first + frames, f"header says {frames} frames but the MOTION "
+                      "block goes on")
 
 
 def _frame_count(path: Path, line: int, token: str) -> int:
@@ -408,54 +479,62 @@ def _frame_rate(path: Path, line: int, token: str) -> float:
     return fps
 
 
-def _parse_motion(path: Path, lines: list[str], at: int, joints: list[_Joint]
+def _parse_motion(path: Path, lines: Iterator[tuple[int, str]], at: int, joints: list[_Joint]
                   ) -> tuple[float, np.ndarray]:
-    """Frames per second and the channel values (T, C) of the MOTION block at line ``at``,
-    line by line (the reference reading, which names the line at fault)."""
-    # (line number, text) of the non-blank lines after MOTION
-    body = [(i + 1, ln) for i, ln in enumerate(lines[at + 1:], start=at + 1) if ln.strip()]
+    """Frames per second and the channel values (T, C) of the MOTION block after line ``at``,
+    from the numbered ``lines`` after it, line by line (the reference reading, which names the
+    line at fault); values are kept as read, 8 bytes each (at most 4 times the text)."""
+    body = ((i, ln) for i, ln in lines if ln.strip())  # the non-blank lines after MOTION
+    last = at
 
-    def header(k: int, key: str) -> tuple[str, int]:
-        if k >= len(body):
-            raise FormatError(path, len(lines), f"file ends early: expected a '{key}' line")
-        lineno, text = body[k]
-        m = re.fullmatch(rf"\s*{key}\s*:\s*(\S+)\s*", text)
+    def header(key: str) -> tuple[str, int]:
+        nonlocal last
+        lineno, text = next(body, (None, ""))
+        if lineno is None:
+            raise FormatError(path, last, f"file ends early: expected a '{key}' line")
+        last = lineno
+        m = re.fullmatch(rf"\s*{key}\s*:\s*(\S+)\s*", text[:200])
         if m is None:
-            raise FormatError(path, lineno, f"expected '{key}: <value>', found {text.strip()!r}")
+            raise FormatError(path, lineno, f"expected '{key}: <value>', found "
+                              f"{text.strip()[:80]!r}")
         return m.group(1), lineno
 
-    frames_s, frames_line = header(0, "Frames")
+    frames_s, frames_line = header("Frames")
     frames = _frame_count(path, frames_line, frames_s)
-    ft_s, ft_line = header(1, "Frame Time")
+    check_size(path, frames_line, frames, len(joints))
+    ft_s, ft_line = header("Frame Time")
     fps = frame_rate(path, ft_line, ft_s)
-    width = _width(path, at + 1, joints)
-    rows = body[2:]
-    if len(rows) < frames:
-        last = rows[-1][0] if rows else ft_line
-        raise FormatError(path, last, f"truncated MOTION block: header says {frames} frames, "
-                          f"found {len(rows)}")
-    if len(rows) > frames:
-        raise FormatError(path, rows[frames][0], f"header says {frames} frames but the MOTION "
-                          f"block goes on ({len(rows)} lines)")
-    data = np.empty((frames, width))
-    for r, (lineno, ln) in enumerate(rows):
+    width = _width(path, at, joints)
+    values, count, last = array("d"), 0, ft_line
+    for lineno, ln in body:
+        if count == frames:
+            raise FormatError(path, lineno, f"header says {frames} frames but the MOTION "
+                              "block goes on")
+        if len(ln) > _VALUE_CHARS * width:
+            raise FormatError(path, lineno, f"a line of {len(ln):,} characters; expected "
+                              f"{width} channel values (the HIERARCHY's channel count)")
         parts = ln.split()
         if len(parts) != width:
             raise FormatError(path, lineno, f"expected {width} channel values (the HIERARCHY's "
                               f"channel count), found {len(parts)}")
         try:
-            data[r] = [float(p) for p in parts]
+            row = np.array([float(p) for p in parts])
         except ValueError:
             col = next(c for c, p in enumerate(parts) if not _is_float(p))
             raise FormatError(path, lineno, f"expected a number for channel {col + 1} "
                               f"({_channel_name(joints, col)}), found {parts[col]!r}") from None
-        bad = ~np.isfinite(data[r]) | (np.abs(np.nan_to_num(data[r])) > _MAX_ABS)
+        bad = ~np.isfinite(row) | (np.abs(np.nan_to_num(row)) > _MAX_ABS)
         if bad.any():
             col = int(np.flatnonzero(bad)[0])
             raise FormatError(path, lineno, f"expected a finite number below {_MAX_ABS:g} in "
                               f"size for channel {col + 1} ({_channel_name(joints, col)}), "
                               f"found {parts[col]!r}")
-    return fps, data
+        values.frombytes(row.tobytes())
+        count, last = count + 1, lineno
+    if count < frames:
+        raise FormatError(path, last, f"truncated MOTION block: header says {frames} frames, "
+                          f"found {count}")
+    return fps, np.frombuffer(values, dtype=np.float64).reshape(frames, width).copy()
 
 
 def _channel_name(joints: list[_Joint], col: int) -> str:
@@ -719,13 +798,15 @@ def write_bvh_pieces(pieces: Iterable[Motion], frames: int, path: str | Path, un
     check_output(path, overwrite)
     k = 1.0 / UNITS[unit]
     dec = _decimals(UNITS[unit])
-    written = 0
+    written, dfs = 0, None
     with atomic_write(path, "w") as f:
         for motion in pieces:
             if written == 0:
+                dfs = depth_first(motion.skeleton.parents)
                 f.write("\n".join(_hierarchy(motion.skeleton, k, dec, order)) + "\n")
                 f.write(f"MOTION\nFrames: {frames}\nFrame Time: {1.0 / motion.fps:.10g}\n")
-            eul = to_euler(motion.rotations, order).reshape(motion.num_frames, -1)
+            # the file's joints are in depth-first order, each its own rotation channels
+            eul = to_euler(motion.rotations[:, dfs], order).reshape(motion.num_frames, -1)
             f.writelines(" ".join(f"{x:.{dec}f}" for x in root) + " "
                          + " ".join(f"{a:.6f}" for a in angles) + "\n"
                          for root, angles in zip(motion.root * k, eul))
@@ -774,8 +855,18 @@ def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
     def vec(v: np.ndarray) -> str:
         return " ".join(f"{x:.{dec}f}" for x in v)
 
-    def emit(j: int, depth: int) -> None:
-        pad = "\t" * depth
+    def close(j: int) -> None:
+        pad = "\t" * len(open_)
+        if j in sk.end_sites or not sk.children(j):
+            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{",
+                        f"{pad}\t\tOFFSET {vec(end_site(sk, j) * k)}", f"{pad}\t}}"])
+        out.append(f"{pad}}}")
+
+    open_: list[int] = []  # a loop, not recursion: a long chain cannot overflow the stack
+    for j in depth_first(sk.parents):
+        while open_ and open_[-1] != sk.parents[j]:
+            close(open_.pop())
+        pad = "\t" * len(open_)
         out.append(f"{pad}{'ROOT' if j == 0 else 'JOINT'} {sk.names[j]}")
         out.append(f"{pad}{{")
         out.append(f"{pad}\tOFFSET {vec(sk.offsets[j] * k)}")
@@ -783,13 +874,21 @@ def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
             out.append(f"{pad}\tCHANNELS 6 Xposition Yposition Zposition {rot_channels}")
         else:
             out.append(f"{pad}\tCHANNELS 3 {rot_channels}")
-        kids = sk.children(j)
-        for c in kids:
-            emit(c, depth + 1)
-        if not kids or j in sk.end_sites:
-            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{",
-                        f"{pad}\t\tOFFSET {vec(end_site(sk, j) * k)}", f"{pad}\t}}"])
-        out.append(f"{pad}}}")
-
-    emit(0, 0)
+        open_.append(int(j))
+    while open_:
+        close(open_.pop())
     return out
+
+
+def depth_first(parents: np.ndarray) -> np.ndarray:
+    """The joints in depth-first order, children in index order (the order of a BVH file's
+    joints): (J,) joint indices. ``parents`` (J,), each before its children."""
+    kids: list[list[int]] = [[] for _ in parents]
+    for j in range(1, len(parents)):
+        kids[int(parents[j])].append(j)
+    out, stack = [], [0] if len(parents) else []
+    while stack:
+        j = stack.pop()
+        out.append(j)
+        stack.extend(reversed(kids[j]))
+    return np.array(out, dtype=np.int64)

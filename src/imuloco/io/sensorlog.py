@@ -101,6 +101,9 @@ class Stream:
 MAX_LINE_BYTES = 1 << 16  # longer lines are refused: no CSV export has lines of 64 KiB
 MAX_ROWS = 50_000_000  # ~28 h at 500 Hz; beyond that the table alone would take > 2.8 GB
 MAX_CELL = 1e20  # above any timestamp (Unix ns are ~1.7e18) or sensor value; larger is garbage
+# blank and comment lines looked through for a table's header: exports have none or a few
+# (a zip member of 64 MiB of line breaks was looked through line by line for 105 s)
+MAX_PREAMBLE_LINES = 1_000
 
 
 def _sniff(header: str) -> tuple[str, bool]:
@@ -126,6 +129,19 @@ def _text_lines(path: Path, f: BinaryIO, first: int = 1) -> Iterator[tuple[int, 
             raise FormatError(path, i, f"not UTF-8 text (byte {exc.start + 1} of the line: "
                                        f"{exc.reason})") from None
         yield i, (text.removeprefix("\ufeff") if i == 1 else text).rstrip("\r\n")
+
+
+def _header_line(path: Path, f: BinaryIO, skip: int = 0) -> tuple[int, str] | None:
+    """(line number, text) of the first line of ``f`` after the first ``skip`` that is neither
+    blank nor a ``#`` comment; None when the file ends first. FormatError when more than
+    :data:`MAX_PREAMBLE_LINES` such lines come first."""
+    for i, ln in _text_lines(path, f):
+        if i > skip and ln.strip() and not ln.startswith("#"):
+            return i, ln
+        if i > skip + MAX_PREAMBLE_LINES:
+            raise FormatError(path, i, f"no header in the first {MAX_PREAMBLE_LINES:,} lines "
+                                       "(blank or comments): not a sensor log table")
+    return None
 
 
 def _split(path: Path, i: int, line: str, delim: str) -> list[str]:
@@ -167,17 +183,14 @@ BLOCK_BYTES = 1 << 22  # lines read per block by the fast path: ~60,000 rows of 
 def _parse(path: Path, allow_empty: bool, data: BinaryIO | None, skip: int = 0
            ) -> tuple[list[str], array, array, int]:
     with (open(path, "rb") if data is None else data) as f:
-        lines = _text_lines(path, f)
-        start, head = next(((i, ln) for i, ln in lines
-                            if i > skip and ln.strip() and not ln.startswith("#")), (None, ""))
+        start, head = _header_line(path, f, skip) or (None, "")
         if start is None:
             raise FormatError(path, None, "empty file: expected a header line")
         delim, decimal_comma = _sniff(head)
         header = [h.strip() for h in _split(path, start, head, delim)]
         values, rows = array("d"), array("q")
         for first, block in _blocks(f, start + 1):
-            if len(rows) + block.count(b"\n") > MAX_ROWS or not _fast_block(
-                    block, first, len(header), delim, decimal_comma, values, rows):
+            if not _fast_block(block, first, len(header), delim, decimal_comma, values, rows):
                 _parse_lines(path, _text_lines(path, io.BytesIO(block), first), header, delim,
                              decimal_comma, allow_empty, values, rows)
     return header, values, rows, start
@@ -208,15 +221,25 @@ def _fast_block(block: bytes, first: int, width: int, delim: str, decimal_comma:
                 values: array, rows: array) -> bool:
     """Append the rows of ``block`` (lines ``first``...) to ``values`` and ``rows`` when it is
     plain: UTF-8 lines of ``width`` numbers within :data:`MAX_CELL` and no longer than
-    :data:`MAX_LINE_BYTES`, no blank line, comment or quote. False (nothing appended)
-    otherwise."""
+    :data:`MAX_LINE_BYTES` or empty lines, no comment or quote, within :data:`MAX_ROWS` rows
+    in all. False (nothing appended) otherwise."""
+    if not block.strip():  # blank lines only (a zip bomb's line breaks): nothing to read
+        return True
     if b'"' in block or b"\0" in block or b"#" in block:
         return False
     codes = np.frombuffer(block, dtype=np.uint8)
     breaks = np.flatnonzero(codes == 10)
     ends = np.append(breaks, len(codes)) if block[-1:] != b"\n" else breaks
-    if np.diff(ends, prepend=-1).max(initial=0) >= MAX_LINE_BYTES:
+    lengths = np.diff(ends, prepend=-1) - 1  # (lines,) bytes before each line's break
+    if lengths.max(initial=0) >= MAX_LINE_BYTES:
         return False  # perhaps a line too long: the line reading says
+    # empty lines ("" or "\r") are skipped here too (numpy skips them): runs of line breaks
+    # (a zip bomb's) are not read line by line
+    full = np.flatnonzero((lengths > 1) | ((lengths == 1) & (codes[ends - 1] != 13)))
+    if not len(full):
+        return True
+    if len(rows) + len(full) > MAX_ROWS:
+        return False  # the line reading says where
     try:
         text = block.decode("utf-8")
     except UnicodeDecodeError:
@@ -234,10 +257,10 @@ def _fast_block(block: bytes, first: int, width: int, delim: str, decimal_comma:
                                comments=None, ndmin=2)
         except (ValueError, Warning):
             return False
-    if table.shape != (len(ends), width) or not np.all(np.abs(table) <= MAX_CELL):
-        return False  # blank lines left out, or NaN, inf or a huge cell (NaN fails too)
+    if table.shape != (len(full), width) or not np.all(np.abs(table) <= MAX_CELL):
+        return False  # lines of spaces left out, or NaN, inf or a huge cell (NaN fails too)
     values.frombytes(table.tobytes())
-    rows.frombytes(np.arange(first, first + len(ends), dtype=np.int64).tobytes())
+    rows.frombytes((first + full).astype(np.int64).tobytes())
     return True
 
 
@@ -425,6 +448,11 @@ def read_phyphox(path: str | Path, data: BinaryIO | None = None) -> list[Stream]
 # app exports: a folder or the zip the app shares
 
 MAX_MEMBER_BYTES = 4 << 30  # a zip member that decompresses to more is refused unread
+# a member over MAX_RATIO_FROM bytes that decompresses to more than MAX_RATIO times its
+# compressed size is refused unread: a sensor table's digits compress 3-10 times (a phone at
+# rest: about 20), a zip bomb's repeated bytes thousands of times (203 bytes of bzip2 were
+# 64 MiB of line breaks)
+MAX_RATIO, MAX_RATIO_FROM = 100, 1 << 20
 MAX_MEMBERS = 10_000
 
 
@@ -476,22 +504,35 @@ class Export:
         m = self._members[name]
         if isinstance(m, Path):
             return open(m, "rb")
-        if m.file_size > MAX_MEMBER_BYTES:
-            raise FormatError(self.label(name), None, f"{m.file_size:,} bytes once unzipped, "
-                                                      f"more than the {MAX_MEMBER_BYTES:,} allowed")
+        self._check_size(name)
         try:
             return self._zip.open(m)
         except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError,
                 ValueError, OSError) as exc:  # damaged, encrypted or of an unknown compression
             raise FormatError(self.label(name), None, f"unreadable zip member ({exc})") from None
 
+    def _check_size(self, name: str) -> None:
+        """Refuse a zip member that unzips to too much (:data:`MAX_MEMBER_BYTES`,
+        :data:`MAX_RATIO`), before reading it."""
+        m = self._members[name]
+        if isinstance(m, Path):
+            return
+        if m.file_size > MAX_MEMBER_BYTES:
+            raise FormatError(self.label(name), None, f"{m.file_size:,} bytes once unzipped, "
+                                                      f"more than the {MAX_MEMBER_BYTES:,} allowed")
+        if m.file_size > max(MAX_RATIO_FROM, MAX_RATIO * m.compress_size):
+            raise FormatError(self.label(name), None, f"{m.compress_size:,} bytes that unzip "
+                              f"to {m.file_size:,}, more than {MAX_RATIO} times as many: not a "
+                              "sensor table (a zip bomb?)")
+
     def header(self, name: str) -> str:
-        """The first line that is neither blank nor a comment, lower case ('' when none)."""
+        """The first line that is neither blank nor a comment, lower case ('' when none or
+        unreadable; a member too large to read is refused)."""
+        self._check_size(name)
         try:
             with self.open(name) as f:
-                for _, line in _text_lines(self.label(name), f):
-                    if line.strip() and not line.startswith("#"):
-                        return line.strip().lower()
+                _, line = _header_line(self.label(name), f) or (0, "")
+                return line.strip().lower()
         except (FormatError, zipfile.BadZipFile, zlib.error, EOFError, OSError):
             pass
         return ""

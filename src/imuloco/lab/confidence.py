@@ -22,8 +22,6 @@ general calibration library (scikit-learn's calibrators are for classifiers' pro
 
 from __future__ import annotations
 
-import zipfile
-import zlib
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -31,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from imuloco.errors import FormatError, InputError
+from imuloco.io.npz import load_npz
 from imuloco.methods.base import calibrated_error
 
 TOLERANCE = 0.3  # the target: predicted rms error within +-30 % of the actual one
@@ -57,12 +56,11 @@ def load_rows(folders: Iterable[str | Path], method: str | None = None) -> Rows:
         files += found
     parts = []
     for f in files:
-        try:
-            with np.load(f, allow_pickle=False) as z:
-                part = {k: z[k] for k in z.files}
-        except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError) as e:
+        try:  # each array's declared shape checked against its size before it is read
+            part = load_npz(f)
+        except FormatError as e:
             raise FormatError(f, None, f"not a confidence file of imuloco bench or corrupted "
-                              f"({type(e).__name__}: {e})") from None
+                              f"({e.message})") from None
         missing = [c for c in COLUMNS if c not in part]
         if missing:
             raise InputError(f"{f}: not a confidence file of imuloco bench (no {missing})")

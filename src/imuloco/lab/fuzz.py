@@ -7,8 +7,10 @@ read by ``read_log``: :mod:`imuloco.lab.fuzz_xsens`) it builds small
 valid files from the bundled sample (:func:`seed_files`), derives N inputs from them by random
 mutation (bytes, lines, cells) and by the structured attacks of issue 18 (a timestamp jumping by days, rows a
 nanosecond apart, cells of 1e308, ``Frame Time`` of 1000 s, 20,000 nested joints, ASF units of
-5e-324, forged array shapes, decompression bombs, deep JSON headers, ...), and reads each in a
-worker process. Every outcome is one of :data:`OUTCOMES`:
+5e-324, forged array shapes, decompression bombs, deep JSON headers, ...) and those of issue 42
+(:mod:`imuloco.lab.fuzz_structure`: structure-aware BVH and AMC, zip-member bombs, output
+targets; every input of these readers is such an attack), and reads each in a worker
+process. Every outcome is one of :data:`OUTCOMES`:
 
 clean
     the library's own error (:class:`~imuloco.errors.ImulocoError`) whose message names the
@@ -69,18 +71,35 @@ from imuloco.io.sensorlog import (
     write_generic_csv,
 )
 from imuloco.lab.fuzz_real import read_real, real_attack, real_garbage, real_seeds
+from imuloco.lab.fuzz_structure import (
+    amc_structure_attack,
+    bvh_structure_attack,
+    output_attack,
+    output_garbage,
+    output_seeds,
+    write_outputs,
+    zip_member_attack,
+)
 from imuloco.lab.fuzz_xsens import xsens_attack, xsens_seeds
 from imuloco.methods import get_method, load_model, method_class
 from imuloco.methods.modelfile import check_header, non_finite
 from imuloco.sensors.reallog import read_log
 from imuloco.sensors.simulate import simulate
 
-READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "model_header", "real", "xsens")
+READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "model_header", "real", "xsens",
+           "bvh-structure", "amc-structure", "zip-members", "outputs")
 READER_TITLES = {"bvh": "BVH", "asf": "ASF/AMC", "sensorlog": "sensor-log tables",
                  "read_log": "`read_log`", "model": "model files",
                  "model_header": "model headers (JSON values)",
                  "real": "real-data folders (`read_trials`)",
-                 "xsens": "Xsens exports (`read_log`)"}
+                 "xsens": "Xsens exports (`read_log`)",
+                 "bvh-structure": "BVH, structure-aware", "amc-structure": "AMC, structure-aware",
+                 "zip-members": "zip members (`read_log`)",
+                 "outputs": "output targets (`check_outputs`, `OutputSet`)"}
+# readers of issue 42's classes (lab/fuzz_structure.py): every input a structured attack,
+# read as the reader they stand for
+STRUCTURED = {"bvh-structure": "bvh", "amc-structure": "asf", "zip-members": "read_log",
+              "outputs": "outputs"}
 OUTCOMES = ("clean", "accepted", "wrong exception type", "hang", "garbage accepted")
 MEMORY_LIMIT = 4 << 30  # bytes of address space per worker
 
@@ -129,6 +148,10 @@ def seed_files(work: Path) -> dict[str, list[Files]]:
         "model_header": models + _shipped_model(),
         "real": real_seeds(),
         "xsens": xsens_seeds(rec.acc[:, 0], rec.gyro[:, 0]),
+        "bvh-structure": [{"motion.bvh": bvh}],
+        "amc-structure": [{"skeleton.asf": asf.encode(), "motion.amc": amc.encode()}],
+        "zip-members": [{"export.zip": sl_zip}],
+        "outputs": output_seeds(),
     }
 
 
@@ -483,8 +506,9 @@ def _npy(arr: np.ndarray) -> bytes:
 
 ATTACKS = {"bvh": _bvh_attack, "asf": _asf_attack, "sensorlog": _table_attack,
            "read_log": _table_attack, "model": _model_attack, "model_header": _header_attack,
-           "real": real_attack,
-           "xsens": xsens_attack}
+           "real": real_attack, "xsens": xsens_attack, "bvh-structure": bvh_structure_attack,
+           "amc-structure": amc_structure_attack, "zip-members": zip_member_attack,
+           "outputs": output_attack}
 
 
 ONLY_ATTACKS = ("model_header",)  # structure-aware only: a flipped byte is the "model" class
@@ -496,7 +520,7 @@ def cases(reader: str, seeds: list[Files], n: int, seed: int = 0) -> Iterator[Ca
     rng = random.Random(f"{reader}-{seed}")
     for _ in range(n):
         files = dict(rng.choice(seeds))
-        if reader in ONLY_ATTACKS or rng.random() < 1 / 3:
+        if reader in ONLY_ATTACKS or reader in STRUCTURED or rng.random() < 1 / 3:
             mutation, files = ATTACKS[reader](files, rng)
         else:
             target = rng.choice(list(files))
@@ -514,6 +538,9 @@ def cases(reader: str, seeds: list[Files], n: int, seed: int = 0) -> Iterator[Ca
 
 def read_case(reader: str, paths: list[Path]) -> object:
     """Read ``paths`` as ``reader`` does; returns what was read."""
+    reader = STRUCTURED.get(reader, reader)
+    if reader == "outputs":
+        return write_outputs(paths[0])
     if reader == "bvh":
         return read_bvh(paths[0])
     if reader == "asf":
@@ -533,6 +560,9 @@ def read_case(reader: str, paths: list[Path]) -> object:
 
 def garbage(reader: str, result: object) -> str | None:
     """Why an accepted ``result`` is implausible, or ``None`` (see the module docstring)."""
+    reader = STRUCTURED.get(reader, reader)
+    if reader == "outputs":
+        return output_garbage(result)
     if reader in ("bvh", "asf"):
         m = result
         if not (1.0 <= m.fps <= 1000.0):

@@ -24,6 +24,7 @@ import numpy as np
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import ModelFileError, ParameterError, UnknownNameError
 from imuloco.io.atomic import atomic_write, check_output
+from imuloco.io.npz import declared
 from imuloco.methods.registry import method_class
 from imuloco.sensors.noise import NOISE_PRESETS
 from imuloco.sensors.placement import PRESETS
@@ -101,11 +102,7 @@ class _Arrays(Mapping):
         if key not in self._cache:
             info = self._infos[key]  # KeyError: a missing array, reported by load_model
             with self._zip.open(info) as f:
-                version = np.lib.format.read_magic(f)
-                read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                               else np.lib.format.read_array_header_2_0)
-                shape, _, dtype = read_header(f)
-                nbytes = math.prod(shape) * dtype.itemsize
+                shape, dtype, nbytes = declared(f)
                 if dtype.hasobject or nbytes > info.file_size:
                     raise ModelFileError(f"{self.path}: array {key!r} declares {dtype} of shape "
                                          f"{shape} ({nbytes:,} bytes) in {info.file_size:,} "

@@ -401,6 +401,11 @@ def read_log(path: str | Path | Sequence[str | Path], placement: str = "right_an
     """
     opts = options or LogOptions(placement, fmt, **kwargs)
     first = path if isinstance(path, (str, Path)) else path[0]
+    for p in [path] if isinstance(path, (str, Path)) else path:
+        if os.path.exists(p) and not (os.path.isfile(p) or os.path.isdir(p)):
+            # a FIFO or device would be read for ever
+            raise FormatError(p, None, "not a regular file or folder (a FIFO, a device, ...); "
+                                       "expected a sensor log")
     try:
         return _import(path, opts)
     except MemoryError:
