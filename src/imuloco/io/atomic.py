@@ -10,6 +10,7 @@ cannot be written.
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from collections.abc import Iterable, Iterator
@@ -28,6 +29,9 @@ def _read_umask() -> int:
 # mkstemp makes a file only its owner can read; a written output gets the permissions open()
 # would give it (0o666 less the umask), so that others can read a shared study's outputs
 _MODE = 0o666 & ~_read_umask()
+# a write that fails for want of room (full disk, quota, file size limit) is the user's to fix:
+# one line naming the file, not a traceback
+FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 
 
 def check_output(path: str | Path, force: bool = False,
@@ -79,6 +83,11 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         yield Path(tmp)
         os.chmod(tmp, _MODE)
         os.replace(tmp, path)
+    except OSError as e:
+        Path(tmp).unlink(missing_ok=True)
+        if e.errno in FULL:
+            raise ImulocoError(f"{os.strerror(e.errno).lower()} writing {path}") from None
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
