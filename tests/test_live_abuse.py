@@ -234,3 +234,22 @@ def test_a_flooder_gets_no_fresh_allowance_by_reconnecting(ridge_without_demo_cl
     codes, resets = asyncio.run(main())
     assert set(codes) == {1008}
     assert resets <= Limits().phone_connect_burst
+
+
+def test_bytes_after_a_request_are_one_log_line(ridge_without_demo_clip, caplog):
+    """websockets 17.4 logged an AssertionError's traceback for a request followed by bytes
+    (found by the fuzzer): the connection is dropped, with one line."""
+    async def main():
+        async with serving(ridge_without_demo_clip) as (server, _):
+            reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
+            writer.write(f"GET /ws/phone HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\n\r\n"
+                         "Connection: Upgrade\r\n\r\n".encode())
+            await writer.drain()
+            await asyncio.wait_for(reader.read(4096), 10)
+            writer.close()
+            await asyncio.sleep(0.2)
+
+    with caplog.at_level("INFO"):
+        asyncio.run(main())
+    no_tracebacks(caplog)
+    assert any("bytes after its HTTP request" in r.getMessage() for r in caplog.records)

@@ -536,13 +536,15 @@ def _inside(path: Path, folder: Path) -> bool:
 
 
 def _one_folder(path: Path, infos: list[zipfile.ZipInfo]) -> None:
-    """Refuse a zip whose tables (``.csv`` members, phyphox's ``meta/`` aside) lie in more than
-    one folder: two phones' exports zipped together are not one recording."""
+    """Refuse a zip whose tables (``.csv`` members, phyphox's ``meta/device.csv`` and
+    ``meta/time.csv`` aside) lie in more than one folder: two phones' exports zipped together
+    are not one recording."""
     folders: dict[str, str] = {}
     for info in infos:
         folder, _, name = info.filename.rpartition("/")
+        meta = folder.rpartition("/")[2] == "meta" and name in _PHYPHOX_META
         if info.is_dir() or not name.lower().endswith(".csv") or name.startswith(".") \
-                or "__MACOSX" in folder or folder.rpartition("/")[2] == "meta":
+                or "__MACOSX" in folder or meta:
             continue
         folders.setdefault(folder, info.filename)
     if len(folders) > 1:

@@ -50,14 +50,18 @@ from pathlib import Path
 
 import numpy as np
 
+from imuloco.lab.fuzz_exports import export_attack, export_garbage, export_seeds, read_export
+from imuloco.lab.fuzz_live import live_attack, live_garbage, live_method, live_seeds, play
 from imuloco.lab.fuzz_real import read_real, real_attack, real_garbage, real_seeds
 from imuloco.lab.fuzz_xsens import xsens_attack, xsens_seeds
 
-READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "real", "xsens")
+READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "real", "xsens", "exports", "live")
 READER_TITLES = {"bvh": "BVH", "asf": "ASF/AMC", "sensorlog": "sensor-log tables",
                  "read_log": "`read_log`", "model": "model files",
                  "real": "real-data folders (`read_trials`)",
-                 "xsens": "Xsens exports (`read_log`)"}
+                 "xsens": "Xsens exports (`read_log`)",
+                 "exports": "phone exports: units, zip folders, links (`read_log`)",
+                 "live": "live server messages and requests (loopback)"}
 OUTCOMES = ("clean", "accepted", "wrong exception type", "hang", "garbage accepted")
 MEMORY_LIMIT = 4 << 30  # bytes of address space per worker
 
@@ -112,6 +116,8 @@ def seed_files(work: Path) -> dict[str, list[Files]]:
         "model": models,
         "real": real_seeds(),
         "xsens": xsens_seeds(rec.acc[:, 0], rec.gyro[:, 0]),
+        "exports": export_seeds(rec.times, rec.acc[:, 0], rec.gyro[:, 0]),
+        "live": live_seeds(rec.times, rec.acc[:, 0], rec.gyro[:, 0]),
     }
 
 
@@ -423,7 +429,7 @@ def _npy(arr: np.ndarray) -> bytes:
 
 ATTACKS = {"bvh": _bvh_attack, "asf": _asf_attack, "sensorlog": _table_attack,
            "read_log": _table_attack, "model": _model_attack, "real": real_attack,
-           "xsens": xsens_attack}
+           "xsens": xsens_attack, "exports": export_attack, "live": live_attack}
 
 
 def cases(reader: str, seeds: list[Files], n: int, seed: int = 0) -> Iterator[Case]:
@@ -472,6 +478,10 @@ def read_case(reader: str, paths: list[Path]) -> object:
         return read_log(paths[0])
     if reader == "real":
         return read_real(paths)
+    if reader == "exports":
+        return read_export(paths)
+    if reader == "live":
+        return play(paths)
     from imuloco.methods import load_model
 
     return load_model(paths[0])
@@ -509,6 +519,10 @@ def garbage(reader: str, result: object) -> str | None:
         return None
     if reader == "real":
         return real_garbage(result)
+    if reader == "exports":
+        return export_garbage(result)
+    if reader == "live":
+        return live_garbage(result)
     from imuloco.methods.modelfile import check_header
 
     model = result
@@ -627,6 +641,8 @@ def run_fuzz(n: int, readers: tuple[str, ...] = READERS, timeout: float = 5.0, s
         import imuloco.io.realimu
         import imuloco.methods.modelfile
         import imuloco.sensors.reallog  # noqa: F401
+        if "live" in readers:
+            live_method()  # fitted once, before the fork
         pool = _Pool(timeout)
         try:
             for reader in readers:

@@ -47,6 +47,7 @@ import logging
 import secrets
 import ssl as ssl_module
 import time
+import traceback
 from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -102,6 +103,24 @@ class Limits:
     phone_idle_s: float = 5.0  # a phone silent this long gives way to a new phone
     phone_connects_per_s: float = 0.2  # phone connections per client, after a burst of ...
     phone_connect_burst: int = 5  # ... this many (each starts a session: viewers see a reset)
+
+
+class _BytesAfterRequest(logging.Filter):
+    """websockets (17.4) logs "unexpected internal error" with an AssertionError's traceback
+    (``send_eof``) when a client sends bytes after an HTTP request that is answered: it drops
+    the connection, as it should; this turns the traceback into one line."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        if isinstance(exc, AssertionError) and exc.__traceback__ is not None \
+                and traceback.extract_tb(exc.__traceback__)[-1].name == "send_eof":
+            record.msg, record.args, record.exc_info = (
+                "dropped a connection that sent bytes after its HTTP request", (), None)
+            record.levelno, record.levelname = logging.WARNING, "WARNING"
+        return True
+
+
+_BYTES_AFTER_REQUEST = _BytesAfterRequest()
 
 
 class LimitExceeded(Exception):
@@ -580,6 +599,7 @@ class LiveServer:
         self.loopback = is_loopback(host)
         self.require_token = not self.loopback if self._require is None else self._require
         self.scheme = "https" if ssl else "http"
+        logging.getLogger("websockets.server").addFilter(_BYTES_AFTER_REQUEST)
         try:
             self.server = await serve(self.handler, host, port,
                                       process_request=self.process_request, ssl=ssl,
