@@ -32,7 +32,10 @@ and resampling to :mod:`imuloco.sensors.reallog`. Supported layouts:
   :mod:`imuloco.io.xsens` with this module's table reader.
 
 phyphox and Sensor Logger exports are read from the zip the app shares as well as from its
-unzipped folder (:class:`Export`; members are size-checked before they are decompressed).
+unzipped folder (:class:`Export`; members are size-checked before they are decompressed; a
+zip's tables must lie in one folder, as two phones' exports zipped together are not one
+recording; a folder's files are read only where they resolve to within it, never through a
+link out of it). Errors quote at most one cell of a file (:func:`imuloco.errors.excerpt`).
 """
 
 from __future__ import annotations

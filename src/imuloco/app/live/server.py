@@ -28,8 +28,12 @@ check (``serve(origins=...)``) takes a fixed list, while the server's own origin
 address the phone used, hence the check here.
 
 Limits (:class:`Limits`): bytes and rows per message, messages per second, phone seconds per
-second, viewers; exceeding one closes that connection with a websocket close code and reason
-and logs one line. A viewer too slow to read gets no poses until it catches up.
+second, phone connections per client, viewers; rates are per client (address) and survive a
+reconnect. Exceeding one closes that connection with a websocket close code and reason and
+logs one line; so does a message that cannot be read at all (1007: JSON nested too deep, a
+number beyond a float). Samples beyond the log readers' plausibility bounds are dropped with an
+error message to the phone, the session goes on. A phone silent for ``phone_idle_s`` gives its
+place to the next phone. A viewer too slow to read gets no poses until it catches up.
 
 Browsers expose motion sensors to secure pages only: ``http://localhost`` is one, but a phone
 reaching a laptop over the network needs HTTPS (``certfile``/``keyfile``, a self-signed
