@@ -45,15 +45,16 @@ def _case(tmp_path, reader, seeds, attack_kind, seed=0):
 
 
 def test_fuzzed_exports_end_in_clean_errors():
-    r = run_fuzz(150, ("exports",))["exports"]
+    r = run_fuzz(150, ("exports",), timeout=30.0)["exports"]
     assert r["wrong exception type"] == r["hang"] == r["garbage accepted"] == 0, r["examples"]
     assert r["clean"] > 40 and r["accepted"] > 10  # both outcomes are exercised
 
 
 def test_fuzzed_live_messages_end_in_clean_closes():
-    r = run_fuzz(40, ("live",))["live"]
+    # 30 s an input: a verdict on the server, not on the speed of a loaded machine
+    r = run_fuzz(40, ("live",), timeout=30.0)["live"]
     assert r["wrong exception type"] == r["hang"] == r["garbage accepted"] == 0, r["examples"]
-    assert r["clean"] > 10 and r["accepted"] > 5
+    assert r["clean"] > 20 and r["accepted"] >= 2  # about 87 % / 13 % over 1,000 inputs
 
 
 @pytest.mark.parametrize("attack, undo, verdict", [

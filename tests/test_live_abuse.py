@@ -187,14 +187,14 @@ def test_implausible_samples_are_dropped_and_the_session_keeps_streaming(
 def test_an_idle_phone_gives_way_to_a_new_one(ridge_without_demo_clip, rows):
     """An idle phone held the only phone slot until websockets' ping timeout (over 35 s)."""
     async def main():
-        limits = Limits(phone_idle_s=0.3)
+        limits = Limits(phone_idle_s=1.0)
         async with serving(ridge_without_demo_clip, limits=limits) as (server, base), \
                 connect(base + "/ws/phone", **client(2)) as idle:
             await idle.send(_msg(rows[:50]))
             await reply(idle, "status")
             async with connect(base + "/ws/phone", **client(3)) as busy:  # idle is not yet
                 assert await closed(busy) == (1013, "another phone is streaming")
-            await asyncio.sleep(0.4)
+            await asyncio.sleep(1.1)
             async with connect(base + "/ws/phone", **client(3)) as new:
                 code, reason = await closed(idle)
                 await new.send(_msg(rows[:50]))
@@ -209,7 +209,8 @@ def test_a_flooder_gets_no_fresh_allowance_by_reconnecting(ridge_without_demo_cl
     """Limits were per connection: each reconnect started a fresh allowance and a fresh session
     (viewers saw 9 resets in 10 s)."""
     async def main():
-        limits = Limits(messages_per_s=2.0)
+        # few connections refill (0.01/s): the verdict holds on a slow, loaded machine
+        limits = Limits(messages_per_s=2.0, phone_connects_per_s=0.01)
         async with serving(ridge_without_demo_clip, limits=limits) as (_, base), \
                 connect(base + "/ws/view") as view:
             await reply(view, "status")
@@ -233,7 +234,7 @@ def test_a_flooder_gets_no_fresh_allowance_by_reconnecting(ridge_without_demo_cl
 
     codes, resets = asyncio.run(main())
     assert set(codes) == {1008}
-    assert resets <= Limits().phone_connect_burst
+    assert resets <= Limits().phone_connect_burst  # 10 before: one per reconnect
 
 
 def test_bytes_after_a_request_are_one_log_line(ridge_without_demo_clip, caplog):
