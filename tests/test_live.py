@@ -552,7 +552,9 @@ def test_a_phone_closed_for_a_limit_frees_its_place_at_once(fitted, phone):
                     break
                 await asyncio.sleep(0.01)
             assert server.phone is None
-            async with connect(base + "/ws/phone", max_size=None) as polite:
+            # another client (limits are per client: the rude one's allowance is spent)
+            async with connect(base + "/ws/phone", max_size=None,
+                               local_addr=("127.0.0.2", 0)) as polite:
                 await polite.send(json.dumps({"rows": rows[:400].tolist()}))
                 kinds = set()
                 while "pose" not in kinds:

@@ -12,6 +12,7 @@ Importing this module imports click and the standard library only (``imuloco --h
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -19,12 +20,14 @@ from typing import Any
 import click
 
 from imuloco.errors import ImulocoError
+from imuloco.io.atomic import FULL
 
 
 class Commands(click.Group):
     """The command group: an :class:`~imuloco.errors.ImulocoError` raised by any command ends
     it with ``Error: <message>`` on a line of its own (after any progress bar) and exit
-    status 1, instead of a traceback."""
+    status 1, instead of a traceback; so does a full disk (``Error: no space left on device
+    writing FILE``)."""
 
     def invoke(self, ctx: click.Context) -> Any:
         try:
@@ -32,6 +35,12 @@ class Commands(click.Group):
         except ImulocoError as e:
             _end_progress_bars()
             raise click.ClickException(str(e)) from None
+        except OSError as e:  # a full disk outside imuloco.io.atomic's writes (a cache, ...)
+            if e.errno not in FULL:
+                raise
+            _end_progress_bars()
+            where = f" writing {e.filename}" if e.filename else ""
+            raise click.ClickException(f"{os.strerror(e.errno).lower()}{where}") from None
 
 
 def _end_progress_bars() -> None:

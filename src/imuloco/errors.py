@@ -72,3 +72,25 @@ class ParameterError(InputError):
     def __init__(self, key: str, message: str) -> None:
         self.key = key
         super().__init__(message)
+
+
+EXCERPT_CHARS = 24  # the most of a user's file an error message quotes
+
+
+def excerpt(text: str, limit: int = EXCERPT_CHARS) -> str:
+    """A cell of a user's file as an error message quotes it: stripped, at most ``limit``
+    characters (``...`` marks a cut), non-printable characters escaped (``repr``).
+
+    The rule for every reader's errors: name the file and line, and quote at most one cell (or
+    column name) so, never a whole line: the file may be another's (a link, a mistaken path),
+    and a line of it is none of the log's business."""
+    s = str(text).strip()
+    quoted = repr(s[:limit])
+    return f"{quoted[:-1]}...{quoted[-1]}" if len(s) > limit else quoted
+
+
+def excerpts(cells: list[str], most: int = 8) -> str:
+    """Up to ``most`` cells (column names of a header) as :func:`excerpt` quotes each, and how
+    many more there are."""
+    shown = ", ".join(excerpt(c) for c in cells[:most])
+    return f"[{shown}{f', ... {len(cells) - most} more' if len(cells) > most else ''}]"

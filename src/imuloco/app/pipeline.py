@@ -217,9 +217,12 @@ def load_rig(path: str | Path):
     its joint names, offsets and the poses of its frames (one T-pose frame will do). A rig
     whose joints do not map every canonical body part is refused, naming the parts."""
     from imuloco.core.retarget import Rig
+    from imuloco.io.bvh import check_joint_names
     from imuloco.io.motionfile import read_motion
 
-    return Rig.measure([read_motion(path)], where=str(path))
+    motion = read_motion(path)
+    check_joint_names(motion.skeleton.names, str(path))  # the BVH written on it keeps them
+    return Rig.measure([motion], where=str(path))
 
 
 def onto_rig(motion: Motion, rig, contacts: dict[str, np.ndarray] | None = None) -> Motion:

@@ -16,6 +16,7 @@ host name): a run killed with ``kill -9`` leaves them, and :func:`clean_stale` (
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import logging
 import os
@@ -44,6 +45,9 @@ def _read_umask() -> int:
 # mkstemp makes a file only its owner can read; a written output gets the permissions open()
 # would give it (0o666 less the umask), so that others can read a shared study's outputs
 _MODE = 0o666 & ~_read_umask()
+# a write that fails for want of room (full disk, quota, file size limit) is the user's to fix:
+# one line naming the file, not a traceback
+FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 
 
 # a temporary file of ours: .NAME.imuloco-tmp-HOST-PID-RANDOM[.SUFFIX]
@@ -180,6 +184,11 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     try:
         yield tmp
         _commit(tmp, path)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        if e.errno in FULL:
+            raise ImulocoError(f"{os.strerror(e.errno).lower()} writing {path}") from None
+        raise
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

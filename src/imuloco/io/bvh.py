@@ -39,7 +39,7 @@ import numpy as np
 from imuloco.core.bodymap import resolve_body_map
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
-from imuloco.errors import FormatError
+from imuloco.errors import FormatError, InputError, excerpt
 from imuloco.io.atomic import atomic_write, check_output
 from imuloco.io.numtext import read_grid
 from imuloco.io.upaxis import (
@@ -844,11 +844,19 @@ def end_site(sk: Skeleton, j: int) -> np.ndarray:
     return direction * length
 
 
+def check_joint_names(names: Iterable[str], where: str = "skeleton") -> None:
+    """InputError naming the first joint name a BVH file cannot hold (empty, with blanks at an
+    end, braces, tabs or line breaks): a rig's names are written back as they are, so a rig
+    (``--skeleton``) is checked before the work rather than at writing."""
+    for name in names:
+        if not name.strip() or name != name.strip() or any(c in name for c in "{}\r\n\t"):
+            raise InputError(f"{where}: joint name {excerpt(name)} cannot be written to BVH (no "
+                             "braces, tabs, line breaks or blanks at its ends): rename it")
+
+
 def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
     """The HIERARCHY section's lines of ``sk`` (lengths times ``k``, ``dec`` decimals)."""
-    for name in sk.names:
-        if not name.strip() or name != name.strip() or any(c in name for c in "{}\r\n\t"):
-            raise ValueError(f"joint name {name!r} cannot be written to BVH")
+    check_joint_names(sk.names)
     rot_channels = " ".join(f"{a}rotation" for a in order)
     out: list[str] = ["HIERARCHY"]
 

@@ -13,11 +13,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from imuloco.errors import FormatError, UnknownNameError
+from imuloco.errors import FormatError, UnknownNameError, excerpt
 from imuloco.io.sensorlog import (
     _SENSOR_LOGGER_HEADER,
     Export,
     Stream,
+    _sniff,
+    _split,
     _text_lines,
     is_export,
     read_generic_csv,
@@ -100,8 +102,6 @@ def detect_format(path: str | Path) -> str:
         header = next((ln for _, ln in _text_lines(path, f)
                        if ln.strip() and not ln.startswith("#")), "")
     h = header.strip().lower()
-    if not header.isprintable():
-        header = "binary data"
     for fmt in LOG_FORMATS:
         if fmt.sniff(path, h):
             return fmt.name
@@ -109,7 +109,8 @@ def detect_format(path: str | Path) -> str:
                                "(generic), 'id,attr_time' (RealWorld), '\"Time (s)\"' (phyphox) "
                                "or 'time,seconds_elapsed' (Sensor Logger), or an Xsens export's "
                                "('// Update Rate: ...' lines, then 'PacketCounter ... Acc_X "
-                               f"... Gyr_X ...'), found {header[:80]!r}")
+                               f"... Gyr_X ...'), found first column "
+                               f"{excerpt(_split(path, 1, header, _sniff(header)[0])[0])}")
 
 
 def read_streams(path: Path, fmt: str = "auto", second: Path | None = None,

@@ -35,7 +35,7 @@ import numpy as np
 from scipy.io import loadmat
 
 from imuloco.core.recording import Recording
-from imuloco.errors import FormatError, UnknownNameError
+from imuloco.errors import FormatError, UnknownNameError, excerpt
 from imuloco.io.xsens import stated_rate, unwrap_counter
 from imuloco.ops.filters import resample_linear
 
@@ -248,7 +248,7 @@ def _numbers(value, path: Path, name: str, expected: str, shape: tuple[int | Non
         ok = bool(np.isfinite(a).all())
     if not ok:
         raise FormatError(path, None, f"{name}: expected {expected}, got {a.dtype.name} "
-                          f"{a.shape}: {' '.join(str(value).split())[:60]!r}")
+                          f"{a.shape}: {excerpt(' '.join(str(value).split()))}")
     return a.astype(np.float64)
 
 
@@ -258,7 +258,7 @@ def _struct(v, path: Path, where: str, keys: tuple[str, ...] = ()) -> dict:
     if not isinstance(v, dict):
         fields = f" of fields {', '.join(keys)}" if keys else ""
         raise FormatError(path, None, f"{where}: expected a struct{fields}, got "
-                          f"{type(v).__name__} {str(v)[:40]!r}")
+                          f"{type(v).__name__} {excerpt(v)}")
     missing = [k for k in keys if k not in v]
     if missing:
         raise FormatError(path, None, f"{where}: missing field {missing[0]!r}")
@@ -326,7 +326,7 @@ def _read_ipol_txt(path: Path) -> tuple[float, np.ndarray, np.ndarray]:
     rate = stated_rate(first) or float("nan")
     if not 1.0 <= rate <= 1000.0:
         raise FormatError(path, 1, f"expected 'Acquisition frequency: 100 Hz' (1-1000 Hz), got "
-                          f"{first.strip()[:60]!r}")
+                          f"{excerpt(first)}")
     if not body.strip():
         raise FormatError(path, 3, "no samples after the two header lines")
     try:

@@ -32,7 +32,10 @@ and resampling to :mod:`imuloco.sensors.reallog`. Supported layouts:
   :mod:`imuloco.io.xsens` with this module's table reader.
 
 phyphox and Sensor Logger exports are read from the zip the app shares as well as from its
-unzipped folder (:class:`Export`; members are size-checked before they are decompressed).
+unzipped folder (:class:`Export`; members are size-checked before they are decompressed; a
+zip's tables must lie in one folder, as two phones' exports zipped together are not one
+recording; a folder's files are read only where they resolve to within it, never through a
+link out of it). Errors quote at most one cell of a file (:func:`imuloco.errors.excerpt`).
 """
 
 from __future__ import annotations
@@ -53,7 +56,7 @@ from typing import BinaryIO, Self
 
 import numpy as np
 
-from imuloco.errors import FormatError, UnknownNameError
+from imuloco.errors import FormatError, UnknownNameError, excerpt, excerpts
 from imuloco.io.atomic import atomic_write, check_output
 
 log = logging.getLogger(__name__)
@@ -292,11 +295,11 @@ def _number(path: Path, line: int, name: str, cell: str, decimal_comma: bool,
     try:
         v = float(cell)
     except ValueError:
-        raise FormatError(path, line, f"column {name!r}: expected a number, got "
-                                      f"{cell[:40]!r}") from None
+        raise FormatError(path, line, f"column {excerpt(name)}: expected a number, got "
+                                      f"{excerpt(cell)}") from None
     if not abs(v) <= MAX_CELL:  # also catches NaN and inf
-        raise FormatError(path, line, f"column {name!r}: expected a finite number of magnitude "
-                                      f"at most {MAX_CELL:g}, got {cell[:40]!r}")
+        raise FormatError(path, line, f"column {excerpt(name)}: expected a finite number of "
+                                      f"magnitude at most {MAX_CELL:g}, got {excerpt(cell)}")
     return v
 
 
@@ -304,7 +307,7 @@ def _columns(path: Path, header: list[str], wanted: list[str]) -> list[int]:
     missing = [w for w in wanted if w not in header]
     if missing:
         raise FormatError(path, 1, f"missing column(s) {missing}; expected {wanted}, "
-                                   f"found {header}")
+                                   f"found {excerpts(header)}")
     return [header.index(w) for w in wanted]
 
 
@@ -317,7 +320,7 @@ def read_generic_csv(path: str | Path) -> list[Stream]:
     path = Path(path)
     header, data, lines = _read_table(path)
     if not header or header[0] != "time_s":
-        raise FormatError(path, 1, f"expected first column 'time_s', found {header[:1]}")
+        raise FormatError(path, 1, f"expected first column 'time_s', found {excerpts(header[:1])}")
     names = header[1:]
     if names == list(GENERIC_COLUMNS):
         prefixes: list[str | None] = [None]
@@ -326,7 +329,7 @@ def read_generic_csv(path: str | Path) -> list[Stream]:
         for n in names:
             p = n.rsplit(".", 1)[0] if "." in n else None
             if p is None or n.rsplit(".", 1)[1] not in GENERIC_COLUMNS:
-                raise FormatError(path, 1, f"unexpected column {n!r}: expected "
+                raise FormatError(path, 1, f"unexpected column {excerpt(n)}: expected "
                                            f"{','.join(GENERIC_COLUMNS)} or "
                                            f"PLACEMENT.{{{','.join(GENERIC_COLUMNS)}}}")
             if p not in prefixes:
@@ -403,7 +406,7 @@ def read_phyphox(path: str | Path, data: BinaryIO | None = None) -> list[Stream]
     path = Path(path)
     header, data, lines = _read_table(path, True, data)
     found: dict[str, dict[str, int]] = {}
-    units: dict[str, str] = {}
+    units: dict[str, dict[str, str]] = {}  # per signal, the unit of each column
     times: dict[str, int] = {}
     last_time = None
     for i, h in enumerate(header):
@@ -420,19 +423,24 @@ def read_phyphox(path: str | Path, data: BinaryIO | None = None) -> list[Stream]
         q = "acc" if kind == "acceleration" else "gyro"
         unit = _UNITS.get(m.group(3).strip())
         if unit is None:
-            raise FormatError(path, 1, f"column {h!r}: unknown unit {m.group(3)!r}; expected "
+            raise FormatError(path, 1, f"column {excerpt(h)}: unknown unit; expected "
                                        f"one of {sorted(set(_UNITS))}")
         if last_time is None:
             raise FormatError(path, 1, f"column {h!r} has no 'Time (s)' column before it")
         found.setdefault(q, {})[m.group(2).lower()] = i
-        units[q], times[q] = unit, last_time
+        units.setdefault(q, {})[h] = unit
+        times[q] = last_time
     if not found:
         raise FormatError(path, 1, "expected phyphox columns 'Time (s)', 'Acceleration x "
-                                   f"(m/s^2)'... or 'Gyroscope x (rad/s)'..., found {header}")
+                                   f"(m/s^2)'... or 'Gyroscope x (rad/s)'..., found {excerpts(header)}")
     out = []
     for q, axes in found.items():
         if sorted(axes) != ["x", "y", "z"]:
             raise FormatError(path, 1, f"{q}: expected x, y and z columns, found {sorted(axes)}")
+        if len(set(units[q].values())) > 1:  # the columns are known names: quoted whole
+            raise FormatError(path, 1, f"{q}: the columns mix units ("
+                              + ", ".join(f"{h!r} in {u}" for h, u in units[q].items())
+                              + "): expected one unit for x, y and z")
         cols = [times[q]] + [axes[a] for a in "xyz"]
         block = data[:, cols]
         ok = ~np.isnan(block).any(axis=1)
@@ -440,7 +448,8 @@ def read_phyphox(path: str | Path, data: BinaryIO | None = None) -> list[Stream]
         if partial.any():
             raise FormatError(path, int(lines[np.argmax(partial)]),
                               f"{q}: some of columns {[header[c] for c in cols]} are empty")
-        out.append(Stream(path, q, block[ok, 0], block[ok, 1:], units[q], None, lines[ok]))
+        unit = next(iter(units[q].values()))
+        out.append(Stream(path, q, block[ok, 0], block[ok, 1:], unit, None, lines[ok]))
     return out
 
 
@@ -466,6 +475,7 @@ class Export:
         if self.path.is_dir():
             self._members: dict[str, object] = {p.name: p for p in sorted(self.path.iterdir())
                                                  if p.is_file()}
+            self._outside = {n for n, p in self._members.items() if not _inside(p, self.path)}
             return
         try:
             self._zip = zipfile.ZipFile(self.path)
@@ -475,12 +485,13 @@ class Export:
         if len(infos) > MAX_MEMBERS:
             raise FormatError(self.path, None, f"zip with {len(infos)} members; an app export "
                                                f"has fewer than {MAX_MEMBERS}")
-        self._members = {}
+        self._members, self._outside = {}, set()
         for info in sorted(infos, key=lambda i: i.filename.count("/")):
             name = info.filename.rsplit("/", 1)[-1]
             if not info.is_dir() and name and not name.startswith(".") \
                     and "__MACOSX" not in info.filename:
                 self._members.setdefault(name, info)
+        _one_folder(self.path, infos)
 
     def __enter__(self) -> Self:
         return self
@@ -502,6 +513,9 @@ class Export:
 
     def open(self, name: str) -> BinaryIO:
         m = self._members[name]
+        if name in self._outside:
+            raise FormatError(self.label(name), None, "a link to a file outside the export "
+                                                      "folder: not followed (copy the file in)")
         if isinstance(m, Path):
             return open(m, "rb")
         self._check_size(name)
@@ -553,6 +567,34 @@ class Export:
         if any("time (s)" in self.header(n) for n in self.names() if n.lower().endswith(".csv")):
             return "phyphox"
         return None
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    """Whether ``path`` (a file of ``folder``, perhaps a link) resolves to a file within
+    ``folder``: an export is read from its own files, never through a link out of it."""
+    try:
+        return path.resolve(strict=True).is_relative_to(folder.resolve(strict=True))
+    except (OSError, RuntimeError):  # a dangling link, a link loop
+        return False
+
+
+def _one_folder(path: Path, infos: list[zipfile.ZipInfo]) -> None:
+    """Refuse a zip whose tables (``.csv`` members, phyphox's ``meta/device.csv`` and
+    ``meta/time.csv`` aside) lie in more than one folder: two phones' exports zipped together
+    are not one recording."""
+    folders: dict[str, str] = {}
+    for info in infos:
+        folder, _, name = info.filename.rpartition("/")
+        meta = folder.rpartition("/")[2] == "meta" and name in _PHYPHOX_META
+        if info.is_dir() or not name.lower().endswith(".csv") or name.startswith(".") \
+                or "__MACOSX" in folder or meta:
+            continue
+        folders.setdefault(folder, info.filename)
+    if len(folders) > 1:
+        shown = ", ".join(list(folders.values())[:4])
+        raise FormatError(path, None, f"tables in {len(folders)} folders ({shown}): one "
+                                      "recording's export has its tables in one folder; zip "
+                                      "each phone's export on its own")
 
 
 def read_phyphox_export(path: str | Path) -> list[Stream]:

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imuloco.errors import FormatError
+from imuloco.errors import FormatError, excerpts
 from imuloco.io.sensorlog import Stream, _read_table, _sniff, _split, _text_lines
 
 MAX_PREAMBLE = 100  # lines before the header (the exports seen: MT Manager 2022 12, DOT app 11)
@@ -106,7 +106,7 @@ def read_xsens(path: str | Path) -> list[Stream]:
         hint = (" (FreeAcc is acceleration without gravity: export Acc, the calibrated "
                 "acceleration, and Gyr)" if "FreeAcc_X" in header else "")
         raise FormatError(path, line, f"missing column(s) {missing}: expected Acc_X, Acc_Y, "
-                                      f"Acc_Z, Gyr_X, Gyr_Y, Gyr_Z; found {header}{hint}")
+                                      f"Acc_Z, Gyr_X, Gyr_Y, Gyr_Z; found {excerpts(header)}{hint}")
     signals = data[:, [header.index(c) for c in ACC + GYR]]
     if np.isnan(signals).any():
         row, col = (int(k[0]) for k in np.nonzero(np.isnan(signals)))

@@ -70,6 +70,8 @@ from imuloco.io.sensorlog import (
     read_sensor_logger,
     write_generic_csv,
 )
+from imuloco.lab.fuzz_exports import export_attack, export_garbage, export_seeds, read_export
+from imuloco.lab.fuzz_live import live_attack, live_garbage, live_method, live_seeds, play
 from imuloco.lab.fuzz_real import read_real, real_attack, real_garbage, real_seeds
 from imuloco.lab.fuzz_structure import (
     amc_structure_attack,
@@ -87,7 +89,7 @@ from imuloco.sensors.reallog import read_log
 from imuloco.sensors.simulate import simulate
 
 READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "model_header", "real", "xsens",
-           "bvh-structure", "amc-structure", "zip-members", "outputs")
+           "bvh-structure", "amc-structure", "zip-members", "outputs", "exports", "live")
 READER_TITLES = {"bvh": "BVH", "asf": "ASF/AMC", "sensorlog": "sensor-log tables",
                  "read_log": "`read_log`", "model": "model files",
                  "model_header": "model headers (JSON values)",
@@ -95,7 +97,9 @@ READER_TITLES = {"bvh": "BVH", "asf": "ASF/AMC", "sensorlog": "sensor-log tables
                  "xsens": "Xsens exports (`read_log`)",
                  "bvh-structure": "BVH, structure-aware", "amc-structure": "AMC, structure-aware",
                  "zip-members": "zip members (`read_log`)",
-                 "outputs": "output targets (`check_outputs`, `OutputSet`)"}
+                 "outputs": "output targets (`check_outputs`, `OutputSet`)",
+                 "exports": "phone exports: units, zip folders, links (`read_log`)",
+                 "live": "live server messages and requests (loopback)"}
 # readers of issue 42's classes (lab/fuzz_structure.py): every input a structured attack,
 # read as the reader they stand for
 STRUCTURED = {"bvh-structure": "bvh", "amc-structure": "asf", "zip-members": "read_log",
@@ -152,6 +156,8 @@ def seed_files(work: Path) -> dict[str, list[Files]]:
         "amc-structure": [{"skeleton.asf": asf.encode(), "motion.amc": amc.encode()}],
         "zip-members": [{"export.zip": sl_zip}],
         "outputs": output_seeds(),
+        "exports": export_seeds(rec.times, rec.acc[:, 0], rec.gyro[:, 0]),
+        "live": live_seeds(rec.times, rec.acc[:, 0], rec.gyro[:, 0]),
     }
 
 
@@ -508,7 +514,7 @@ ATTACKS = {"bvh": _bvh_attack, "asf": _asf_attack, "sensorlog": _table_attack,
            "read_log": _table_attack, "model": _model_attack, "model_header": _header_attack,
            "real": real_attack, "xsens": xsens_attack, "bvh-structure": bvh_structure_attack,
            "amc-structure": amc_structure_attack, "zip-members": zip_member_attack,
-           "outputs": output_attack}
+           "outputs": output_attack, "exports": export_attack, "live": live_attack}
 
 
 ONLY_ATTACKS = ("model_header",)  # structure-aware only: a flipped byte is the "model" class
@@ -555,6 +561,10 @@ def read_case(reader: str, paths: list[Path]) -> object:
         return read_log(paths[0])
     if reader == "real":
         return read_real(paths)
+    if reader == "exports":
+        return read_export(paths)
+    if reader == "live":
+        return play(paths)
     return load_model(paths[0])
 
 
@@ -593,6 +603,10 @@ def garbage(reader: str, result: object) -> str | None:
         return None
     if reader == "real":
         return real_garbage(result)
+    if reader == "exports":
+        return export_garbage(result)
+    if reader == "live":
+        return live_garbage(result)
     model = result
     if reader == "model_header":  # the forged value got past the header's checks
         try:
@@ -707,6 +721,8 @@ def run_fuzz(n: int, readers: tuple[str, ...] = READERS, timeout: float = 5.0, s
         if "model_header" in readers and importlib.util.find_spec("torch"):  # torch (the deep extra) imported
             # before the workers fork: importing it in each took 8 s of a case's time limit
             method_class("learned")
+        if "live" in readers:
+            live_method()  # fitted once, before the fork
         pool = _Pool(timeout)
         try:
             for reader in readers:

@@ -437,6 +437,9 @@ def _import(path: str | Path | Sequence[str | Path], opts: LogOptions
                for q in ("acc", "gyro")}
     for q, unit in (("acc", opts.acc_unit), ("gyro", opts.gyro_unit)):
         declared = {sensors[n][q].unit for n in names} - {None}
+        if len(declared) > 1:  # one unit per signal: a mix would be read as one of them
+            raise FormatError(report.files[0], None, f"{q}: the sensors' tables declare "
+                              f"different units ({', '.join(sorted(declared))}): expected one")
         signals[q], found, detected = _units(signals[q], q, unit, declared)
         setattr(report, f"{q}_unit", found)
         setattr(report, f"{q}_unit_detected", detected)

@@ -28,8 +28,12 @@ check (``serve(origins=...)``) takes a fixed list, while the server's own origin
 address the phone used, hence the check here.
 
 Limits (:class:`Limits`): bytes and rows per message, messages per second, phone seconds per
-second, viewers; exceeding one closes that connection with a websocket close code and reason
-and logs one line. A viewer too slow to read gets no poses until it catches up.
+second, phone connections per client, viewers; rates are per client (address) and survive a
+reconnect. Exceeding one closes that connection with a websocket close code and reason and
+logs one line; so does a message that cannot be read at all (1007: JSON nested too deep, a
+number beyond a float). Samples beyond the log readers' plausibility bounds are dropped with an
+error message to the phone, the session goes on. A phone silent for ``phone_idle_s`` gives its
+place to the next phone. A viewer too slow to read gets no poses until it catches up.
 
 Browsers expose motion sensors to secure pages only: ``http://localhost`` is one, but a phone
 reaching a laptop over the network needs HTTPS (``certfile``/``keyfile``, a self-signed
@@ -47,6 +51,7 @@ import logging
 import secrets
 import ssl as ssl_module
 import time
+import traceback
 from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -61,6 +66,7 @@ from websockets.protocol import State
 
 from imuloco.app.live.session import MAX_GAP_S, LiveSession, TokenBucket, frames_to_json
 from imuloco.errors import FormatError, InputError
+from imuloco.sensors.reallog import MAX_ABS_TIME, MAX_VALUE
 from imuloco.viz.html import inline_stickfigure
 
 log = logging.getLogger(__name__)
@@ -71,6 +77,8 @@ STATUS_EVERY_S = 0.5  # phone seconds between status messages
 LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
 LIMIT_CLOSE_TIMEOUT_S = 1.0  # closing a connection that broke a limit
 YIELD_EVERY = 32  # messages broadcast between two returns to the event loop
+MAX_CLIENTS = 1024  # clients (addresses) whose allowances are remembered; the least recent go
+SINGLE_HEADERS = ("Host", "Origin", "Upgrade")  # read here: twice is a bad request
 
 
 @functools.cache
@@ -81,8 +89,13 @@ def _page(name: str) -> str:
 
 @dataclass(frozen=True)
 class Limits:
-    """What one connection may do. Exceeding a limit closes the connection (code 1009 for a
-    message too big, 1008 for a rate, 1013 for too many connections) with the reason."""
+    """What one client may do. Exceeding a limit closes the connection (code 1009 for a
+    message too big, 1008 for a rate, 1013 for too many connections) with the reason.
+
+    Rates are per client (its address), kept across its connections: reconnecting gives no
+    fresh allowance, and a client may open at most ``phone_connect_burst`` phone connections
+    at once, then ``phone_connects_per_s``. The idle rule: a phone that has sent nothing for
+    ``phone_idle_s`` gives its place to the next phone that connects (closed with 1001)."""
 
     max_bytes: int = 256 * 1024  # one message (a phone sends ~75 bytes per row)
     max_rows: int = 1000  # sample rows in one message (10 s at 100 Hz)
@@ -91,10 +104,33 @@ class Limits:
     stream_burst_s: float = 30.0  # ... this many (a phone's backlog after a network stall)
     max_viewers: int = 200
     viewer_buffer: int = 256 * 1024  # bytes queued to a viewer before poses skip it
+    phone_idle_s: float = 5.0  # a phone silent this long gives way to a new phone
+    phone_connects_per_s: float = 0.2  # phone connections per client, after a burst of ...
+    phone_connect_burst: int = 5  # ... this many (each starts a session: viewers see a reset)
+
+
+class _BytesAfterRequest(logging.Filter):
+    """websockets (17.4) logs "unexpected internal error" with an AssertionError's traceback
+    (``send_eof``) when a client sends bytes after an HTTP request that is answered: it drops
+    the connection, as it should; this turns the traceback into one line."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        if isinstance(exc, AssertionError) and exc.__traceback__ is not None \
+                and traceback.extract_tb(exc.__traceback__)[-1].name == "send_eof":
+            record.msg, record.args, record.exc_info = (
+                "dropped a connection that sent bytes after its HTTP request", (), None)
+            record.levelno, record.levelname = logging.WARNING, "WARNING"
+        return True
+
+
+_BYTES_AFTER_REQUEST = _BytesAfterRequest()
 
 
 class LimitExceeded(Exception):
-    """A connection broke a :class:`Limits` rule: close it with ``code`` and ``reason``."""
+    """A connection broke a :class:`Limits` rule, or sent a message that cannot be read at all
+    (1007: JSON nested too deep, a number beyond a float's range): close it with ``code`` and
+    ``reason``."""
 
     def __init__(self, code: int, reason: str) -> None:
         super().__init__(reason)
@@ -125,6 +161,11 @@ def parse_rows(message: str | bytes, width: int, max_rows: int | None = None) ->
         if max_rows is not None and isinstance(rows, list) and len(rows) > max_rows:
             raise LimitExceeded(1009, f"{len(rows)} rows in one message; at most {max_rows}")
         rows = np.asarray(rows, dtype=np.float64)
+    except RecursionError:
+        raise LimitExceeded(1007, "JSON nested too deep: expected {\"rows\": [[t, ...], ...]}"
+                            ) from None
+    except OverflowError:
+        raise LimitExceeded(1007, "a number beyond the range of a float") from None
     except (ValueError, KeyError, TypeError) as e:
         raise ValueError(f"expected JSON {{\"rows\": [[t, acc x,y,z, gyro x,y,z], ...]}}: {e}"
                          ) from None
@@ -134,6 +175,24 @@ def parse_rows(message: str | bytes, width: int, max_rows: int | None = None) ->
     if not np.isfinite(rows).all():
         raise ValueError("rows hold non-finite values (NaN or infinity)")
     return rows
+
+
+def plausible(rows: np.ndarray, sensors: int) -> tuple[np.ndarray, str | None]:
+    """The sample rows (N, 1 + 6 S) within the log readers' plausibility bounds
+    (:data:`~imuloco.sensors.reallog.MAX_ABS_TIME` seconds,
+    :data:`~imuloco.sensors.reallog.MAX_VALUE` per axis), and what was dropped (``None``:
+    nothing). One sample at 1e200 would leave the model's state non-finite for good."""
+    values = rows[:, 1:].reshape(len(rows), sensors, 2, 3)
+    checks = [("time", np.abs(rows[:, 0]) > MAX_ABS_TIME, f"{MAX_ABS_TIME:g} s"),
+              ("acc", (np.abs(values[:, :, 0]) > MAX_VALUE["acc"]).any(axis=(1, 2)),
+               f"{MAX_VALUE['acc']:g} m/s^2"),
+              ("gyro", (np.abs(values[:, :, 1]) > MAX_VALUE["gyro"]).any(axis=(1, 2)),
+               f"{MAX_VALUE['gyro']:g} rad/s")]
+    bad = np.logical_or.reduce([b for _, b, _ in checks])
+    if not bad.any():
+        return rows, None
+    why = "; ".join(f"{q} beyond +-{limit}" for q, b, limit in checks if b.any())
+    return rows[~bad], f"{int(bad.sum())} of {len(rows)} samples dropped: {why}"
 
 
 def is_loopback(host: str) -> bool:
@@ -167,11 +226,22 @@ def _why_closed(ws: ServerConnection) -> str:
 @dataclass
 class _Batch:
     """What the worker made of some rows: frames reconstructed, and the messages for viewers
-    as (type, JSON text) in order; the status line for viewers and the phone when due."""
+    as (type, JSON text) in order; the status line for viewers and the phone when due; what
+    the phone is told of samples dropped."""
 
     frames: int
     messages: list[tuple[str, str]]
     status: str | None
+    error: str | None = None
+
+
+@dataclass
+class _Client:
+    """A client's allowances (token buckets), kept across its connections."""
+
+    messages: TokenBucket
+    stream: TokenBucket
+    connects: TokenBucket
 
 
 class LiveServer:
@@ -209,6 +279,9 @@ class LiveServer:
         self.viewers: set[ServerConnection] = set()
         self.skipped: dict[ServerConnection, int] = {}  # poses a slow viewer missed
         self.phone: ServerConnection | None = None
+        self._phone_seen = 0.0  # time.monotonic() of the phone's last message or connection
+        self._clients: dict[str, _Client] = {}  # by address, least recently seen first
+        self._closing: set[asyncio.Task] = set()  # idle phones being closed
         self.session: LiveSession | None = None
         self.server: Server | None = None
         self.status = "waiting for a phone"
@@ -253,6 +326,11 @@ class LiveServer:
     def process_request(self, connection: ServerConnection, request: Request) -> Response | None:
         """Refuse what :meth:`refusal` names; serve the pages over plain HTTP; let websocket
         upgrades through."""
+        twice = [h for h in SINGLE_HEADERS if len(request.headers.get_all(h)) > 1]
+        if twice:
+            log.warning("refused %s: more than one %s header", _peer(connection), twice[0])
+            return connection.respond(http.HTTPStatus.BAD_REQUEST,
+                                      f"more than one {twice[0]} header\n")
         why = self.refusal(request)
         if why is not None:
             log.warning("refused %s %s: %s", _peer(connection), urlsplit(request.path).path, why)
@@ -306,27 +384,65 @@ class LiveServer:
             else:  # dropped: one line, whatever was being sent to it
                 log.warning("viewer %s dropped: %s%s", _peer(ws), _why_closed(ws), late)
 
-    async def _phone(self, ws: ServerConnection) -> None:
-        if self.phone is not None or self.replaying:
-            await self._close(ws, "phone", 1013, "another phone is streaming"
-                              if self.phone is not None else "the server is replaying a recording")
-            return
-        self.phone = ws
-        self.start_session()
+    def _client(self, ws: ServerConnection) -> _Client:
+        """The allowances of the client (address) behind ``ws``, fresh for a new one."""
+        key = ws.remote_address[0] if ws.remote_address else "?"
         lim = self.limits
-        messages = TokenBucket(lim.messages_per_s, lim.messages_per_s)
-        stream = TokenBucket(lim.stream_speed, lim.stream_burst_s)
+        client = self._clients.pop(key, None) or _Client(
+            TokenBucket(lim.messages_per_s, lim.messages_per_s),
+            TokenBucket(lim.stream_speed, lim.stream_burst_s),
+            TokenBucket(lim.phone_connects_per_s, lim.phone_connect_burst))
+        self._clients[key] = client  # now the most recent
+        while len(self._clients) > MAX_CLIENTS:
+            del self._clients[next(iter(self._clients))]
+        return client
+
+    def _give_way(self, now: float) -> bool:
+        """Whether the phone slot is free for a new phone: none holds it, or the one that
+        does has been idle for :attr:`Limits.phone_idle_s` (it is closed, 1001)."""
+        idle = now - self._phone_seen
+        if self.phone is None or idle < self.limits.phone_idle_s:
+            return self.phone is None
+        old = self.phone
+        self._release(old)
+        old.close_timeout = LIMIT_CLOSE_TIMEOUT_S
+        task = asyncio.create_task(self._close(old, "phone", 1001, f"another phone took the "
+                                                                   f"place after {idle:.1f} s idle"))
+        self._closing.add(task)
+        task.add_done_callback(self._closing.discard)
+        return True
+
+    async def _phone(self, ws: ServerConnection) -> None:
+        now = time.monotonic()
+        if self.replaying or not self._give_way(now):
+            await self._close(ws, "phone", 1013, "the server is replaying a recording"
+                              if self.replaying else "another phone is streaming")
+            return
+        lim = self.limits
+        client = self._client(ws)
+        if not client.connects.take(now):
+            await self._close(ws, "phone", 1008, f"reconnecting too often (at most "
+                                                 f"{lim.phone_connect_burst} at once, then "
+                                                 f"{lim.phone_connects_per_s:g}/s)")
+            return
+        self.phone, self._phone_seen = ws, now
+        self.start_session()
         refused = False
         try:
             async for message in ws:
-                if not messages.take(time.monotonic()):
+                if self.phone is not ws:  # given way while idle: the session is another's
+                    break
+                self._phone_seen = time.monotonic()
+                if not client.messages.take(self._phone_seen):
                     raise LimitExceeded(1008, f"more than {lim.messages_per_s:g} messages/s")
                 try:
-                    batch = await self._in_worker(self._message, message, stream)
+                    batch = await self._in_worker(self._message, message, client.stream)
                 except ValueError as e:
                     await ws.send(json.dumps({"type": "error", "text": str(e)}))
                     continue
                 await self._publish(batch)
+                if batch.error is not None:
+                    await ws.send(json.dumps({"type": "error", "text": batch.error}))
         except LimitExceeded as e:
             refused = True
             self._release(ws)  # at once: a phone reconnecting need not wait for the handshake
@@ -353,15 +469,20 @@ class LiveServer:
 
     def _message(self, message: str | bytes, stream: TokenBucket) -> _Batch:
         """Parse and process one phone message within the limits (worker thread)."""
-        width = 1 + 6 * len(self.method.placements_)
-        rows = parse_rows(message, width, self.limits.max_rows)
+        sensors = len(self.method.placements_)
+        rows, dropped = plausible(parse_rows(message, 1 + 6 * sensors, self.limits.max_rows),
+                                  sensors)
+        if not len(rows):
+            return _Batch(0, [], None, dropped)
         last = self.session.last_t
         dt = np.diff(rows[:, 0], prepend=rows[0, 0] if last is None else last)
         seconds = float(dt[(dt > 0) & (dt <= MAX_GAP_S)].sum())  # a dropout costs nothing
         if not stream.take(time.monotonic(), seconds):
             raise LimitExceeded(1008, f"samples span more than {self.limits.stream_speed:g} s "
                                       "per second: stream in real time")
-        return self.process(rows)
+        batch = self.process(rows)
+        batch.error = dropped
+        return batch
 
     def process(self, rows: np.ndarray) -> _Batch:
         """Push sample rows (N, 1 + 6 S) into the session (no I/O: the worker runs this)."""
@@ -482,6 +603,7 @@ class LiveServer:
         self.loopback = is_loopback(host)
         self.require_token = not self.loopback if self._require is None else self._require
         self.scheme = "https" if ssl else "http"
+        logging.getLogger("websockets.server").addFilter(_BYTES_AFTER_REQUEST)
         try:
             self.server = await serve(self.handler, host, port,
                                       process_request=self.process_request, ssl=ssl,
