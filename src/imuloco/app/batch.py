@@ -162,14 +162,15 @@ def worker_model(sha256: str, data: bytes):
 def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
                     platform: str | None = None, height_m: float | None = None,
-                    unit: str = "cm", skeleton: str | None = None) -> dict[str, Any]:
-    """Reconstruct one recording (a path read here), write ``NAME.bvh`` (lengths in ``unit``)
-    then ``NAME.json``.
+                    unit: str = "cm", skeleton: str | None = None,
+                    rig: str | None = "bvh-default") -> dict[str, Any]:
+    """Reconstruct one recording (a path read here), write ``NAME.bvh`` (lengths in ``unit``,
+    on rig preset ``rig``: :func:`imuloco.app.export.write_reconstruction`) then ``NAME.json``.
 
     Returns ``{"row": ..., "strides": [...]}`` (see :func:`walker_rows`); errors are caught and
     reported in the row."""
+    from imuloco.app.export import write_reconstruction
     from imuloco.app.pipeline import reconstruct_file
-    from imuloco.io.bvh import write_bvh
 
     t0 = time.perf_counter()
     try:
@@ -181,9 +182,11 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
         report = recon.to_json()
         report["seconds"] = round(time.perf_counter() - t0, 3)
         report["batch"] = {"recording": recording, "model_sha256": model_sha256,
-                           "placement": placement, "height_m": height_m, "unit": unit}
+                           "placement": placement, "height_m": height_m, "unit": unit,
+                           "rig": rig}
         out = Path(out_dir)
-        write_bvh(motion, out / f"{name}.bvh", unit=unit, overwrite=True)  # atomic
+        write_reconstruction(motion, out / f"{name}.bvh", rig, unit=unit,
+                             overwrite=True)  # atomic
         with atomic_write(out / f"{name}.json", "w") as f:  # last: marks the outputs complete
             f.write(json.dumps(report, indent=2) + "\n")
     except Exception as e:  # noqa: BLE001 - one bad recording must not stop the batch
@@ -219,12 +222,13 @@ def error_row(name: str, recording: str, error: BaseException, seconds: float) -
 
 
 def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: str = "cm",
-                     height_m: float | None = None, placement: str | None = None
-                     ) -> dict | None | bool:
-    """``NAME.json`` when it completes this recording with this model, BVH unit, height and
-    placement (``None``: any placement); ``None`` when there is no JSON or it has another
-    height (to do); ``False`` when outputs of another recording, model, unit, placement or
-    program are there."""
+                     height_m: float | None = None, placement: str | None = None,
+                     rig: str | None = "bvh-default") -> dict | None | bool:
+    """``NAME.json`` when it completes this recording with this model, BVH unit, height,
+    placement (``None``: any placement) and rig preset; ``None`` when there is no JSON or it
+    has another height or rig (to do; reports written before the presets were on ``model``);
+    ``False`` when outputs of another recording, model, unit, placement or program are
+    there."""
     path = out / f"{name}.json"
     if not path.exists():
         return None
@@ -237,7 +241,8 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
                 and (out / f"{name}.bvh").is_file())
     except (OSError, ValueError, KeyError, TypeError):
         return False
-    return False if not same else report if batch.get("height_m") == height_m else None
+    redo = batch.get("height_m") != height_m or batch.get("rig", "model") != rig
+    return False if not same else None if redo else report
 
 
 def _schema(fields: Sequence[str], extra: Sequence = ()):
@@ -326,7 +331,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
               force: bool = False, progress: bool = False, fitted=None, scheduler=None,
               platform: str | None = None, height_m: float | None = None, retries: int = 2,
               unit: str = "cm", skeleton: str | Path | None = None,
-              walkers: str | Path | None = None) -> dict[str, Any]:
+              walkers: str | Path | None = None, rig: str | None = "bvh-default"
+              ) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
     Parameters
@@ -351,6 +357,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     walkers : a CSV of the walkers' heights and the study's own columns, by output name, that
         may hold walkers of other batches (:func:`imuloco.app.walkers.read_walkers`; read
         before starting).
+    rig : the rig preset of the BVH files (:func:`imuloco.app.export.write_reconstruction`;
+        None with ``skeleton``).
 
     Returns
     -------
@@ -379,6 +387,11 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
         from imuloco.app.pipeline import load_rig
 
         load_rig(skeleton)  # refuse a rig that cannot be mapped before any work
+        rig = None  # the BVHs are on the user's rig
+    elif rig is not None:
+        from imuloco.core.rigs import check_rig_name
+
+        check_rig_name(rig)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     if fitted is None:
@@ -392,7 +405,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     sha = hashlib.sha256(blob).hexdigest()
     model_seconds = time.perf_counter() - t0
 
-    reports = {n: _complete_report(out, n, r, sha, unit, heights[n], placement)
+    reports = {n: _complete_report(out, n, r, sha, unit, heights[n], placement, rig)
                for n, r in zip(names, recs)}
     foreign = [str(out / f"{n}.json") for n, rep in reports.items() if rep is False]
     if foreign and not force:
@@ -427,7 +440,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                                     placement=placement, fmt=fmt, calibrate=calibrate,
                                     platform=platform, height_m=heights[n], unit=unit,
                                     skeleton=None if skeleton is None else str(skeleton),
-                                    key=f"imuloco-batch-{job}-{n}", retries=retries,
+                                    rig=rig, key=f"imuloco-batch-{job}-{n}", retries=retries,
                                     pure=False)
                 futures.append(fut)
                 jobs_of[fut.key] = (n, r)

@@ -25,8 +25,10 @@ from typing import Any
 import numpy as np
 
 from imuloco.app.confidence import Confidence
+from imuloco.app.export import rest_of
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
+from imuloco.core.rigs import MODEL, apply_rig
 from imuloco.methods.base import Reconstruction
 
 PIECE_SECONDS = 600.0  # 10 min: 18,000 frames at 30 fps, ~100 MB of analysis
@@ -146,7 +148,8 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
                        platform: str | None = None, overwrite: bool = False,
                        piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS,
                        progress: bool = False, unit: str = "cm",
-                       height: float | None = None) -> dict[str, Any]:
+                       height: float | None = None, rig: str | None = "bvh-default"
+                       ) -> dict[str, Any]:
     """Import a log, reconstruct it in pieces and write the BVH to ``output`` piece by piece.
 
     Parameters as :func:`imuloco.app.pipeline.reconstruct_file` (``method`` a name, or a fitted
@@ -160,6 +163,9 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     ``height``: the wearer's body height in metres; every piece is scaled to it
     (:func:`imuloco.measures.gait.to_height`, the same factor for all) before its gait is
     measured and it is written.
+    ``rig``: the rig preset written (:func:`imuloco.core.rigs.apply_rig`; None: the model's
+    skeleton as it is), its T-pose rest :func:`imuloco.app.export.rest_of` the first piece,
+    used for every piece.
     """
     import time
 
@@ -212,7 +218,15 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
             final[:] = [piece]
             yield piece
 
-    write_bvh_pieces(pieces(), frames, output, unit=unit, overwrite=overwrite)
+    def on_rig(motions: Iterator[Motion]) -> Iterator[Motion]:
+        rest = None
+        for piece in motions:
+            if rig is not None and rig != MODEL:
+                rest = rest_of(piece) if rest is None else rest
+                piece = apply_rig(piece, rig, rest)
+            yield piece
+
+    write_bvh_pieces(on_rig(pieces()), frames, output, unit=unit, overwrite=overwrite)
     bar.close()
     sensor = _sensor_gait(final[0], raw, placement, height)
     confidence = Confidence.concatenate(confidences)
