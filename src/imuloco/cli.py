@@ -758,13 +758,13 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
         raise click.BadParameter(f"{video}: expected a .mp4 or .gif file", param_hint="--video")
+    check_outputs([output, video, html_path, report_path], force,
+                  inputs=[*recording, *([model_path] if model_path else []),
+                          *([skeleton] if skeleton else [])])
     check_motion_output(output, "-o/--output")
     if report_path is not None:
         check_report_output(report_path)
     preset = _preset(rig, skeleton)
-    check_outputs([output, video, html_path, report_path], force,
-                  inputs=[*recording, *([model_path] if model_path else []),
-                          *([skeleton] if skeleton else [])])
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
         if video or html_path or skeleton or output.suffix.lower() != ".bvh":

@@ -93,6 +93,19 @@ def _octahedron(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return verts, np.array(normals)
 
 
+def _bones_mesh(motion: Motion, bind: np.ndarray, tips: dict[int, np.ndarray]
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices (V, 3), normals (V, 3) and owning joints (V,) of an octahedral bone from each
+    joint (bind positions (J, 3)) to each child and from each leaf to its tip (3,)."""
+    sk = motion.skeleton
+    bones = [(int(sk.parents[c]), bind[int(sk.parents[c])], bind[c])
+             for c in range(1, sk.num_joints) if np.linalg.norm(sk.offsets[c]) > 1e-6]
+    bones += [(j, bind[j], tip) for j, tip in tips.items()]
+    shapes = [_octahedron(a, b) for _, a, b in bones]
+    return (np.concatenate([v for v, _ in shapes]), np.concatenate([m for _, m in shapes]),
+            np.repeat([j for j, _, _ in bones], 24))
+
+
 def write_gltf(motion: Motion, path: str | Path, overwrite: bool = False, mesh: bool = True,
                height: float | None = None) -> Path:
     """Write ``motion`` as glTF 2.0: ``.glb`` (binary) or ``.gltf`` (JSON, data embedded).
@@ -157,13 +170,7 @@ def write_gltf(motion: Motion, path: str | Path, overwrite: bool = False, mesh: 
     meshes = []
     materials = []
     if mesh:
-        bones = [(int(sk.parents[c]), bind[int(sk.parents[c])], bind[c])
-                 for c in range(1, n) if np.linalg.norm(sk.offsets[c]) > 1e-6]
-        bones += [(j, bind[j], tips[k]) for k, j in enumerate(leaves)]
-        shapes = [_octahedron(a, b) for _, a, b in bones]
-        verts = np.concatenate([v for v, _ in shapes])
-        normals = np.concatenate([m for _, m in shapes])
-        owner = np.repeat([j for j, _, _ in bones], 24)
+        verts, normals, owner = _bones_mesh(motion, bind, dict(zip(leaves, tips)))
         joint_ids = np.zeros((len(verts), 4), dtype=np.uint16)
         joint_ids[:, 0] = owner
         weights = np.zeros((len(verts), 4))
