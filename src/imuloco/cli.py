@@ -821,10 +821,12 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 def _preset(rig: str | None, skeleton: Path | None) -> str | None:
     """The rig preset to write with: ``rig``, by default ``bvh-default``; None with
     ``--skeleton`` (the motion is retargeted onto the user's rig), which excludes ``--rig``."""
+    from imuloco.core.rigs import DEFAULT_RIG
+
     if rig is not None and skeleton is not None:
         raise click.UsageError("--rig and --skeleton are exclusive: --skeleton retargets onto "
                                "your rig (its names and rest pose), --rig writes a preset")
-    return None if skeleton is not None else rig or "bvh-default"
+    return None if skeleton is not None else rig or DEFAULT_RIG
 
 
 def _echo_gait_source(source: str, note: str | None) -> None:

@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from imuloco.app.walkers import Walkers, read_walkers
+from imuloco.core.rigs import DEFAULT_RIG, check_rig_name
 from imuloco.errors import ImulocoError, MissingExtraError, OutputExistsError
 from imuloco.io.atomic import atomic_write, check_output
 from imuloco.measures.strides import STRIDE_FIELDS
@@ -163,7 +164,7 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
                     platform: str | None = None, height_m: float | None = None,
                     unit: str = "cm", skeleton: str | None = None,
-                    rig: str | None = "bvh-default") -> dict[str, Any]:
+                    rig: str | None = DEFAULT_RIG) -> dict[str, Any]:
     """Reconstruct one recording (a path read here), write ``NAME.bvh`` (lengths in ``unit``,
     on rig preset ``rig``: :func:`imuloco.app.export.write_reconstruction`) then ``NAME.json``.
 
@@ -223,7 +224,7 @@ def error_row(name: str, recording: str, error: BaseException, seconds: float) -
 
 def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: str = "cm",
                      height_m: float | None = None, placement: str | None = None,
-                     rig: str | None = "bvh-default") -> dict | None | bool:
+                     rig: str | None = DEFAULT_RIG) -> dict | None | bool:
     """``NAME.json`` when it completes this recording with this model, BVH unit, height,
     placement (``None``: any placement) and rig preset; ``None`` when there is no JSON or it
     has another height or rig (to do; reports written before the presets were on ``model``);
@@ -331,7 +332,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
               force: bool = False, progress: bool = False, fitted=None, scheduler=None,
               platform: str | None = None, height_m: float | None = None, retries: int = 2,
               unit: str = "cm", skeleton: str | Path | None = None,
-              walkers: str | Path | None = None, rig: str | None = "bvh-default"
+              walkers: str | Path | None = None, rig: str | None = DEFAULT_RIG
               ) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
@@ -389,8 +390,6 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
         load_rig(skeleton)  # refuse a rig that cannot be mapped before any work
         rig = None  # the BVHs are on the user's rig
     elif rig is not None:
-        from imuloco.core.rigs import check_rig_name
-
         check_rig_name(rig)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

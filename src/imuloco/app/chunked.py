@@ -28,7 +28,7 @@ from imuloco.app.confidence import Confidence
 from imuloco.app.export import rest_of
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
-from imuloco.core.rigs import MODEL, apply_rig
+from imuloco.core.rigs import DEFAULT_RIG, MODEL, apply_rig
 from imuloco.methods.base import Reconstruction
 
 PIECE_SECONDS = 600.0  # 10 min: 18,000 frames at 30 fps, ~100 MB of analysis
@@ -148,7 +148,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
                        platform: str | None = None, overwrite: bool = False,
                        piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS,
                        progress: bool = False, unit: str = "cm",
-                       height: float | None = None, rig: str | None = "bvh-default"
+                       height: float | None = None, rig: str | None = DEFAULT_RIG
                        ) -> dict[str, Any]:
     """Import a log, reconstruct it in pieces and write the BVH to ``output`` piece by piece.
 

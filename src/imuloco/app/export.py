@@ -16,7 +16,14 @@ import numpy as np
 
 from imuloco.core.motion import Motion
 from imuloco.core.retarget import Rig, same_family
-from imuloco.core.rigs import MODEL, apply_rig, check_rig_name, measure_rest, tpose_rest
+from imuloco.core.rigs import (
+    DEFAULT_RIG,
+    MODEL,
+    apply_rig,
+    check_rig_name,
+    measure_rest,
+    tpose_rest,
+)
 from imuloco.errors import InputError, UnknownNameError
 from imuloco.io.bvh import write_bvh
 from imuloco.io.database import load_sample
@@ -24,7 +31,6 @@ from imuloco.io.gltf import pygltflib_module, write_gltf
 from imuloco.measures.gait import stature
 
 MOTION_SUFFIXES = (".bvh", ".glb", ".gltf")
-DEFAULT_RIG = "bvh-default"
 
 
 def check_motion_output(path: str | Path, what: str = "output") -> Path:

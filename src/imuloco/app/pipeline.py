@@ -473,8 +473,8 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     """
     from tqdm.auto import tqdm
 
-    from imuloco.app.export import DEFAULT_RIG, write_reconstruction
-    from imuloco.core.rigs import check_rig_name
+    from imuloco.app.export import write_reconstruction
+    from imuloco.core.rigs import DEFAULT_RIG, check_rig_name
     from imuloco.io.atomic import atomic_write, check_outputs
     from imuloco.io.database import load_sample
     from imuloco.io.sensorlog import write_generic_csv

@@ -114,6 +114,7 @@ PRESETS: dict[str, RigPreset] = {p.name: p for p in (
               "{Side}Shoulder"),
 )}
 MODEL = "model"  # the model's skeleton as it is, no preset
+DEFAULT_RIG = "bvh-default"  # what reconstruct, batch and demo write without --rig
 RIG_NAMES: tuple[str, ...] = (*PRESETS, MODEL)
 
 
@@ -159,7 +160,7 @@ def measure_rest(motion: Motion) -> np.ndarray:
     return tpose_rest(Rig.measure([motion], where=motion.name or "motion"))
 
 
-def apply_rig(motion: Motion, name: str = "bvh-default", rest: np.ndarray | None = None
+def apply_rig(motion: Motion, name: str = DEFAULT_RIG, rest: np.ndarray | None = None
               ) -> Motion:
     """``motion`` on preset ``name`` (:data:`RIG_NAMES`): T-pose rest, the preset's names and
     hierarchy; world joint positions unchanged. ``rest``: the T-pose rest of its skeleton
