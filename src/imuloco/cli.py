@@ -82,6 +82,21 @@ class _LogFormat(click.Choice):
         return ("auto", *FORMATS)
 
 
+class _LibraryChoice(click.Choice):
+    """One of a library ``module``'s names (the tuple constant ``attr``), read on first use as
+    :class:`_LogFormat` reads its choices."""
+
+    def __init__(self, module: str, attr: str) -> None:
+        self.module, self.attr = module, attr
+        self.case_sensitive = True
+
+    @property
+    def choices(self) -> tuple[str, ...]:  # type: ignore[override]
+        from importlib import import_module
+
+        return tuple(getattr(import_module(self.module), self.attr))
+
+
 class _Range(click.FloatRange):
     """A finite number in a range: click's FloatRange lets NaN through (it fails every
     comparison) and inf where a side is open, which then broke deep inside (``int(nan)``)."""
@@ -198,6 +213,12 @@ skeleton_option = click.option(
     "--skeleton", "skeleton", type=_existing_file(), default=None,
     help="A BVH of your rig: the motion is retargeted onto it (its joint names, offsets and "
          "rest pose) [default: the model's training skeleton].")
+rig_option = click.option(
+    "--rig", type=_LibraryChoice("imuloco.core.rigs", "RIG_NAMES"), default=None,
+    help="Joint names, hierarchy and T-pose rest of the written motion (the same motion on "
+         "each): bvh-default (the model's joint names), mixamo, unreal (UE4 mannequin), unity "
+         "(Humanoid), or model (the training skeleton's own rest pose) [default: bvh-default; "
+         "not with --skeleton].")
 calibrate_option = click.option("--no-calibrate", is_flag=True,
                                 help="Skip the phone-on-leg calibration.")
 # how motion files are read (info, phases, bench, train): read_bvh's options
@@ -707,7 +728,8 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @model_options
 @log_options
 @click.option("-o", "--output", type=_file(), required=True,
-              help="BVH file to write (on the model's training skeleton, or --skeleton's).")
+              help="Motion file to write, by its suffix: .bvh, .glb or .gltf (glTF 2.0, "
+                   "metres; needs the [gltf] extra); on --rig, or --skeleton's rig.")
 @click.option("--video", type=_file(), default=None,
               help="Also render a stick-figure video (.mp4 or .gif).")
 @click.option("--video-seconds", type=_Range(0, min_open=True), default=None,
@@ -715,8 +737,9 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @click.option("--html", "html_path", type=_file(), default=None,
               help="Also write the interactive HTML viewer.")
 @click.option("--report", "report_path", type=_file(), default=None,
-              help="Also write the report (gait, checks) as JSON.")
+              help="Also write the report (gait, checks) as JSON (a .json file).")
 @skeleton_option
+@rig_option
 @calibrate_option
 @platform_option
 @click.option("--piece-seconds", type=_Range(10.0), default=None,
@@ -728,35 +751,39 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
-                report_path: Path | None, skeleton: Path | None, no_calibrate: bool,
-                platform: str | None, piece_seconds: float | None, height: float | None,
-                force: bool,
-                units: str) -> None:
-    """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
+                report_path: Path | None, skeleton: Path | None, rig: str | None,
+                no_calibrate: bool, platform: str | None, piece_seconds: float | None,
+                height: float | None, force: bool, units: str) -> None:
+    """Reconstruct full-body motion from a phone RECORDING and write it as BVH or glTF.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
     accelerometer file and a gyroscope file, in either order (a RealWorld acc_*.csv finds its
     gyroscope_*.csv).
     """
+    from imuloco.app.export import check_motion_output, check_report_output
     from imuloco.app.outputs import Outputs, write_outputs
     from imuloco.app.pipeline import reconstruct_file
 
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
         raise click.BadParameter(f"{video}: expected a .mp4 or .gif file", param_hint="--video")
-    outputs = Outputs(output, report_path, video, html_path, video_seconds, units)
+    check_motion_output(output, "-o/--output")
+    if report_path is not None:
+        check_report_output(report_path)
+    preset = _preset(rig, skeleton)
+    outputs = Outputs(output, report_path, video, html_path, video_seconds, units, preset)
     outputs.check(force, inputs=[*recording, *([model_path] if model_path else []),
                                  *([skeleton] if skeleton else [])])
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
-        if video or html_path or skeleton:
-            raise click.UsageError("--piece-seconds writes the BVH on the model's skeleton "
-                                   "only: drop --video/--html/--skeleton")
+        if video or html_path or skeleton or output.suffix.lower() != ".bvh":
+            raise click.UsageError("--piece-seconds writes a BVH on a --rig preset only: "
+                                   "drop --video/--html/--skeleton, write a .bvh")
         from imuloco.app.chunked import reconstruct_to_bvh
 
         pieces = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
                                     not no_calibrate, platform=platform, overwrite=True,
                                     piece_s=piece_seconds, progress=True, unit=units,
-                                    height=height)
+                                    height=height, rig=preset)
         written = write_outputs(outputs, pieces)  # the report: the BVH is written
         m, c = pieces.motion, pieces["confidence"]
         click.echo(f"{m.frames} frames at {m.fps:g} fps ({m.duration_s:.1f} s) in "
@@ -786,6 +813,16 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     _echo_gait_source(report.gait_source, report.gait_note)
     click.echo("wrote " + ", ".join(str(p) for p in written))
 
+
+def _preset(rig: str | None, skeleton: Path | None) -> str | None:
+    """The rig preset to write with: ``rig``, by default ``bvh-default``; None with
+    ``--skeleton`` (the motion is retargeted onto the user's rig), which excludes ``--rig``."""
+    from imuloco.core.rigs import DEFAULT_RIG
+
+    if rig is not None and skeleton is not None:
+        raise click.UsageError("--rig and --skeleton are exclusive: --skeleton retargets onto "
+                               "your rig (its names and rest pose), --rig writes a preset")
+    return None if skeleton is not None else rig or DEFAULT_RIG
 
 
 def _echo_gait_source(source: str, note: str | None) -> None:
@@ -817,16 +854,18 @@ def _flagged_text(c: dict) -> str:
               show_default=True, help="Folder for the outputs.")
 @model_options
 @skeleton_option
+@rig_option
 @force_option
 @_units_option
 def demo(out_dir: Path, model_path: Path | None, method_name: str | None,
-         skeleton: Path | None, force: bool, units: str) -> None:
+         skeleton: Path | None, rig: str | None, force: bool, units: str) -> None:
     """Simulate a phone on the right ankle of a bundled walk, reconstruct it and write the
     BVH, a side-by-side video (MP4, GIF), the HTML viewer, plots and a report."""
     from imuloco.app.pipeline import demo as run_demo
 
     report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
-                      progress=True, unit=units, skeleton=skeleton)
+                      progress=True, unit=units, skeleton=skeleton,
+                      preset=_preset(rig, skeleton))
     m = report["metrics"]
     click.echo(f"model: {report['model']}")
     g, gt = report["gait"], report["gait_ground_truth"]
@@ -922,6 +961,7 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
 @calibrate_option
 @platform_option
 @skeleton_option
+@rig_option
 @height_option
 @click.option("--walkers", "walkers_file", type=_existing_file(), default=None, metavar="CSV",
               help="Each walker's height: a CSV with a header and the columns name (the "
@@ -939,7 +979,7 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
 def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path,
           jobs: int | None, scheduler: str | None, model_path: Path | None,
           method_name: str | None, placement: str, fmt: str, skeleton: Path | None,
-          no_calibrate: bool, platform: str | None, height: float | None,
+          rig: str | None, no_calibrate: bool, platform: str | None, height: float | None,
           walkers_file: Path | None, force: bool, timeout: float | None, units: str) -> None:
     """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
     recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
@@ -957,7 +997,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
                         calibrate=not no_calibrate, force=force, progress=True,
                         scheduler=scheduler, platform=platform, unit=units,
                         skeleton=skeleton, height_m=height, walkers=walkers_file,
-                        timeout_s=TIMEOUT_S if timeout is None else timeout)
+                        timeout_s=TIMEOUT_S if timeout is None else timeout,
+                        rig=_preset(rig, skeleton))
     click.echo(f"model: {summary['model']}", err=True)
     click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
     for r in summary["recordings"]:

@@ -57,6 +57,7 @@ from typing import Any
 
 from imuloco.app.outputs import Outputs, write_outputs
 from imuloco.app.walkers import Walkers, read_walkers
+from imuloco.core.rigs import DEFAULT_RIG, check_rig_name
 from imuloco.errors import ImulocoError, InputError, MissingExtraError, OutputExistsError
 from imuloco.io.atomic import atomic_write, check_output, clean_stale, sha256_file
 from imuloco.io.folderlock import FolderLock
@@ -210,14 +211,15 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
                     platform: str | None = None, height_m: float | None = None,
                     unit: str = "cm", skeleton: str | None = None,
-                    timeout_s: float | None = None) -> dict[str, Any]:
+                    timeout_s: float | None = None, rig: str | None = DEFAULT_RIG
+                    ) -> dict[str, Any]:
     """Reconstruct one recording (a path read here), write ``NAME.bvh`` (lengths in ``unit``)
-    and ``NAME.json`` as one set, the JSON naming the BVH's SHA-256.
+    (on rig preset ``rig``) and ``NAME.json`` as one set, the JSON naming the BVH's SHA-256.
 
     Returns ``{"row": ..., "strides": [...]}`` (see :func:`walker_rows`); errors are caught and
     reported in the row, as is no result after ``timeout_s`` seconds (None: no limit)."""
     args = (recording, out_dir, name, model_sha256, model, placement, fmt, calibrate, platform,
-            height_m, unit, skeleton)
+            height_m, unit, skeleton, rig)
     if timeout_s is None:
         return _reconstruct_one(*args)
     t0, result, context = time.perf_counter(), [], contextvars.copy_context()  # Dask's worker
@@ -234,7 +236,8 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
 
 def _reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
                      placement: str, fmt: str, calibrate: bool, platform: str | None,
-                     height_m: float | None, unit: str, skeleton: str | None
+                     height_m: float | None, unit: str, skeleton: str | None,
+                     rig: str | None
                      ) -> dict[str, Any]:
     """:func:`reconstruct_one` without its time limit."""
     from imuloco.app.pipeline import reconstruct_file
@@ -248,10 +251,12 @@ def _reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str,
                                          height=height_m)
         recon.seconds = round(time.perf_counter() - t0, 3)
         recon.batch = {"recording": recording, "model_sha256": model_sha256,
-                       "placement": placement, "height_m": height_m, "unit": unit}
+                       "placement": placement, "height_m": height_m, "unit": unit,
+                       "rig": rig}
         out = Path(out_dir)
         # atomic, the JSON last: it marks the outputs complete
-        write_outputs(Outputs(out / f"{name}.bvh", out / f"{name}.json", unit=unit), recon,
+        write_outputs(Outputs(out / f"{name}.bvh", out / f"{name}.json", unit=unit, rig=rig),
+                      recon,
                       motion)
         report = recon.to_json()
     except Exception as e:  # noqa: BLE001 - one bad recording must not stop the batch
@@ -287,13 +292,14 @@ def error_row(name: str, recording: str, error: BaseException, seconds: float) -
 
 
 def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: str = "cm",
-                     height_m: float | None = None, placement: str | None = None
-                     ) -> dict | None | bool:
-    """``NAME.json`` when it completes this recording with this model, BVH unit, height and
-    placement (``None``: any placement); ``None`` when there is no JSON, it has another
-    height or it does not name the BVH beside it by its SHA-256 (to do: a run killed between
-    writing the two, or a report of an older version); ``False`` when outputs of another
-    recording, model, unit, placement or program are there."""
+                     height_m: float | None = None, placement: str | None = None,
+                     rig: str | None = DEFAULT_RIG) -> dict | None | bool:
+    """``NAME.json`` when it completes this recording with this model, BVH unit, height,
+    placement (``None``: any placement) and rig preset; ``None`` when there is no JSON or it
+    has another height or rig, or does not name the BVH beside it by its SHA-256 (to do: a run
+    killed between writing the two, or a report of an older version);
+    ``False`` when outputs of another recording, model, unit, placement or program are
+    there."""
     path = out / f"{name}.json"
     if not path.exists():
         return None
@@ -308,7 +314,8 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
             return None
     except (OSError, ValueError, KeyError, TypeError):
         return False
-    return False if not same else report if batch.get("height_m") == height_m else None
+    redo = batch.get("height_m") != height_m or batch.get("rig", "model") != rig
+    return False if not same else None if redo else report
 
 
 def _schema(fields: Sequence[str], extra: Sequence = ()):
@@ -418,7 +425,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
               force: bool = False, progress: bool = False, fitted=None, scheduler=None,
               platform: str | None = None, height_m: float | None = None, retries: int = 2,
               unit: str = "cm", skeleton: str | Path | None = None,
-              walkers: str | Path | None = None, timeout_s: float | None = TIMEOUT_S
+              walkers: str | Path | None = None, timeout_s: float | None = TIMEOUT_S,
+              rig: str | None = DEFAULT_RIG
               ) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
@@ -446,6 +454,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
         before starting).
     timeout_s : a recording's time limit in seconds (None: none); one with no result by then
         is an error row.
+    rig : the rig preset of the BVH files (:func:`imuloco.app.export.write_reconstruction`;
+        None with ``skeleton``).
 
     Returns
     -------
@@ -474,6 +484,9 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
         from imuloco.app.pipeline import load_rig
 
         load_rig(skeleton)  # refuse a rig that cannot be mapped before any work
+        rig = None  # the BVHs are on the user's rig
+    elif rig is not None:
+        check_rig_name(rig)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     if fitted is None:
@@ -487,7 +500,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     sha = hashlib.sha256(blob).hexdigest()
     model_seconds = time.perf_counter() - t0
 
-    reports = {n: _complete_report(out, n, r, sha, unit, heights[n], placement)
+    reports = {n: _complete_report(out, n, r, sha, unit, heights[n], placement, rig)
                for n, r in zip(names, recs)}
     foreign = [str(out / f"{n}.json") for n, rep in reports.items() if rep is False]
     if foreign and not force:
@@ -522,7 +535,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                                     placement=placement, fmt=fmt, calibrate=calibrate,
                                     platform=platform, height_m=heights[n], unit=unit,
                                     skeleton=None if skeleton is None else str(skeleton),
-                                    timeout_s=timeout_s,
+                                    timeout_s=timeout_s, rig=rig,
                                     key=f"imuloco-batch-{job}-{n}", retries=retries,
                                     pure=False)
                 futures.append(fut)

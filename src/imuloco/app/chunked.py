@@ -25,9 +25,11 @@ from pathlib import Path
 import numpy as np
 
 from imuloco.app.confidence import Confidence
+from imuloco.app.export import rest_of
 from imuloco.app.report import MotionInfo, Pieces, ReconstructionReport, build_report
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
+from imuloco.core.rigs import DEFAULT_RIG, MODEL, apply_rig
 from imuloco.measures.gait import Gait, Plausibility
 from imuloco.measures.sensorgait import GaitReport
 from imuloco.methods.base import Reconstruction
@@ -134,7 +136,8 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
                        platform: str | None = None, overwrite: bool = False,
                        piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS,
                        progress: bool = False, unit: str = "cm",
-                       height: float | None = None) -> ReconstructionReport:
+                       height: float | None = None, rig: str | None = DEFAULT_RIG
+                       ) -> ReconstructionReport:
     """Import a log, reconstruct it in pieces and write the BVH to ``output`` piece by piece.
 
     Parameters as :func:`imuloco.app.pipeline.reconstruct_file` (``method`` a name, or a fitted
@@ -148,6 +151,9 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     ``height``: the wearer's body height in metres; every piece is scaled to it
     (:func:`imuloco.measures.gait.to_height`, the same factor for all) before its gait is
     measured and it is written.
+    ``rig``: the rig preset written (:func:`imuloco.core.rigs.apply_rig`; None: the model's
+    skeleton as it is), its T-pose rest :func:`imuloco.app.export.rest_of` the first piece,
+    used for every piece.
     """
     import time
 
@@ -207,7 +213,15 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
             final[:] = [piece, phases]
             yield piece
 
-    write_bvh_pieces(pieces(), frames, output, unit=unit, overwrite=overwrite)
+    def on_rig(motions: Iterator[Motion]) -> Iterator[Motion]:
+        rest = None
+        for piece in motions:
+            if rig is not None and rig != MODEL:
+                rest = rest_of(piece) if rest is None else rest
+                piece = apply_rig(piece, rig, rest)
+            yield piece
+
+    write_bvh_pieces(on_rig(pieces()), frames, output, unit=unit, overwrite=overwrite)
     bar.close()
     motion_gait = Gait(**combine(gait, sizes))
     if estimator_of(placement) is None:

@@ -15,11 +15,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from imuloco.app.export import write_reconstruction
 from imuloco.app.pipeline import render_outputs
 from imuloco.app.report import ReconstructionReport
 from imuloco.core.motion import Motion
+from imuloco.core.rigs import DEFAULT_RIG
 from imuloco.io.atomic import OutputSet, atomic_write, check_outputs, sha256_file
-from imuloco.io.bvh import write_bvh
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,8 @@ class Outputs:
     video : a stick-figure video (``.mp4``, ``.gif``) of the first ``video_seconds`` (None:
         all), or None.
     html : the interactive viewer, or None.
+    rig : the rig preset the motion is written on (:mod:`imuloco.core.rigs`; None: the
+        motion's own skeleton, e.g. a user's rig it was retargeted onto).
     """
 
     bvh: Path
@@ -39,6 +42,7 @@ class Outputs:
     html: Path | None = None
     video_seconds: float | None = None
     unit: str = "cm"
+    rig: str | None = DEFAULT_RIG
 
     def check(self, force: bool = False, inputs: Iterable[str | Path] = ()) -> None:
         """Raise :class:`~imuloco.errors.OutputExistsError` when a file exists and ``force``
@@ -65,7 +69,8 @@ def write_outputs(outputs: Outputs, report: ReconstructionReport, motion: Motion
         raise ValueError("a video or viewer needs the motion")
     with OutputSet() as outs:  # all staged, then renamed together, the report last
         if motion is not None:
-            write_bvh(motion, outs.path(bvh), unit=outputs.unit, overwrite=True)
+            write_reconstruction(motion, outs.path(bvh), outputs.rig, unit=outputs.unit,
+                                 overwrite=True)
             digest = outs.sha256(bvh)
             if outputs.video or outputs.html:
                 render_outputs([motion], [f"{motion.name} ({report.method})"],

@@ -36,7 +36,7 @@ from imuloco.sensors.placement import PRESETS
 
 if TYPE_CHECKING:
     from imuloco.methods.base import Method
-from imuloco.errors import UnknownNameError
+from imuloco.errors import InputError, UnknownNameError
 
 log = logging.getLogger(__name__)
 
@@ -107,7 +107,7 @@ def choose_model(method: str | None = None, model: str | Path | None = None,
         leaves its own clip out).
     db : the bundled sample when already loaded.
     """
-    from imuloco.errors import InputError, ModelFileError
+    from imuloco.errors import ModelFileError
     from imuloco.methods import get_method, load_model, method_class
 
     require_extras(placement)
@@ -365,7 +365,8 @@ def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequ
 
 def demo(out_dir: str | Path, method: str | None = None, model: str | Path | None = None,
          clip: str = DEMO_CLIP, overwrite: bool = False, progress: bool = False,
-         unit: str = "cm", skeleton: str | Path | None = None) -> dict[str, Any]:
+         unit: str = "cm", skeleton: str | Path | None = None,
+         preset: str | None = None) -> dict[str, Any]:
     """The README's first command: a bundled clip, a simulated phone, a reconstruction.
 
     Takes ``clip`` from the bundled sample, simulates a phone on the right ankle with phone
@@ -379,7 +380,9 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     (:func:`confidence_check`; per frame in ``errors.png`` and the viewer).
     ``unit`` is the BVH's length unit (``cm`` or ``m``).
     With ``skeleton`` (a motion file of the user's rig) ``reconstruction.bvh`` is on that rig
-    (:func:`onto_rig`); the video, viewer and metrics stay on the model's skeleton.
+    (:func:`onto_rig`), else on rig ``preset`` (:func:`imuloco.app.export.write_reconstruction`;
+    default ``bvh-default``, the model's joint names in a T-pose rest); the video, viewer and
+    metrics stay on the model's skeleton.
 
     Returns
     -------
@@ -387,8 +390,9 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     """
     from tqdm.auto import tqdm
 
+    from imuloco.app.export import write_reconstruction
+    from imuloco.core.rigs import DEFAULT_RIG, check_rig_name
     from imuloco.io.atomic import atomic_write, check_outputs
-    from imuloco.io.bvh import write_bvh
     from imuloco.io.database import load_sample
     from imuloco.io.sensorlog import write_generic_csv
     from imuloco.measures.gait import Gait, Plausibility, to_json
@@ -404,6 +408,9 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     paths = {n: out / n for n in names}
     check_outputs(paths.values(), overwrite,
                   inputs=[p for p in (model, skeleton) if p is not None])
+    if skeleton is not None and preset is not None:
+        raise InputError("a rig preset and a skeleton file are exclusive: give one")
+    preset = None if skeleton is not None else check_rig_name(preset or DEFAULT_RIG)
     bar = tqdm(total=5, desc="demo", unit="step", disable=not progress)
 
     db = load_sample()
@@ -434,8 +441,8 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     gt_cut, rec_cut = gt.slice(0, n), motion.slice(0, n)
     rec_cut.name = "reconstruction"
     conf = recon.confidence.sliced(0, n)
-    write_bvh(rec_cut if rig is None else onto_rig(rec_cut, rig),
-              paths["reconstruction.bvh"], unit=unit, overwrite=overwrite)
+    write_reconstruction(rec_cut if rig is None else onto_rig(rec_cut, rig),
+                         paths["reconstruction.bvh"], preset, unit=unit, overwrite=overwrite)
     bar.update()
 
     bar.set_postfix_str("rendering")

@@ -4,7 +4,9 @@ Sensors, contacts and metrics refer to body parts (``"right_ankle"``), never to 
 joint names. A body map is a ``dict`` from part to joint name. Built-in candidate names cover
 the Bandai-Namco skeleton of the shared data, the CMU skeleton (ASF/AMC bone names and the common
 BVH conversions of it), Character Creator / iClone / ActorCore (``CC_Base_*``; their twist, share,
-finger and face bones stay unmapped) and common BVH naming (Mixamo and similar). A user gives their own map by
+finger and face bones stay unmapped), Unreal's mannequin (``pelvis``, ``spine_01``, ``thigh_l``,
+...; ``spine_03`` the chest), Unity Humanoid's bone names and common BVH naming (Mixamo and
+similar). A user gives their own map by
 passing ``overrides`` to :func:`resolve_body_map` or a ``body_map`` to :class:`Skeleton`.
 """
 
@@ -32,26 +34,28 @@ _CENTRE_CANDIDATES: dict[str, tuple[str, ...]] = {
     # conversions call "Spine"; "lowerback" sits on the root.
     # Character Creator: Hip > Waist > Spine01 > Spine02 > NeckTwist01 > NeckTwist02 > Head;
     # Spine01 and Spine02 sit where Bandai-Namco's Spine and Chest do.
-    "spine": ("Spine", "upperback", "lowerback", "LowerBack", "Spine1", "CC_Base_Spine01"),
+    "spine": ("Spine", "upperback", "lowerback", "LowerBack", "Spine1", "CC_Base_Spine01",
+              "spine_01"),
     "chest": ("Chest", "thorax", "Spine2", "Spine1", "upperback", "UpperChest",
-              "CC_Base_Spine02"),
-    "neck": ("Neck", "lowerneck", "Neck1", "upperneck", "CC_Base_NeckTwist01"),
+              "CC_Base_Spine02", "spine_03"),
+    "neck": ("Neck", "lowerneck", "Neck1", "upperneck", "CC_Base_NeckTwist01", "neck_01"),
     "head": ("Head", "CC_Base_Head"),
 }
 _LIMB_CANDIDATES: dict[str, tuple[str, ...]] = {
     "hip": ("UpperLeg_{S}", "{Side}UpLeg", "{s}femur", "{Side}Hip", "{Side}UpperLeg", "{Side}Thigh",
-            "{S}_Hip", "CC_Base_{S}_Thigh"),
+            "{S}_Hip", "CC_Base_{S}_Thigh", "thigh_{s}"),
     "knee": ("LowerLeg_{S}", "{Side}Leg", "{s}tibia", "{Side}Knee", "{Side}LowerLeg", "{Side}Shin",
-             "{S}_Knee", "CC_Base_{S}_Calf"),
-    "ankle": ("Foot_{S}", "{Side}Foot", "{s}foot", "{Side}Ankle", "{S}_Ankle", "CC_Base_{S}_Foot"),
+             "{S}_Knee", "CC_Base_{S}_Calf", "calf_{s}"),
+    "ankle": ("Foot_{S}", "{Side}Foot", "{s}foot", "{Side}Ankle", "{S}_Ankle", "CC_Base_{S}_Foot",
+              "foot_{s}"),
     "toe": ("Toes_{S}", "{Side}ToeBase", "{s}toes", "{Side}Toe", "{Side}Toes", "{Side}Toe_End",
-            "{S}_Foot", "CC_Base_{S}_ToeBase"),
+            "{S}_Foot", "CC_Base_{S}_ToeBase", "ball_{s}"),
     "shoulder": ("UpperArm_{S}", "{Side}Arm", "{s}humerus", "{Side}UpperArm", "{Side}Shoulder",
-                 "{S}_Shoulder", "CC_Base_{S}_Upperarm"),
+                 "{S}_Shoulder", "CC_Base_{S}_Upperarm", "upperarm_{s}"),
     "elbow": ("LowerArm_{S}", "{Side}ForeArm", "{s}radius", "{Side}Elbow", "{Side}LowerArm",
-              "{S}_Elbow", "CC_Base_{S}_Forearm"),
+              "{S}_Elbow", "CC_Base_{S}_Forearm", "lowerarm_{s}"),
     "wrist": ("Hand_{S}", "{Side}Hand", "{s}wrist", "{Side}Wrist", "{s}hand", "{S}_Wrist",
-              "CC_Base_{S}_Hand"),
+              "CC_Base_{S}_Hand", "hand_{s}"),
 }
 
 

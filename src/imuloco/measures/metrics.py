@@ -373,7 +373,8 @@ def evaluate_files(ground_truth: str | Path, reconstructed: str | Path,
     if worst > offset_tol:
         j = int(np.abs(a.offsets - b.offsets).max(axis=1).argmax())
         raise InputError(f"{reconstructed}: bone offsets differ from {ground_truth}'s "
-                         f"(joint {a.names[j]!r} by {worst * CM:.2f} cm)")
+                         f"(joint {a.names[j]!r} by {worst * CM:.2f} cm; a reconstruction on a "
+                         "T-pose rest compares with `reconstruct --rig model`)")
     if abs(gt.fps - rec.fps) > 1e-3 * gt.fps:
         raise InputError(f"{reconstructed}: {rec.fps:g} fps, but {ground_truth} has "
                          f"{gt.fps:g} fps; resample one first")
