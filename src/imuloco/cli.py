@@ -707,7 +707,10 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @click.option("--html", "html_path", type=_file(), default=None,
               help="Also write the interactive HTML viewer.")
 @click.option("--report", "report_path", type=_file(), default=None,
-              help="Also write the report (gait, checks) as JSON.")
+              help="Also write the report (gait, checks) as JSON, and beside it NAME.md, a "
+                   "readable summary with plots (NAME-*.png; plots need the [viz] extra).")
+@click.option("--summary", "summary_path", type=_file(), default=None,
+              help="Write the readable summary here instead of beside --report (.md).")
 @skeleton_option
 @calibrate_option
 @platform_option
@@ -720,7 +723,8 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
-                report_path: Path | None, skeleton: Path | None, no_calibrate: bool,
+                report_path: Path | None, summary_path: Path | None, skeleton: Path | None,
+                no_calibrate: bool,
                 platform: str | None, piece_seconds: float | None, height: float | None,
                 force: bool,
                 units: str) -> None:
@@ -736,7 +740,12 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
         raise click.BadParameter(f"{video}: expected a .mp4 or .gif file", param_hint="--video")
-    check_outputs([output, video, html_path, report_path], force,
+    from imuloco.app.summary import summary_paths, write_summary
+
+    if summary_path is None and report_path is not None:
+        summary_path = report_path.with_suffix(".md")
+    summaries = [] if summary_path is None else list(summary_paths(summary_path).values())
+    check_outputs([output, video, html_path, report_path, *summaries], force,
                   inputs=[*recording, *([model_path] if model_path else []),
                           *([skeleton] if skeleton else [])])
     source = recording[0] if len(recording) == 1 else list(recording)
@@ -753,10 +762,13 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         if report_path:
             with atomic_write(report_path, "w") as f:
                 f.write(json.dumps(pieces, indent=2) + "\n")
+        written = [p for p in (output, report_path) if p]
+        if summary_path:
+            written.append(write_summary(pieces, summary_path, overwrite=True)[0])
         m, c = pieces["motion"], pieces["confidence"]
         click.echo(f"{m['frames']} frames at {m['fps']:g} fps ({m['duration_s']:.1f} s) in "
                    f"{pieces['pieces']['count']} piece(s)" + _confidence_text(c) + "; wrote "
-                   + ", ".join(str(p) for p in (output, report_path) if p))
+                   + ", ".join(map(str, written)))
         _echo_gait_source(pieces["gait_source"], pieces["gait_note"])
         return
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
@@ -775,6 +787,9 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         with atomic_write(report_path, "w") as f:
             f.write(json.dumps(report.to_json(), indent=2) + "\n")
         written.append(report_path)
+    if summary_path:
+        written.append(write_summary(report.to_json(), summary_path, overwrite=True,
+                                     name=motion.name)[0])
     g = report.gait
     rhythm = (report.motion_gait or g)["cadence_rhythm_spm"]  # the reconstruction's legs
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "

@@ -174,6 +174,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         to_height,
         to_json,
     )
+    from imuloco.measures.sensorgait import model_gait_note
     from imuloco.measures.strides import with_confidence
     from imuloco.methods.training import frame_times
     from imuloco.phases import gait_phases
@@ -229,7 +230,8 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         "gait": (sensor["gait"] | {"duration_s": motion_gait["duration_s"]} if sensor
                  else motion_gait),
         "gait_source": sensor.get("gait_source", "the reconstructed motion, per piece"),
-        "gait_note": sensor.get("gait_note"),
+        "gait_note": (sensor.get("gait_note") if sensor else
+                      model_gait_note(placement, motion_gait)),
         **({"strides": sensor["strides"], "motion_gait": motion_gait} if sensor else {}),
         "plausibility": to_json(combine(checks, sizes)),
         "confidence": confidence.to_json(),

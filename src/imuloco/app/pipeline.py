@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from imuloco.app.confidence import Confidence
+from imuloco.app.summary import confidence_markdown, demo_markdown  # noqa: F401 (re-exported)
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
 
@@ -348,7 +349,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         to_height,
         to_json,
     )
-    from imuloco.measures.sensorgait import gait_report
+    from imuloco.measures.sensorgait import gait_report, model_gait_note
     from imuloco.measures.strides import with_confidence
     from imuloco.sensors.placement import get_placement
     from imuloco.sensors.reallog import read_log, recording_name
@@ -384,7 +385,13 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     k = rec.placements.index(fitted.placements_[0])
     gait = gait_report(motion, rec, placement, height)
     cadence, swing = signal_rhythm(rec, k)  # the raw signal's, beside the motion's
+    swing = swing if get_placement(rec.placements[k]).on_shank else None
     gait["strides"] = with_confidence(gait["strides"], confidence.error_m, motion.fps)
+    checks = to_json(plausibility(motion))
+    if gait["motion_gait"] is None and gait["gait_note"] is None:  # the motion's gait
+        gait["gait_note"] = model_gait_note(
+            placement, gait["gait"], cadence, swing,
+            {side: checks.get(f"{side}_shank_swing_deg") for side in ("left", "right")})
     report = ReconstructionReport(
         recording=log_report.to_json(),
         calibration=info.get("calibration"), feet_pinned_by=info["feet_pinned_by"],
@@ -394,9 +401,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         height_m=height,
         **gait,
         signal_cadence_spm=to_json({"v": cadence})["v"],
-        signal_swing_deg=(to_json({"v": swing})["v"]
-                          if get_placement(rec.placements[k]).on_shank else None),
-        plausibility=to_json(plausibility(motion)), confidence=confidence,
+        signal_swing_deg=None if swing is None else to_json({"v": swing})["v"],
+        plausibility=checks, confidence=confidence,
     )
     if skeleton is not None:
         bar.set_postfix_str(f"retargeting onto {Path(skeleton).name}")
@@ -586,90 +592,3 @@ def confidence_check(gt: Motion, rec: Motion, confidence: Confidence) -> dict[st
             if sel.any():
                 out[key] = float(actual[sel].mean())
     return to_json(out)
-
-
-def _fmt(v: Any) -> str:
-    return "–" if v is None else (f"{v:.3g}" if isinstance(v, float) else str(v))
-
-
-def confidence_markdown(report: dict[str, Any]) -> list[str]:
-    """The demo report's lines on the method's confidence (predicted beside actual error)."""
-    conf = report.get("confidence") or {}
-    lines = ["## Confidence (the method's predicted error)", ""]
-    if not conf.get("available"):
-        return [*lines, f"None: {conf.get('note') or 'the method gives no confidence'}.", ""]
-    check = report.get("confidence_check") or {}
-
-    def cm(v: float | None) -> str:
-        return "–" if v is None else f"{100 * v:.2f}"
-
-    frac = conf.get("unreliable_fraction")
-    lines += [
-        ("The method predicts, per frame, its rms joint position error (relative to the "
-         "pelvis); here it is set beside the actual error against the ground truth "
-         "(`errors.png` draws both per frame; the viewer shows it and marks flagged frames)."),
-        "",
-        "| | predicted | actual |",
-        "|---|---:|---:|",
-        (f"| mean rms joint position error (cm) | {cm(check.get('mean_predicted_error_m'))} "
-         f"| {cm(check.get('mean_actual_error_m'))} |"),
-        (f"| 90th percentile (cm) | {cm(check.get('p90_predicted_error_m'))} "
-         f"| {cm(check.get('p90_actual_error_m'))} |"),
-        "",
-        (f"Predicted / actual: {_fmt(check.get('ratio'))} (1 is calibrated, below 1 "
-         f"over-confident); Spearman rank correlation over frames: "
-         f"{_fmt(check.get('spearman'))}. Frames flagged unreliable: "
-         + ("not flagged by this method" if frac is None else
-            f"{100 * frac:.1f} % (actual error there {cm(check.get('actual_error_unreliable_m'))}"
-            f" cm, elsewhere {cm(check.get('actual_error_reliable_m'))} cm)") + "."),
-        f"Note: {(conf.get('note') or '–').rstrip('.')}.",
-        "",
-    ]
-    return lines
-
-
-def demo_markdown(report: dict[str, Any]) -> str:
-    """The short human-readable report of :func:`demo`."""
-    calib = "; ".join(
-        f"{c['placement']} sensor turned {c['rotation_deg']:.1f} deg from the segment's frame "
-        f"(up axis from {c['up_from']}, {c['swings']} strides found)"
-        for c in report.get("calibration", [])) or "not run"
-    lines = [
-        "# imuloco demo",
-        "",
-        (f"Clip `{report['clip']}` of the bundled sample; a phone on the right ankle simulated "
-         "with phone noise (`recording.csv`), then imported, calibrated and reconstructed as "
-         "`imuloco reconstruct recording.csv` would."),
-        "",
-        f"- Model: {report['model']}.",
-        f"- Calibration: {calib}.",
-        (f"- Reconstruction: {report['motion']['frames']} frames at "
-         f"{report['motion']['fps']:g} fps; took {report['seconds']} s end to end (rendering "
-         "included)."),
-        "",
-        "## Metrics (reconstruction against the ground truth)",
-        "",
-        "| metric | value |",
-        "|---|---:|",
-        *[f"| {k} | {_fmt(v)} |" for k, v in report["metrics"].items()],
-        "",
-        "## Gait parameters",
-        "",
-        "| parameter | ground truth | reconstruction |",
-        "|---|---:|---:|",
-        *[f"| {k} | {_fmt(report['gait_ground_truth'][k])} | {_fmt(v)} |"
-          for k, v in report["gait"].items()],
-        f"| cadence of the raw signal (Welch) | | {_fmt(report['signal_cadence_spm'])} |",
-        *[f"| {k} | {_fmt(report['plausibility_ground_truth'][k])} | "
-          f"{_fmt(v)} |" for k, v in report["plausibility"].items() if k.endswith("_swing_deg")],
-        f"| shank swing of the raw signal (deg) | | {_fmt(report['signal_swing_deg'])} |",
-        "",
-        *confidence_markdown(report),
-        "## Files",
-        "",
-        ("`reconstruction.bvh` (opens in Blender), `demo.mp4` / `demo.gif` (ground truth "
-         "left, reconstruction right), `demo.html` (interactive viewer, works offline), "
-         "`signals.png`, `phases.png`, `errors.png`, `report.json`."),
-        "",
-    ]
-    return "\n".join(lines)
