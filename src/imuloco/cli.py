@@ -1009,50 +1009,70 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
               help="TLS certificate (PEM): serve HTTPS, which phones need for motion sensors.")
 @click.option("--key", "keyfile", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Private key of --cert.")
+@click.option("--https", "self_signed", is_flag=True,
+              help="Serve HTTPS with a certificate made for this session (self-signed: the "
+                   "phone asks once to accept it); instead of --cert/--key.")
 @click.option("--allow-origin", "allow_origins", multiple=True, metavar="ORIGIN",
               help="Also accept browsers on this origin (https://host:port); repeatable.")
 @height_option
 def live(host: str, port: int, model_path: Path | None, method_name: str | None,
          placement: str, calibrate_seconds: float, replay: Path | None, fmt: str, speed: float,
-         loop: bool, certfile: str | None, keyfile: str | None,
+         loop: bool, certfile: str | None, keyfile: str | None, self_signed: bool,
          allow_origins: tuple[str, ...], height: float | None) -> None:
     """Watch a walker live: a phone on the leg streams its sensors (open /phone on it), a
     browser shows the reconstruction as it walks (open /live). Ctrl-C stops."""
     import asyncio
+    import tempfile
 
     from imuloco.errors import MissingExtraError
 
-    try:
+    try:  # the [live] extra
+        from imuloco.app.live import lan
         from imuloco.app.live.server import LiveServer, configure_logging, run, ssl_context
     except ModuleNotFoundError as e:
-        if e.name != "websockets":
+        if e.name not in ("websockets", "segno", "psutil", "cryptography"):
             raise
-        raise MissingExtraError("live mode", "websockets", "live") from None
+        raise MissingExtraError("live mode", e.name, "live") from None
     from imuloco.app.pipeline import choose_model
 
+    if self_signed and certfile:
+        raise click.UsageError("--https makes its own certificate: drop --cert/--key")
     choice = choose_model(method_name, model_path, placement, progress=True)
     server = LiveServer(choice.method, calibrate_seconds, choice.description,
                         allow_origins=allow_origins, height_m=height)
-    ssl = ssl_context(certfile, keyfile) if certfile else None
-    shown = "localhost" if host in ("127.0.0.1", "0.0.0.0", "::") else host
+    shown = lan.shown_host(host)
+    with tempfile.TemporaryDirectory(prefix="imuloco-live-") as tmp:  # the session's key
+        if self_signed:
+            certfile, keyfile = map(str, lan.self_signed([shown, "localhost", "127.0.0.1"],
+                                                         tmp))
+        ssl = ssl_context(certfile, keyfile) if certfile else None
 
-    def started(srv: LiveServer) -> None:
-        click.echo(f"model: {choice}", err=True)
-        urls = srv.urls(shown)
-        click.echo(f"viewer: {urls['live']}\nphone:  {urls['phone']}" +
-                   ("" if host != "127.0.0.1" else "  (--host 0.0.0.0 for a phone on the "
-                                                   "network)"))
-        if not ssl and host != "127.0.0.1":
-            click.echo("phones only give motion sensors to https pages: pass --cert and --key",
-                       err=True)
+        def started(srv: LiveServer) -> None:
+            click.echo(f"model: {choice}", err=True)
+            urls = srv.urls(shown)
+            click.echo(f"viewer: {urls['live']}\nphone:  {urls['phone']}" +
+                       ("" if host != "127.0.0.1" else "  (--host 0.0.0.0 for a phone on the "
+                                                       "network)"))
+            if host == "127.0.0.1":
+                return
+            if shown == "localhost":
+                click.echo("no network address found on this machine: is it on Wi-Fi?",
+                           err=True)
+            click.echo("scan with the phone (on the same network):\n"
+                       + lan.qr_text(urls["phone"]))
+            if self_signed:
+                click.echo(f"https: {lan.PHONE_WARNING}", err=True)
+            elif not ssl:
+                click.echo("phones only give motion sensors to https pages: add --https (or "
+                           "--cert and --key)", err=True)
 
-    configure_logging()
-    replay_args = None if replay is None else {"path": replay, "placement": placement,
-                                               "fmt": fmt, "speed": speed, "loop": loop}
-    try:
-        asyncio.run(run(server, host, port, ssl, replay_args, on_start=started))
-    except KeyboardInterrupt:
-        click.echo("stopped")
+        configure_logging()
+        replay_args = None if replay is None else {"path": replay, "placement": placement,
+                                                   "fmt": fmt, "speed": speed, "loop": loop}
+        try:
+            asyncio.run(run(server, host, port, ssl, replay_args, on_start=started))
+        except KeyboardInterrupt:
+            click.echo("stopped")
 
 
 def main() -> None:
