@@ -134,4 +134,7 @@ def test_model_gait_note_checks_the_legs_against_the_shanks_own_swing():
     assert "swing as the sensor says" in even
     off = model_gait_note("right_thigh", {"cadence_rhythm_spm": 141.0}, 109.0)
     assert "differs from the sensor's own rhythm" in off
+    steps = model_gait_note("right_thigh", {"cadence_rhythm_spm": 108.9, "cadence_spm": 141.2},
+                            108.6)
+    assert "agrees with" in steps and "141.2 steps/min, 30 % off the legs' rhythm" in steps
     assert "nothing model-free checks them" in off

@@ -622,3 +622,45 @@ def test_a_second_file_with_a_one_file_log_is_refused(walk_rec, tmp_path):
         read_log((a, b))
     with pytest.raises(ValueError, match="got 3 files"):  # the third was dropped
         read_log((a, b, a))
+
+
+def test_a_csv_with_its_own_column_names_reads_through_a_mapping(walk_rec, tmp_path):
+    """``--columns time=timestamp,acc_x=ax,...``: another app's CSV (milliseconds, extra
+    columns, other names) reads as the generic log it holds; a bad mapping names the fault."""
+    from imuloco.errors import UnknownNameError
+    from imuloco.io.sensorlog import parse_columns
+
+    t = walk_rec.times * 1000.0  # milliseconds, detected as for any log
+    body = np.column_stack([t, walk_rec.acc[:, 0], walk_rec.gyro[:, 0], np.zeros(len(t))])
+    path = tmp_path / "other.csv"
+    np.savetxt(path, body, delimiter=",", header="timestamp,ax,ay,az,gx,gy,gz,mag",
+               comments="", fmt="%.6f")
+    with pytest.raises(FormatError, match="--columns"):
+        read_log(path)
+    columns = parse_columns("time=timestamp, acc_x=ax,acc_y=ay,acc_z=az,gyro_x=gx,gyro_y=gy,"
+                            "gyro_z=gz")
+    rec, report = read_log(path, rate=None, columns=columns)
+    reference, _ = read_log(write_generic_csv(walk_rec, tmp_path / "walk.csv"), rate=None)
+    assert report.format == "generic" and report.time_unit == "ms"
+    np.testing.assert_allclose(rec.acc, reference.acc, atol=1e-5)
+    np.testing.assert_allclose(rec.gyro, reference.gyro, atol=1e-5)
+    with pytest.raises(FormatError, match=r"missing column\(s\) \['acc_y'"):
+        read_log(path, columns=parse_columns("time=timestamp,acc_x=ax"))
+    for bad in ("time", "gyro_q=gz", "time=a,time=b"):
+        with pytest.raises(UnknownNameError, match="NAME=COLUMN"):
+            parse_columns(bad)
+
+
+def test_many_gaps_are_one_warning_with_their_count(walk_rec, tmp_path, caplog):
+    keep = np.ones(walk_rec.num_samples, bool)
+    for start in (100, 300, 500):  # three 0.5 s holes
+        keep[start:start + 50] = False
+    holes = Recording(walk_rec.times[keep], walk_rec.acc[keep], walk_rec.gyro[keep],
+                      walk_rec.placements)
+    path = write_generic_csv(holes, tmp_path / "holes.csv")
+    with caplog.at_level("WARNING"):
+        _, report = read_log(path)
+    assert len(report.gaps) == 3
+    lines = [r.getMessage() for r in caplog.records if "gap" in r.getMessage()]
+    assert len(lines) == 1 and "3 gaps without samples" in lines[0]
+    assert lines[0].count(str(path)) == 1

@@ -27,11 +27,14 @@ class Commands(click.Group):
     status 1, instead of a traceback."""
 
     def invoke(self, ctx: click.Context) -> Any:
-        try:
-            return super().invoke(ctx)
-        except ImulocoError as e:
-            _end_progress_bars()
-            raise click.ClickException(str(e)) from None
+        from imuloco.app.console import console
+
+        with console():  # warnings on their own lines, each kind once
+            try:
+                return super().invoke(ctx)
+            except ImulocoError as e:
+                _end_progress_bars()
+                raise click.ClickException(str(e)) from None
 
 
 def _end_progress_bars() -> None:
@@ -170,6 +173,7 @@ model_options = _options(
 # reading phone logs (reconstruct, batch, live --replay): imuloco.sensors.reallog
 log_options = _options(
     click.option("--placement", default="right_ankle", show_default=True,
+                 callback=_placements,
                  help="Where the phone was worn (placement preset): right_ankle or "
                       "left_ankle for a shin, right_foot or left_foot for a shoe IMU, "
                       "lower_back at L5 (these three need the [gait] extra)."),
@@ -714,6 +718,10 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @skeleton_option
 @calibrate_option
 @platform_option
+@click.option("--columns", "columns_text", default=None, metavar="NAME=COLUMN,...",
+              help="A CSV's own column names, read as a generic log: e.g. "
+                   "time=timestamp,acc_x=ax,acc_y=ay,acc_z=az,gyro_x=gx,gyro_y=gy,gyro_z=gz "
+                   "(units and the time unit are detected).")
 @click.option("--piece-seconds", type=_Range(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html/--skeleton).")
@@ -725,8 +733,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                 video_seconds: float | None, html_path: Path | None,
                 report_path: Path | None, summary_path: Path | None, skeleton: Path | None,
                 no_calibrate: bool,
-                platform: str | None, piece_seconds: float | None, height: float | None,
-                force: bool,
+                platform: str | None, columns_text: str | None, piece_seconds: float | None,
+                height: float | None, force: bool,
                 units: str) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
 
@@ -737,8 +745,10 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     from imuloco.app.pipeline import reconstruct_file, render_outputs
     from imuloco.io.atomic import atomic_write, check_outputs
     from imuloco.io.bvh import write_bvh
+    from imuloco.io.sensorlog import parse_columns
 
-    if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
+    columns = parse_columns(columns_text) if columns_text else None  # before any work
+    if video is not None and video.suffix.lower() not in (".mp4", ".gif"):
         raise click.BadParameter(f"{video}: expected a .mp4 or .gif file", param_hint="--video")
     from imuloco.app.summary import summary_paths, write_summary
 
@@ -758,7 +768,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         pieces = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
                                     not no_calibrate, platform=platform, overwrite=True,
                                     piece_s=piece_seconds, progress=True, unit=units,
-                                    height=height)
+                                    height=height, columns=columns)
         if report_path:
             with atomic_write(report_path, "w") as f:
                 f.write(json.dumps(pieces, indent=2) + "\n")
@@ -774,7 +784,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
                                       progress=True, platform=platform, skeleton=skeleton,
-                                      height=height)
+                                      height=height, columns=columns)
     click.echo(f"model: {report.model}", err=True)
     write_bvh(motion, output, unit=units, overwrite=True)  # checked above
     written = [output]
@@ -966,7 +976,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     prepended where names repeat (also in case alone) or where it is 'summary'."""
     from imuloco.app.batch import find_recordings, run_batch
 
-    paths = find_recordings(recordings, patterns)
+    paths = find_recordings(recordings, patterns, out_dir=out_dir)
     if not paths:
         raise click.UsageError("no recordings: give files or --glob PATTERN")
     summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,

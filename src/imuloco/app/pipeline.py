@@ -22,6 +22,7 @@ import logging
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from importlib.util import find_spec
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -57,13 +58,18 @@ def require_extras(placement: str) -> None:
     """Raise :class:`~imuloco.errors.MissingExtraError` (``pip install 'imuloco[gait]'``)
     before any work when ``placement``'s pipeline needs a package that is not installed
     (:data:`GAIT_EXTRA`)."""
-    from importlib.util import find_spec
-
     from imuloco.errors import MissingExtraError
 
     module = GAIT_EXTRA.get(placement)
     if module is not None and (find_spec(module) is None or find_spec("pandas") is None):
         raise MissingExtraError(f"a {placement} sensor's calibration and gait", module, "gait")
+
+
+def shipped_placements(method: str = DEFAULT_METHOD) -> list[str]:
+    """The placements ``method`` has a pretrained model of in the package."""
+    from imuloco.data import MODELS_DIR
+
+    return sorted(p.stem.removeprefix(f"{method}_") for p in MODELS_DIR.glob(f"{method}_*.npz"))
 
 
 def shipped_model(method: str, placement: str) -> Path | None:
@@ -134,6 +140,12 @@ def choose_model(method: str | None = None, model: str | Path | None = None,
         method = FALLBACK
         why = (f"no pretrained {DEFAULT_METHOD!r} model is usable here, so the best available "
                f"baseline {method!r} was fitted")
+        if path is None and find_spec("torch") is not None:  # no model for this placement
+            log.warning("no shipped model for %s (models ship for %s): fitting %r on the "
+                        "bundled sample's clips instead, a rough stand-in (on simulated held-out "
+                        "styles 6-8 cm MPJPE, feet sliding 94-188 cm/s: "
+                        "docs/results/placements/); its gait is not to be trusted",
+                        placement, ", ".join(shipped_placements()), method)
     else:
         why = f"method {method!r} has no shipped model for {placement}, so it was fitted"
     from imuloco.io.database import load_sample
@@ -312,7 +324,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
                      fmt: str = "auto", calibrate: bool = True, pin: bool | None = None,
                      progress: bool = False, fitted: Method | ModelChoice | None = None,
                      platform: str | None = None, skeleton: str | Path | None = None,
-                     height: float | None = None) -> tuple[Motion, ReconstructionReport]:
+                     height: float | None = None, columns: dict[str, str] | None = None
+                     ) -> tuple[Motion, ReconstructionReport]:
     """Import a phone's sensor log and reconstruct the wearer's motion.
 
     Parameters
@@ -331,6 +344,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         gait is measured before, on the model's skeleton).
     height : the wearer's body height in metres: the skeleton, and so every length and speed,
         is scaled to it (:func:`imuloco.measures.gait.to_height`) before gait is measured.
+    columns : a CSV's own names of the generic log's columns (``{"time": "timestamp", ...}``,
+        :func:`imuloco.io.sensorlog.parse_columns`).
 
     Returns
     -------
@@ -360,7 +375,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar = tqdm(total=len(steps), desc="reconstruct", unit="step", disable=not progress)
     t0 = time.perf_counter()
     bar.set_postfix_str("reading the log")
-    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform)
+    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform,
+                               columns=columns)
     bar.update()
     bar.set_postfix_str("model")
     if fitted is None:

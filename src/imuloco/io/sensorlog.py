@@ -289,11 +289,37 @@ def _columns(path: Path, header: list[str], wanted: list[str]) -> list[int]:
 # ---------------------------------------------------------------------------------------------
 # generic
 
-def read_generic_csv(path: str | Path) -> list[Stream]:
+COLUMN_NAMES = ("time", *GENERIC_COLUMNS)  # what --columns maps (time: the time column)
+
+
+def parse_columns(text: str) -> dict[str, str]:
+    """``"time=timestamp,acc_x=ax,..."`` as ``{"time": "timestamp", "acc_x": "ax", ...}``
+    (:data:`COLUMN_NAMES` to a file's header names); UnknownNameError for anything else."""
+    out: dict[str, str] = {}
+    for item in filter(None, (i.strip() for i in text.split(","))):
+        ours, sep, theirs = (p.strip() for p in item.partition("="))
+        ours = "time" if ours == "time_s" else ours
+        if not sep or not theirs or ours not in COLUMN_NAMES or ours in out:
+            raise UnknownNameError(f"column mapping {item!r}: expected NAME=COLUMN once per "
+                                   f"NAME of {list(COLUMN_NAMES)}, e.g. "
+                                   "time=timestamp,acc_x=ax,...")
+        out[ours] = theirs
+    return out
+
+
+def read_generic_csv(path: str | Path, columns: dict[str, str] | None = None) -> list[Stream]:
     """Streams of a generic CSV (see the module docstring): one acc and one gyro per sensor;
-    ``placement`` is the column prefix or ``None`` for the unprefixed single-sensor layout."""
+    ``placement`` is the column prefix or ``None`` for the unprefixed single-sensor layout.
+
+    columns : another CSV's own header names for :data:`COLUMN_NAMES` (:func:`parse_columns`;
+        unnamed ones keep their generic name): one sensor in those columns, the file's other
+        columns ignored, the time column's unit detected as for any log."""
     path = Path(path)
     header, data, lines = _read_table(path)
+    if columns:
+        wanted = {**{n: n for n in COLUMN_NAMES}, "time": "time_s", **columns}
+        idx = _columns(path, header, [wanted[n] for n in COLUMN_NAMES])
+        header, data = ["time_s", *GENERIC_COLUMNS], data[:, idx]
     if not header or header[0] != "time_s":
         raise FormatError(path, 1, f"expected first column 'time_s', found {header[:1]}")
     names = header[1:]
@@ -712,4 +738,5 @@ def detect_format(path: str | Path) -> str:
                                "(generic), 'id,attr_time' (RealWorld), '\"Time (s)\"' (phyphox) "
                                "or 'time,seconds_elapsed' (Sensor Logger), or an Xsens export's "
                                "('// Update Rate: ...' lines, then 'PacketCounter ... Acc_X "
-                               f"... Gyr_X ...'), found {header[:80]!r}")
+                               f"... Gyr_X ...'), found {header[:80]!r}; another CSV: "
+                               "name its columns with --columns time=COLUMN,acc_x=COLUMN,...")

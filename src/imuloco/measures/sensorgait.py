@@ -461,6 +461,13 @@ def model_gait_note(placement: str, gait: dict, signal_cadence_spm: float | None
                      f"steps/min, {100 * off:.1f} % apart)")
     else:
         parts.append("its cadence was not checked against the sensor's own rhythm")
+    counted = gait.get("cadence_spm")
+    if _finite(counted) and _finite(rhythm) and rhythm > 0 \
+            and abs(counted - rhythm) / rhythm > CADENCE_AGREEMENT:
+        parts.append(f"the steps counted give {counted:.1f} steps/min, "
+                     f"{100 * abs(counted - rhythm) / rhythm:.0f} % off the legs' rhythm: the "
+                     "reconstructed feet's contacts, hence steps, stride and stance, are "
+                     "unreliable")
     legs = {k: v for k, v in (shank_swing_deg or {}).items() if _finite(v)}
     if _finite(signal_swing_deg) and len(legs) == 2:
         low, high = min(legs.values()), max(legs.values())

@@ -10,6 +10,7 @@ end (up the shin for an ankle sensor, as a phone strapped on the shin reads +g o
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -87,7 +88,10 @@ def get_placement(name: str | Placement) -> Placement:
     if isinstance(name, Placement):
         return name
     if name not in PRESETS:
-        raise UnknownNameError(f"unknown sensor placement {name!r}; presets: {sorted(PRESETS)}")
+        close = difflib.get_close_matches(str(name), list(PRESETS), n=2, cutoff=0.6)
+        hint = f"did you mean {' or '.join(map(repr, close))}? " if close else ""
+        raise UnknownNameError(f"unknown sensor placement {name!r}; {hint}presets: "
+                               f"{sorted(PRESETS)}")
     return PRESETS[name]
 
 

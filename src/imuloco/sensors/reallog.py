@@ -184,7 +184,8 @@ FORMAT_NAMES = ("auto", *FORMATS)
 
 
 def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
-                  platform: str | None) -> tuple[str, list[Stream]]:
+                  platform: str | None, columns: dict[str, str] | None = None
+                  ) -> tuple[str, list[Stream]]:
     """Step 1: the format (detected when ``"auto"``) and the streams the reader found."""
     if isinstance(path, (list, tuple)):
         if len(path) != 2:
@@ -194,14 +195,16 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
     path = Path(path)
     if not path.exists():
         raise MissingInputError(f"{path}: no such file or folder")
-    fmt = detect_format(path) if fmt == "auto" else fmt
+    if columns and fmt not in ("auto", "generic"):
+        raise InputError(f"a column mapping is for generic CSV logs, not {fmt}")
+    fmt = "generic" if columns else detect_format(path) if fmt == "auto" else fmt
     export = is_export(path)
     if gyro_path is not None and fmt in ("generic", "sensorlogger", "xsens"):
         raise FormatError(gyro_path, None, f"a second file, but a {fmt} log holds both signals "
                                            f"in {path.name}: give one file (many walkers: "
                                            "imuloco batch)")
     if fmt == "generic":
-        return fmt, read_generic_csv(path)
+        return fmt, read_generic_csv(path, columns)
     if fmt == "phyphox":
         streams = read_phyphox_export(path) if export else read_phyphox(path)
         if gyro_path is not None:
@@ -422,6 +425,7 @@ class LogOptions:
     max_gap: float = 0.2
     on_gap: str = "warn"
     platform: str | None = None
+    columns: dict[str, str] | None = field(default=None, hash=False)
 
     def __post_init__(self) -> None:
         for name, value, allowed in (("fmt", self.fmt, FORMAT_NAMES),
@@ -460,6 +464,9 @@ def read_log(path: str | Path | Sequence[str | Path], placement: str = "right_an
         on_gap : ``"warn"`` (report, log and interpolate across) or ``"raise"``.
         platform : Sensor Logger only, ``"android"``/``"ios"`` (default: from Metadata.csv, or
         guessed with a warning).
+        columns : a CSV's own names of the generic columns
+        (:func:`imuloco.io.sensorlog.parse_columns`: ``{"time": "timestamp", "acc_x": "ax"}``),
+        read as a generic log.
 
     Returns
     -------
@@ -481,7 +488,7 @@ def read_log(path: str | Path | Sequence[str | Path], placement: str = "right_an
 def _import(path: str | Path | Sequence[str | Path], opts: LogOptions
             ) -> tuple[Recording, LogReport]:
     fmt, streams = _read_streams(path, opts.fmt, None if opts.gyro_path is None
-                                 else Path(opts.gyro_path), opts.platform)
+                                 else Path(opts.gyro_path), opts.platform, opts.columns)
     report = LogReport(fmt, sorted({str(s.path) for s in streams}))
     report.platform = next((s.platform for s in streams if s.platform), None)
     sensors = _sensors(streams, opts.placement)
@@ -506,9 +513,16 @@ def _import(path: str | Path | Sequence[str | Path], opts: LogOptions
         signals[q], found, detected = _units(signals[q], q, unit, declared)
         setattr(report, f"{q}_unit", found)
         setattr(report, f"{q}_unit_detected", detected)
-    for g in report.gaps:
+    if len(report.gaps) == 1:
+        g = report.gaps[0]
         log.warning("%s: no samples from %.3f s to %.3f s (%.3f s gap)", report.files[0],
                     g.start, g.stop, g.stop - g.start)
+    elif report.gaps:  # one line for the file, not one each (the report lists them all)
+        worst = max(report.gaps, key=lambda g: g.stop - g.start)
+        log.warning("%s: %d gaps without samples, %.3f s in all, the longest %.3f s from "
+                    "%.3f s (each in the report's recording.gaps)", report.files[0],
+                    len(report.gaps), sum(g.stop - g.start for g in report.gaps),
+                    worst.stop - worst.start, worst.start)
     if report.gaps and opts.on_gap == "raise":
         worst = max(report.gaps, key=lambda g: g.stop - g.start)
         raise FormatError(report.files[0], None, f"{len(report.gaps)} gap(s) longer than "

@@ -524,6 +524,7 @@ def configure_logging() -> None:
     """One line per event on stderr: the server's own at INFO, websockets' own per-connection
     chatter off (a dropped viewer is one line of ours)."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", datefmt="%H:%M:%S")
+    logging.getLogger().setLevel(logging.INFO)  # also where a handler was there (the CLI's)
     logging.getLogger("websockets").setLevel(logging.WARNING)
 
 
