@@ -664,3 +664,22 @@ def test_many_gaps_are_one_warning_with_their_count(walk_rec, tmp_path, caplog):
     lines = [r.getMessage() for r in caplog.records if "gap" in r.getMessage()]
     assert len(lines) == 1 and "3 gaps without samples" in lines[0]
     assert lines[0].count(str(path)) == 1
+
+
+def test_two_phyphox_zips_read_as_accelerometer_and_gyroscope(walk_rec, tmp_path):
+    """The built-in "Acceleration with g" and "Gyroscope" experiments export a zip each; two
+    passed together read as the pair (they were refused as 'not UTF-8 text')."""
+    acc, gyr = _phyphox_rows(walk_rec)
+    for name, table in (("acc", acc), ("gyr", gyr)):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "Raw Data.csv").write_text(table)
+    pair = [_zip(tmp_path / "acc", tmp_path / "acc.zip"), _zip(tmp_path / "gyr",
+                                                               tmp_path / "gyr.zip")]
+    rec, report = read_log(pair, rate=None)
+    assert report.format == "phyphox"
+    (tmp_path / "both").mkdir()
+    (tmp_path / "both" / "Accelerometer.csv").write_text(acc)
+    (tmp_path / "both" / "Gyroscope.csv").write_text(gyr)
+    both, _ = read_log(_zip(tmp_path / "both", tmp_path / "both.zip"), rate=None)
+    np.testing.assert_array_equal(rec.acc, both.acc)
+    np.testing.assert_array_equal(rec.gyro, both.gyro)

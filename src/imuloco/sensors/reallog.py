@@ -207,8 +207,9 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
         return fmt, read_generic_csv(path, columns)
     if fmt == "phyphox":
         streams = read_phyphox_export(path) if export else read_phyphox(path)
-        if gyro_path is not None:
-            streams += read_phyphox(gyro_path)
+        if gyro_path is not None:  # a second export (zip or folder) or table
+            streams += (read_phyphox_export(gyro_path) if is_export(gyro_path)
+                        else read_phyphox(gyro_path))
         return fmt, streams
     if fmt == "sensorlogger":
         return fmt, read_sensor_logger(path if export else path.parent, platform)
