@@ -66,7 +66,7 @@ def _summary_report(confidence: bool) -> dict:
                 "stance_s": 0.66, "swing_s": 0.44, "confidence": 0.03}
                for k, t in enumerate(np.arange(0, 30, 1.1)) for foot in ("left", "right")]
     report = {"recording": {"files": ["walk.csv"], "format": "generic", "duration_s": 30.0,
-                            "source_rate_hz": 100.0},
+                            "source_rate_hz": 100.0, "gaps": [[2.0, 2.5], [20.0, 21.0]]},
               "placement": "right_ankle", "model": "a test model", "height_m": None,
               "motion": {"frames": 900, "fps": 30.0, "duration_s": 30.0},
               "gait": {"steps": 54.0, "cadence_spm": 109.1, "cadence_rhythm_spm": 109.0,
@@ -94,6 +94,7 @@ def test_summary_draws_the_plots_a_user_reads_and_explains_the_predicted_error(t
     md = (tmp_path / "walk.md").read_text()
     assert "mean 17.90 cm, 90th percentile 22.00 cm" in md
     assert "2.7 % in 1 stretch(es)" in md
+    assert "Here 1 of the 1 flagged stretches listed start within 2 s of a gap" in md
     assert "Why it can be high with few frames flagged" in md and "10 cm" in md
     assert "| steps | 54 |" in md and "| cadence (steps/min) | 109 |" in md
     assert "Gait note: model-derived: test" in md
