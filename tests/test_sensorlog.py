@@ -683,3 +683,37 @@ def test_two_phyphox_zips_read_as_accelerometer_and_gyroscope(walk_rec, tmp_path
     both, _ = read_log(_zip(tmp_path / "both", tmp_path / "both.zip"), rate=None)
     np.testing.assert_array_equal(rec.acc, both.acc)
     np.testing.assert_array_equal(rec.gyro, both.gyro)
+
+
+def test_a_phyphox_simple_experiment_names_axes_only(walk_rec, tmp_path):
+    """phyphox's "Add simple experiment" writes one table per sensor whose columns name an
+    axis and a unit ("X (m/s^2)"): the file and the unit say the quantity; a magnetometer's
+    table is left alone; a linear accelerometer's alone is refused as without gravity."""
+    acc, gyr = _phyphox_rows(walk_rec)
+
+    def axes_only(table: str) -> str:
+        head, body = table.split("\n", 1)
+        for long in ("Acceleration ", "Gyroscope "):
+            head = head.replace(f'"{long}x', '"X').replace(f'"{long}y', '"Y') \
+                .replace(f'"{long}z', '"Z')
+        return head + "\n" + body
+
+    simple, named = tmp_path / "simple", tmp_path / "named"
+    for folder, a, g in ((simple, axes_only(acc), axes_only(gyr)), (named, acc, gyr)):
+        (folder / "meta").mkdir(parents=True)
+        (folder / "meta" / "device.csv").write_text("property,value\nmodel,x\n")
+        (folder / "Accelerometer.csv").write_text(a)
+        (folder / "Gyroscope.csv").write_text(g)
+    assert '"X (m/s^2)"' in (simple / "Accelerometer.csv").read_text()
+    (simple / "Magnetometer.csv").write_text('"Time (s)","X (µT)","Y (µT)","Z (µT)"\n0,1,2,3\n')
+    rec, report = read_log(_zip(simple, tmp_path / "simple.zip"), rate=None)
+    reference, _ = read_log(_zip(named, tmp_path / "named.zip"), rate=None)
+    assert report.format == "phyphox"
+    np.testing.assert_array_equal(rec.acc, reference.acc)
+    np.testing.assert_array_equal(rec.gyro, reference.gyro)
+    linear = tmp_path / "linear"
+    linear.mkdir()
+    (linear / "linearAccelerometer.csv").write_text(axes_only(acc))
+    (linear / "Gyroscope.csv").write_text(axes_only(gyr))
+    with pytest.raises(FormatError, match="without gravity"):
+        read_log(_zip(linear, tmp_path / "linear.zip"))

@@ -394,8 +394,28 @@ def read_realworld(acc_path: str | Path, gyro_path: str | Path) -> list[Stream]:
 # phyphox
 
 _PHYPHOX = re.compile(r"^(acceleration|linear acceleration|gyroscope) ([xyz]) \((.+)\)$", re.IGNORECASE)
+# a simple experiment's table names an axis only ("X (m/s^2)"): its unit and the file's name
+# ("Accelerometer.csv", "linearAccelerometer.csv", "Gyroscope.csv") say the quantity
+_PHYPHOX_AXIS = re.compile(r"^([xyz]) \((.+)\)$", re.IGNORECASE)
 _UNITS = {"m/s^2": "m/s^2", "m/s²": "m/s^2", "g": "g", "rad/s": "rad/s", "deg/s": "deg/s",
           "°/s": "deg/s"}
+
+
+def _phyphox_column(header: str, file_name: str) -> tuple[str, str, str] | None:
+    """(quantity, axis, unit) of a phyphox column: ``"Acceleration x (m/s^2)"``, or a simple
+    experiment's ``"X (m/s^2)"`` whose unit and file (``Accelerometer.csv``,
+    ``linearAccelerometer.csv``, ``Gyroscope.csv``) say the quantity; None for other
+    columns (time, magnitudes, a magnetometer's)."""
+    m = _PHYPHOX.match(header)
+    if m:
+        return m.group(1).lower(), m.group(2).lower(), m.group(3).strip()
+    m = _PHYPHOX_AXIS.match(header)
+    unit = _UNITS.get(m.group(2).strip()) if m else None
+    if unit is None:
+        return None
+    kind = ("gyroscope" if unit in ("rad/s", "deg/s") else
+            "linear acceleration" if "linear" in file_name.lower() else "acceleration")
+    return kind, m.group(1).lower(), m.group(2).strip()
 
 
 def read_phyphox(path: str | Path, data: BinaryIO | None = None) -> list[Stream]:
@@ -414,21 +434,22 @@ def read_phyphox(path: str | Path, data: BinaryIO | None = None) -> list[Stream]
         if h.lower().startswith("time (s)"):
             last_time = i
             continue
-        m = _PHYPHOX.match(h)
-        if not m:
+        column = _phyphox_column(h, path.name)
+        if column is None:
             continue
-        kind = m.group(1).lower()
+        kind, axis, unit_text = column
         if kind == "linear acceleration":
             raise FormatError(path, 1, f"column {h!r} is acceleration without gravity; export "
-                                       "'Acceleration with g' instead")
+                                       "'Acceleration with g' (in a simple experiment: "
+                                       "'Accelerometer') instead")
         q = "acc" if kind == "acceleration" else "gyro"
-        unit = _UNITS.get(m.group(3).strip())
+        unit = _UNITS.get(unit_text)
         if unit is None:
-            raise FormatError(path, 1, f"column {h!r}: unknown unit {m.group(3)!r}; expected "
+            raise FormatError(path, 1, f"column {h!r}: unknown unit {unit_text!r}; expected "
                                        f"one of {sorted(set(_UNITS))}")
         if last_time is None:
             raise FormatError(path, 1, f"column {h!r} has no 'Time (s)' column before it")
-        found.setdefault(q, {})[m.group(2).lower()] = i
+        found.setdefault(q, {})[axis] = i
         units[q], times[q] = unit, last_time
     if not found:
         raise FormatError(path, 1, "expected phyphox columns 'Time (s)', 'Acceleration x "
@@ -548,8 +569,8 @@ def read_phyphox_export(path: str | Path) -> list[Stream]:
     with Export(path) as ex:
         for name in ex.names():
             h = ex.header(name)
-            if not name.lower().endswith(".csv") or "time (s)" not in h or \
-                    not ("acceleration" in h or "gyroscope" in h):
+            if not name.lower().endswith(".csv") or "time (s)" not in h or not any(
+                    _phyphox_column(c.strip().strip('"'), name) for c in re.split(r"[,;\t]", h)):
                 continue
             try:
                 streams += read_phyphox(ex.label(name), ex.open(name))
