@@ -320,6 +320,8 @@ def write_summary(report: dict[str, Any], md_path: str | Path, overwrite: bool =
                 strides, path, swing, report.get("signal_swing_deg"), overwrite=True)
             draw["contacts"] = lambda path: gaitplots.plot_contacts(strides, path,
                                                                     overwrite=True)
+        elif "pieces" in report and "strides" not in report:
+            note = "No stride plots: a reconstruction in pieces keeps no per-stride rows."
         else:
             note = "No stride plots: no stride was found."
         conf = report.get("confidence") or {}
