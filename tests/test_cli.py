@@ -258,3 +258,14 @@ def test_a_placement_without_a_shipped_model_warns_what_it_falls_back_to(caplog)
     text = caplog.text
     assert "no shipped model for right_thigh" in text and "right_ankle" in text
     assert "docs/results/placements/" in text and "not to be trusted" in text
+
+
+@pytest.mark.parametrize("command", ["reconstruct", "batch"])
+def test_a_bad_column_mapping_is_refused_before_any_work(command, tmp_path):
+    log = tmp_path / "other.csv"
+    log.write_text("timestamp,ax\n0,1\n")
+    out = ["-o", str(tmp_path / "x.bvh")] if command == "reconstruct" else [
+        "--out", str(tmp_path / "out")]
+    res = CliRunner().invoke(cli, [command, str(log), *out, "--columns", "gyro_q=gz"])
+    assert res.exit_code != 0 and "'gyro_q=gz': expected NAME=COLUMN" in res.output
+    assert not (tmp_path / "out").exists() and not (tmp_path / "x.bvh").exists()

@@ -193,6 +193,22 @@ skeleton_option = click.option(
     "--skeleton", "skeleton", type=_existing_file(), default=None,
     help="A BVH of your rig: the motion is retargeted onto it (its joint names, offsets and "
          "rest pose) [default: the model's training skeleton].")
+columns_option = click.option(
+    "--columns", "columns", default=None, metavar="NAME=COLUMN,...",
+    callback=lambda ctx, param, value: _parse_columns(value),
+    help="A CSV's own column names, read as a generic log: e.g. "
+         "time=timestamp,acc_x=ax,acc_y=ay,acc_z=az,gyro_x=gx,gyro_y=gy,gyro_z=gz (units and "
+         "the time unit are detected).")
+
+
+def _parse_columns(value: str | None) -> dict[str, str] | None:
+    """``--columns`` as a mapping (:func:`imuloco.io.sensorlog.parse_columns`), before any
+    work."""
+    from imuloco.io.sensorlog import parse_columns
+
+    return parse_columns(value) if value else None
+
+
 calibrate_option = click.option("--no-calibrate", is_flag=True,
                                 help="Skip the phone-on-leg calibration.")
 # how motion files are read (info, phases, bench, train): read_bvh's options
@@ -718,10 +734,7 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @skeleton_option
 @calibrate_option
 @platform_option
-@click.option("--columns", "columns_text", default=None, metavar="NAME=COLUMN,...",
-              help="A CSV's own column names, read as a generic log: e.g. "
-                   "time=timestamp,acc_x=ax,acc_y=ay,acc_z=az,gyro_x=gx,gyro_y=gy,gyro_z=gz "
-                   "(units and the time unit are detected).")
+@columns_option
 @click.option("--piece-seconds", type=_Range(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html/--skeleton).")
@@ -733,7 +746,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                 video_seconds: float | None, html_path: Path | None,
                 report_path: Path | None, summary_path: Path | None, skeleton: Path | None,
                 no_calibrate: bool,
-                platform: str | None, columns_text: str | None, piece_seconds: float | None,
+                platform: str | None, columns: dict[str, str] | None,
+                piece_seconds: float | None,
                 height: float | None, force: bool,
                 units: str) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH.
@@ -745,10 +759,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     from imuloco.app.pipeline import reconstruct_file, render_outputs
     from imuloco.io.atomic import atomic_write, check_outputs
     from imuloco.io.bvh import write_bvh
-    from imuloco.io.sensorlog import parse_columns
-
-    columns = parse_columns(columns_text) if columns_text else None  # before any work
-    if video is not None and video.suffix.lower() not in (".mp4", ".gif"):
+    if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
         raise click.BadParameter(f"{video}: expected a .mp4 or .gif file", param_hint="--video")
     from imuloco.app.summary import summary_paths, write_summary
 
@@ -959,6 +970,7 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
                    "walkers.parquet. One file can hold the whole study: rows without a "
                    "recording here are counted, not refused, unless close to a recording "
                    "without a row (a typo).")
+@columns_option
 @click.option("--force", is_flag=True,
               help="Redo recordings whose outputs are complete (a re-run skips them).")
 @_units_option
@@ -966,7 +978,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
           jobs: int | None, scheduler: str | None, model_path: Path | None,
           method_name: str | None, placement: str, fmt: str, skeleton: Path | None,
           no_calibrate: bool, platform: str | None, height: float | None,
-          walkers_file: Path | None, force: bool, units: str) -> None:
+          walkers_file: Path | None, columns: dict[str, str] | None, force: bool,
+          units: str) -> None:
     """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
     recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
     finished recordings, redoes walkers whose height changed).
@@ -982,7 +995,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
                         calibrate=not no_calibrate, force=force, progress=True,
                         scheduler=scheduler, platform=platform, unit=units,
-                        skeleton=skeleton, height_m=height, walkers=walkers_file)
+                        skeleton=skeleton, height_m=height, walkers=walkers_file,
+                        columns=columns)
     click.echo(f"model: {summary['model']}", err=True)
     click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
     for r in summary["recordings"]:

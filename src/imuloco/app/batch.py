@@ -180,7 +180,8 @@ def worker_model(sha256: str, data: bytes):
 def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
                     platform: str | None = None, height_m: float | None = None,
-                    unit: str = "cm", skeleton: str | None = None) -> dict[str, Any]:
+                    unit: str = "cm", skeleton: str | None = None,
+                    columns: dict[str, str] | None = None) -> dict[str, Any]:
     """Reconstruct one recording (a path read here), write ``NAME.bvh`` (lengths in ``unit``)
     then ``NAME.json``.
 
@@ -196,7 +197,7 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
             motion, recon = reconstruct_file(recording, placement=placement, fmt=fmt,
                                              calibrate=calibrate, fitted=fitted,
                                              platform=platform, skeleton=skeleton,
-                                             height=height_m)
+                                             height=height_m, columns=columns)
         report = recon.to_json()
         report["warnings"] = [w.getMessage() for w in warned]
         report["seconds"] = round(time.perf_counter() - t0, 3)
@@ -372,7 +373,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
               force: bool = False, progress: bool = False, fitted=None, scheduler=None,
               platform: str | None = None, height_m: float | None = None, retries: int = 2,
               unit: str = "cm", skeleton: str | Path | None = None,
-              walkers: str | Path | None = None) -> dict[str, Any]:
+              walkers: str | Path | None = None, columns: dict[str, str] | None = None
+              ) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
     Parameters
@@ -397,6 +399,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     walkers : a CSV of the walkers' heights and the study's own columns, by output name, that
         may hold walkers of other batches (:func:`imuloco.app.walkers.read_walkers`; read
         before starting).
+    columns : a CSV's own names of the generic log's columns
+        (:func:`imuloco.io.sensorlog.parse_columns`), for every recording.
 
     Returns
     -------
@@ -473,6 +477,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                                     placement=placement, fmt=fmt, calibrate=calibrate,
                                     platform=platform, height_m=heights[n], unit=unit,
                                     skeleton=None if skeleton is None else str(skeleton),
+                                    columns=columns,
                                     key=f"imuloco-batch-{job}-{n}", retries=retries,
                                     pure=False)
                 futures.append(fut)
