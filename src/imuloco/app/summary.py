@@ -184,7 +184,8 @@ def caveats(report: dict[str, Any]) -> list[str]:
             "held-out styles of the bundled sample such a fit is 6-8 cm off (MPJPE) with feet "
             "sliding 94-188 cm/s (docs/results/placements/): a rough animation, and its gait "
             "is not to be trusted.")
-    if report.get("height_m") is None:
+    model_gait = str(report.get("gait_source", "")).startswith("the reconstructed motion")
+    if report.get("height_m") is None and model_gait:
         out.append("**Lengths and speeds are on the model's skeleton** (1.63 m tall for the "
                    "shipped models); `--height METRES` puts them in the wearer's proportions.")
     return out
@@ -213,7 +214,11 @@ def _gait_lines(report: dict[str, Any]) -> list[str]:
                   f"| shank swing of the raw signal (deg) | {_value(report['signal_swing_deg'])} |"]
     if p.get("foot_skate_cm_s") is not None:
         lines.append(f"| foot skate (cm/s) | {_value(p['foot_skate_cm_s'])} |")
-    lines += ["", f"Gait note: {report.get('gait_note') or '–'}", ""]
+    note = report.get("gait_note") or (
+        "measured by the sensor itself (see the source above and the caveats)"
+        if not str(report.get("gait_source", "")).startswith("the reconstructed motion")
+        else "–")
+    lines += ["", f"Gait note: {note}", ""]
     return lines
 
 
