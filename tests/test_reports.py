@@ -139,3 +139,16 @@ def test_model_gait_note_checks_the_legs_against_the_shanks_own_swing():
                             108.6)
     assert "agrees with" in steps and "141.2 steps/min, 30 % off the legs' rhythm" in steps
     assert "nothing model-free checks them" in off
+
+
+def test_summary_of_a_shoe_sensor_says_its_gait_is_measured(tmp_path):
+    from imuloco.app.summary import summary_markdown
+
+    report = _summary_report(False) | {
+        "placement": "right_foot", "gait_note": None, "signal_swing_deg": None,
+        "gait_source": "the right_foot sensor's signal: gaitmap RtsKalman ZUPT trajectory"}
+    md = summary_markdown(report, "foot")
+    assert "A shoe sensor measures gait itself" in md and "shin" not in md
+    assert "Gait note: measured by the sensor itself" in md
+    assert "--height METRES" not in md  # its strides are in real metres
+    assert "gives no per-frame confidence" not in md and "no confidence here" in md
