@@ -101,6 +101,7 @@ def browser():
                 "--window-size=1000,700", "--disable-extensions", "--no-first-run"):
         opts.add_argument(arg)
     opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    opts.accept_insecure_certs = True  # `live --https`'s self-signed certificate, on loopback
     driver = webdriver.Chrome(service=Service(driver_path), options=opts)
     driver.set_page_load_timeout(60)
     yield driver

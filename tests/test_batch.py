@@ -555,3 +555,33 @@ def test_a_stuck_recording_becomes_an_error_row(logs, fitted, client, tmp_path, 
     rows = summary["recordings"]
     assert [r["status"] for r in rows] == ["error", "ok"]
     assert "TimeoutError: no result after 2 s" in rows[0]["error"]
+
+
+def test_batch_never_reads_its_own_outputs_and_relays_its_workers_warnings(
+        fitted, client, tmp_path, sample_db, caplog):
+    """A re-run with ``--glob '*/*.csv'`` over a study whose --out is among the folders leaves
+    out the batch's own summary.csv; a Sensor Logger export without Metadata.csv warns that
+    Android is assumed, in the walker's report and on the batch's log (relayed from the
+    worker, where no one reads it)."""
+    from tests.test_sensorlog import _sensor_logger
+
+    rec = simulate(next(c for c in sample_db.clips if c.name == WALKERS[0]), ["right_ankle"],
+                   100.0, "phone", seed=5)
+    _sensor_logger(tmp_path / "alice", rec, total=True, ios=False)
+    (tmp_path / "alice" / "Metadata.csv").unlink()
+    out = tmp_path / "out"
+    with caplog.at_level("WARNING"):
+        run_batch(find_recordings([], [str(tmp_path / "*" / "*.csv")], out_dir=out), out,
+                  fitted=fitted, scheduler=client)
+    assert (out / "summary.csv").is_file()
+    report = json.loads((out / "alice.json").read_text())
+    assert any("assuming Android" in w for w in report["warnings"])
+    relayed = [r for r in caplog.records if r.name == "imuloco.app.batch"]
+    assert any(r.getMessage().startswith("alice: ") and "assuming Android" in r.getMessage()
+               for r in relayed)
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        again = find_recordings([], [str(tmp_path / "*" / "*.csv")], out_dir=out)
+    assert again == [tmp_path / "alice"]
+    assert "left out 1 file(s) this batch writes" in caplog.text and "summary.csv" in caplog.text
+    assert find_recordings([out / "summary.csv"]) == [out / "summary.csv"]  # no out_dir: kept

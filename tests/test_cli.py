@@ -214,3 +214,59 @@ def test_bench_load_takes_comma_separated_folders(tmp_path, monkeypatch):
     res = CliRunner().invoke(cli, ["bench", "--load", f"{a},{tmp_path / 'c'}", "--out",
                                    str(tmp_path / "o")])
     assert res.exit_code == 2 and "--load" in res.output and "does not exist" in res.output
+
+
+def test_warnings_print_on_their_own_lines_once_per_kind_with_a_count(capsys):
+    """The console channel: a warning never ends up on a progress bar's line, and repeats of
+    a kind are one count at the end."""
+    import logging
+
+    from tqdm import tqdm
+
+    from imuloco.app.console import console
+
+    log = logging.getLogger("imuloco.test")
+    with console() as handler:
+        bar = tqdm(total=3, desc="work")
+        for k in range(3):
+            log.warning("%s: no samples from %d s", "/long/path/walk.csv", k)
+            bar.update()
+        log.warning("another kind")
+        bar.close()
+    err = capsys.readouterr().err
+    lines = err.replace("\r", "\n").splitlines()
+    assert "/long/path/walk.csv: no samples from 0 s" in lines
+    assert "another kind" in lines
+    assert err.count("/long/path/walk.csv") == 2  # the first, then the count's line
+    assert "(2 more warnings like: /long/path/walk.csv: no samples from 0 s)" in lines
+    assert handler.repeats == {("imuloco.test", "%s: no samples from %d s"): 2}
+
+
+def test_placement_typo_says_what_was_meant_before_reading_anything(tmp_path):
+    res = CliRunner().invoke(cli, ["reconstruct", str(tmp_path), "--placement", "right_thig",
+                                   "-o", str(tmp_path / "x.bvh")])
+    assert res.exit_code != 0
+    assert "did you mean 'right_thigh'" in res.output
+
+
+def test_a_placement_without_a_shipped_model_warns_what_it_falls_back_to(caplog):
+    pytest.importorskip("torch")
+    from imuloco.app.pipeline import choose_model
+
+    with caplog.at_level("WARNING"):
+        choice = choose_model(placement="right_thigh")
+    assert choice.source == "fitted" and choice.method.name == "ridge"
+    text = caplog.text
+    assert "no shipped model for right_thigh" in text and "right_ankle" in text
+    assert "docs/results/placements/" in text and "not to be trusted" in text
+
+
+@pytest.mark.parametrize("command", ["reconstruct", "batch"])
+def test_a_bad_column_mapping_is_refused_before_any_work(command, tmp_path):
+    log = tmp_path / "other.csv"
+    log.write_text("timestamp,ax\n0,1\n")
+    out = ["-o", str(tmp_path / "x.bvh")] if command == "reconstruct" else [
+        "--out", str(tmp_path / "out")]
+    res = CliRunner().invoke(cli, [command, str(log), *out, "--columns", "gyro_q=gz"])
+    assert res.exit_code != 0 and "'gyro_q=gz': expected NAME=COLUMN" in res.output
+    assert not (tmp_path / "out").exists() and not (tmp_path / "x.bvh").exists()

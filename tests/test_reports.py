@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from imuloco.app import pipeline
@@ -136,3 +137,98 @@ def test_write_outputs_writes_the_set_and_refuses_to_overwrite(tmp_path, log_fil
     outputs.check(force=True)
     with pytest.raises(ImulocoError, match="overwrite an input"):
         Outputs(tmp_path / "out.bvh", log_file).check(force=True, inputs=[log_file])
+
+
+# ---- the readable summary beside a report (reconstruct --report NAME.json -> NAME.md) ------
+def _summary_report(confidence: bool) -> dict:
+    strides = [{"foot": foot, "start_s": t + (0.55 if foot == "left" else 0.0),
+                "duration_s": 1.1, "length_m": 1.3 + 0.01 * k, "speed_mps": 1.2,
+                "stance_s": 0.66, "swing_s": 0.44, "confidence": 0.03}
+               for k, t in enumerate(np.arange(0, 30, 1.1)) for foot in ("left", "right")]
+    report = {"recording": {"files": ["walk.csv"], "format": "generic", "duration_s": 30.0,
+                            "source_rate_hz": 100.0, "gaps": [[2.0, 2.5], [20.0, 21.0]]},
+              "placement": "right_ankle", "model": "a test model", "height_m": None,
+              "motion": {"frames": 900, "fps": 30.0, "duration_s": 30.0},
+              "gait": {"steps": 54.0, "cadence_spm": 109.1, "cadence_rhythm_spm": 109.0,
+                       "stride_length_m": 1.4, "speed_mps": 1.27},
+              "gait_source": "the reconstructed motion", "gait_note": "model-derived: test",
+              "strides": strides, "signal_cadence_spm": 108.8, "signal_swing_deg": 74.0,
+              "plausibility": {"left_shank_swing_deg": 70.0, "right_shank_swing_deg": 72.0},
+              "confidence": {"available": False, "note": "no confidence here"}}
+    if confidence:
+        report["confidence"] = {
+            "available": True, "mean_error_m": 0.179, "p90_error_m": 0.22, "max_error_m": 0.39,
+            "unreliable_fraction": 0.027, "unreliable_segments": [[3.0, 4.5]],
+            "unreliable_segments_total": 1, "error_m_bin_s": 1,
+            "error_m_per_second": [0.15 + 0.001 * k for k in range(30)], "note": "calibrated"}
+    return report
+
+
+def test_summary_draws_the_plots_a_user_reads_and_explains_the_predicted_error(tmp_path):
+    pytest.importorskip("matplotlib")
+    from imuloco.app.summary import write_summary
+
+    written = write_summary(_summary_report(True), tmp_path / "walk.md")
+    assert [p.name for p in written] == ["walk.md", "walk-strides.png", "walk-symmetry.png",
+                                         "walk-contacts.png", "walk-error.png"]
+    md = (tmp_path / "walk.md").read_text()
+    assert "mean 17.90 cm, 90th percentile 22.00 cm" in md
+    assert "2.7 % in 1 stretch(es)" in md
+    assert "Here 1 of the 1 flagged stretches listed start within 2 s of a gap" in md
+    assert "Why it can be high with few frames flagged" in md and "10 cm" in md
+    assert "| steps | 54 |" in md and "| cadence (steps/min) | 109 |" in md
+    assert "Gait note: model-derived: test" in md
+    assert "docs/results/real/shin-stride/README.md" in md  # the shin caveat's evidence
+    assert "--height METRES" in md  # lengths on the model's skeleton
+    # nothing is replaced without overwrite
+    from imuloco.errors import ImulocoError
+
+    with pytest.raises(ImulocoError, match="walk"):
+        write_summary(_summary_report(True), tmp_path / "walk.md")
+
+
+def test_summary_error_plot_draws_the_seconds_and_flagged_stretches(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    from imuloco.viz import gaitplots
+
+    saved = {}
+    real_save = gaitplots._save
+    monkeypatch.setattr(gaitplots, "_save", lambda fig, path, overwrite: (
+        saved.setdefault("fig", fig), real_save(fig, path, overwrite))[1])
+    gaitplots.plot_predicted_error([0.1, None, 0.3], 2.0, tmp_path / "e.png", [[1.0, 2.0]])
+    fig = saved["fig"]
+    ax = fig.axes[0]
+    line = ax.get_lines()[0]
+    np.testing.assert_allclose(line.get_xdata(), [1.0, 3.0, 5.0])  # bin centres
+    np.testing.assert_allclose(line.get_ydata(), [10.0, np.nan, 30.0])  # cm
+    assert "flagged unreliable" in [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def test_model_gait_note_checks_the_legs_against_the_shanks_own_swing():
+    from imuloco.measures.sensorgait import model_gait_note
+
+    gait = {"cadence_rhythm_spm": 101.0}
+    short = model_gait_note("right_ankle", gait, 100.8, 79.0, {"left": 44.0, "right": 66.0})
+    assert short.startswith("model-derived") and "0.2 % apart" in short
+    assert "likely read short" in short and "shin-stride" in short
+    even = model_gait_note("right_ankle", gait, 100.8, 74.0, {"left": 73.0, "right": 74.0})
+    assert "swing as the sensor says" in even
+    off = model_gait_note("right_thigh", {"cadence_rhythm_spm": 141.0}, 109.0)
+    assert "differs from the sensor's own rhythm" in off
+    steps = model_gait_note("right_thigh", {"cadence_rhythm_spm": 108.9, "cadence_spm": 141.2},
+                            108.6)
+    assert "agrees with" in steps and "141.2 steps/min, 30 % off the legs' rhythm" in steps
+    assert "nothing model-free checks them" in off
+
+
+def test_summary_of_a_shoe_sensor_says_its_gait_is_measured(tmp_path):
+    from imuloco.app.summary import summary_markdown
+
+    report = _summary_report(False) | {
+        "placement": "right_foot", "gait_note": None, "signal_swing_deg": None,
+        "gait_source": "the right_foot sensor's signal: gaitmap RtsKalman ZUPT trajectory"}
+    md = summary_markdown(report, "foot")
+    assert "A shoe sensor measures gait itself" in md and "shin" not in md
+    assert "Gait note: measured by the sensor itself" in md
+    assert "--height METRES" not in md  # its strides are in real metres
+    assert "gives no per-frame confidence" not in md and "no confidence here" in md

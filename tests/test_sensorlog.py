@@ -672,3 +672,98 @@ def test_blank_lines_between_rows_are_read_without_the_line_loop(walk_rec, tmp_p
     assert len(table) == len(lines) - 1
     assert list(rows[:4]) == [3, 4, 7, 8] and rows[-1] == len(lines) + 3
     np.testing.assert_array_equal(table[0], [float(x) for x in lines[1].split(",")])
+
+
+def test_a_csv_with_its_own_column_names_reads_through_a_mapping(walk_rec, tmp_path):
+    """``--columns time=timestamp,acc_x=ax,...``: another app's CSV (milliseconds, extra
+    columns, other names) reads as the generic log it holds; a bad mapping names the fault."""
+    from imuloco.errors import UnknownNameError
+    from imuloco.io.sensorlog import parse_columns
+
+    t = walk_rec.times * 1000.0  # milliseconds, detected as for any log
+    body = np.column_stack([t, walk_rec.acc[:, 0], walk_rec.gyro[:, 0], np.zeros(len(t))])
+    path = tmp_path / "other.csv"
+    np.savetxt(path, body, delimiter=",", header="timestamp,ax,ay,az,gx,gy,gz,mag",
+               comments="", fmt="%.6f")
+    with pytest.raises(FormatError, match="--columns"):
+        read_log(path)
+    columns = parse_columns("time=timestamp, acc_x=ax,acc_y=ay,acc_z=az,gyro_x=gx,gyro_y=gy,"
+                            "gyro_z=gz")
+    rec, report = read_log(path, rate=None, columns=columns)
+    reference, _ = read_log(write_generic_csv(walk_rec, tmp_path / "walk.csv"), rate=None)
+    assert report.format == "generic" and report.time_unit == "ms"
+    np.testing.assert_allclose(rec.acc, reference.acc, atol=1e-5)
+    np.testing.assert_allclose(rec.gyro, reference.gyro, atol=1e-5)
+    with pytest.raises(FormatError, match=r"missing column\(s\) \['acc_y'"):
+        read_log(path, columns=parse_columns("time=timestamp,acc_x=ax"))
+    for bad in ("time", "gyro_q=gz", "time=a,time=b"):
+        with pytest.raises(UnknownNameError, match="NAME=COLUMN"):
+            parse_columns(bad)
+
+
+def test_many_gaps_are_one_warning_with_their_count(walk_rec, tmp_path, caplog):
+    keep = np.ones(walk_rec.num_samples, bool)
+    for start in (100, 300, 500):  # three 0.5 s holes
+        keep[start:start + 50] = False
+    holes = Recording(walk_rec.times[keep], walk_rec.acc[keep], walk_rec.gyro[keep],
+                      walk_rec.placements)
+    path = write_generic_csv(holes, tmp_path / "holes.csv")
+    with caplog.at_level("WARNING"):
+        _, report = read_log(path)
+    assert len(report.gaps) == 3
+    lines = [r.getMessage() for r in caplog.records if "gap" in r.getMessage()]
+    assert len(lines) == 1 and "3 gaps without samples" in lines[0]
+    assert lines[0].count(str(path)) == 1
+
+
+def test_two_phyphox_zips_read_as_accelerometer_and_gyroscope(walk_rec, tmp_path):
+    """The built-in "Acceleration with g" and "Gyroscope" experiments export a zip each; two
+    passed together read as the pair (they were refused as 'not UTF-8 text')."""
+    acc, gyr = _phyphox_rows(walk_rec)
+    for name, table in (("acc", acc), ("gyr", gyr)):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "Raw Data.csv").write_text(table)
+    pair = [_zip(tmp_path / "acc", tmp_path / "acc.zip"), _zip(tmp_path / "gyr",
+                                                               tmp_path / "gyr.zip")]
+    rec, report = read_log(pair, rate=None)
+    assert report.format == "phyphox"
+    (tmp_path / "both").mkdir()
+    (tmp_path / "both" / "Accelerometer.csv").write_text(acc)
+    (tmp_path / "both" / "Gyroscope.csv").write_text(gyr)
+    both, _ = read_log(_zip(tmp_path / "both", tmp_path / "both.zip"), rate=None)
+    np.testing.assert_array_equal(rec.acc, both.acc)
+    np.testing.assert_array_equal(rec.gyro, both.gyro)
+
+
+def test_a_phyphox_simple_experiment_names_axes_only(walk_rec, tmp_path):
+    """phyphox's "Add simple experiment" writes one table per sensor whose columns name an
+    axis and a unit ("X (m/s^2)"): the file and the unit say the quantity; a magnetometer's
+    table is left alone; a linear accelerometer's alone is refused as without gravity."""
+    acc, gyr = _phyphox_rows(walk_rec)
+
+    def axes_only(table: str) -> str:
+        head, body = table.split("\n", 1)
+        for long in ("Acceleration ", "Gyroscope "):
+            head = head.replace(f'"{long}x', '"X').replace(f'"{long}y', '"Y') \
+                .replace(f'"{long}z', '"Z')
+        return head + "\n" + body
+
+    simple, named = tmp_path / "simple", tmp_path / "named"
+    for folder, a, g in ((simple, axes_only(acc), axes_only(gyr)), (named, acc, gyr)):
+        (folder / "meta").mkdir(parents=True)
+        (folder / "meta" / "device.csv").write_text("property,value\nmodel,x\n")
+        (folder / "Accelerometer.csv").write_text(a)
+        (folder / "Gyroscope.csv").write_text(g)
+    assert '"X (m/s^2)"' in (simple / "Accelerometer.csv").read_text()
+    (simple / "Magnetometer.csv").write_text('"Time (s)","X (µT)","Y (µT)","Z (µT)"\n0,1,2,3\n')
+    rec, report = read_log(_zip(simple, tmp_path / "simple.zip"), rate=None)
+    reference, _ = read_log(_zip(named, tmp_path / "named.zip"), rate=None)
+    assert report.format == "phyphox"
+    np.testing.assert_array_equal(rec.acc, reference.acc)
+    np.testing.assert_array_equal(rec.gyro, reference.gyro)
+    linear = tmp_path / "linear"
+    linear.mkdir()
+    (linear / "linearAccelerometer.csv").write_text(axes_only(acc))
+    (linear / "Gyroscope.csv").write_text(axes_only(gyr))
+    with pytest.raises(FormatError, match="without gravity"):
+        read_log(_zip(linear, tmp_path / "linear.zip"))

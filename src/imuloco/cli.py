@@ -30,17 +30,20 @@ class Commands(click.Group):
     writing FILE``)."""
 
     def invoke(self, ctx: click.Context) -> Any:
-        try:
-            return super().invoke(ctx)
-        except ImulocoError as e:
-            _end_progress_bars()
-            raise click.ClickException(str(e)) from None
-        except OSError as e:  # a full disk outside imuloco.io.atomic's writes (a cache, ...)
-            if e.errno not in FULL:
-                raise
-            _end_progress_bars()
-            where = f" writing {e.filename}" if e.filename else ""
-            raise click.ClickException(f"{os.strerror(e.errno).lower()}{where}") from None
+        from imuloco.app.console import console  # the warning channel: on the CLI only
+
+        with console():  # warnings on their own lines, each kind once
+            try:
+                return super().invoke(ctx)
+            except ImulocoError as e:
+                _end_progress_bars()
+                raise click.ClickException(str(e)) from None
+            except OSError as e:  # a full disk outside imuloco.io.atomic's writes (a cache, ...)
+                if e.errno not in FULL:
+                    raise
+                _end_progress_bars()
+                where = f" writing {e.filename}" if e.filename else ""
+                raise click.ClickException(f"{os.strerror(e.errno).lower()}{where}") from None
 
 
 def _end_progress_bars() -> None:
@@ -194,6 +197,7 @@ model_options = _options(
 # reading phone logs (reconstruct, batch, live --replay): imuloco.sensors.reallog
 log_options = _options(
     click.option("--placement", default="right_ankle", show_default=True,
+                 callback=_placements,
                  help="Where the phone was worn (placement preset): right_ankle or "
                       "left_ankle for a shin, right_foot or left_foot for a shoe IMU, "
                       "lower_back at L5 (these three need the [gait] extra)."),
@@ -219,6 +223,22 @@ rig_option = click.option(
          "each): bvh-default (the model's joint names), mixamo, unreal (UE4 mannequin), unity "
          "(Humanoid), or model (the training skeleton's own rest pose) [default: bvh-default; "
          "not with --skeleton].")
+columns_option = click.option(
+    "--columns", "columns", default=None, metavar="NAME=COLUMN,...",
+    callback=lambda ctx, param, value: _parse_columns(value),
+    help="A CSV's own column names, read as a generic log: e.g. "
+         "time=timestamp,acc_x=ax,acc_y=ay,acc_z=az,gyro_x=gx,gyro_y=gy,gyro_z=gz (units and "
+         "the time unit are detected).")
+
+
+def _parse_columns(value: str | None) -> dict[str, str] | None:
+    """``--columns`` as a mapping (:func:`imuloco.io.sensorlog.parse_columns`), before any
+    work."""
+    from imuloco.io.sensorlog import parse_columns
+
+    return parse_columns(value) if value else None
+
+
 calibrate_option = click.option("--no-calibrate", is_flag=True,
                                 help="Skip the phone-on-leg calibration.")
 # how motion files are read (info, phases, bench, train): read_bvh's options
@@ -737,11 +757,16 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @click.option("--html", "html_path", type=_file(), default=None,
               help="Also write the interactive HTML viewer.")
 @click.option("--report", "report_path", type=_file(), default=None,
-              help="Also write the report (gait, checks) as JSON (a .json file).")
+              help="Also write the report (gait, checks) as JSON (a .json file), and beside it "
+                   "NAME.md, a readable summary with plots (NAME-*.png; plots need the [viz] "
+                   "extra).")
+@click.option("--summary", "summary_path", type=_file(), default=None,
+              help="Write the readable summary here instead of beside --report (.md).")
 @skeleton_option
 @rig_option
 @calibrate_option
 @platform_option
+@columns_option
 @click.option("--piece-seconds", type=_Range(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html/--skeleton).")
@@ -751,8 +776,9 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
                 placement: str, fmt: str, output: Path, video: Path | None,
                 video_seconds: float | None, html_path: Path | None,
-                report_path: Path | None, skeleton: Path | None, rig: str | None,
-                no_calibrate: bool, platform: str | None, piece_seconds: float | None,
+                report_path: Path | None, summary_path: Path | None, skeleton: Path | None,
+                rig: str | None, no_calibrate: bool, platform: str | None,
+                columns: dict[str, str] | None, piece_seconds: float | None,
                 height: float | None, force: bool, units: str) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH or glTF.
 
@@ -763,6 +789,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     from imuloco.app.export import check_motion_output, check_report_output
     from imuloco.app.outputs import Outputs, write_outputs
     from imuloco.app.pipeline import reconstruct_file
+    from imuloco.app.summary import summary_paths, write_summary
+    from imuloco.io.atomic import check_outputs
 
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
         raise click.BadParameter(f"{video}: expected a .mp4 or .gif file", param_hint="--video")
@@ -770,9 +798,12 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     if report_path is not None:
         check_report_output(report_path)
     preset = _preset(rig, skeleton)
+    if summary_path is None and report_path is not None:
+        summary_path = report_path.with_suffix(".md")
+    summaries = [] if summary_path is None else list(summary_paths(summary_path).values())
+    inputs = [*recording, *([model_path] if model_path else []), *([skeleton] if skeleton else [])]
     outputs = Outputs(output, report_path, video, html_path, video_seconds, units, preset)
-    outputs.check(force, inputs=[*recording, *([model_path] if model_path else []),
-                                 *([skeleton] if skeleton else [])])
+    check_outputs([output, video, html_path, report_path, *summaries], force, inputs=inputs)
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
         if video or html_path or skeleton or output.suffix.lower() != ".bvh":
@@ -783,8 +814,10 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         pieces = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
                                     not no_calibrate, platform=platform, overwrite=True,
                                     piece_s=piece_seconds, progress=True, unit=units,
-                                    height=height, rig=preset)
+                                    height=height, rig=preset, columns=columns)
         written = write_outputs(outputs, pieces)  # the report: the BVH is written
+        if summary_path:
+            written.append(write_summary(pieces.to_json(), summary_path, overwrite=True)[0])
         m, c = pieces.motion, pieces["confidence"]
         click.echo(f"{m.frames} frames at {m.fps:g} fps ({m.duration_s:.1f} s) in "
                    f"{pieces.pieces.count} piece(s)" + _confidence_text(c) + "; wrote "
@@ -794,9 +827,12 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
                                       progress=True, platform=platform, skeleton=skeleton,
-                                      height=height)
+                                      height=height, columns=columns)
     click.echo(f"model: {report.model}", err=True)
     written = write_outputs(outputs, report, motion, progress=True)
+    if summary_path:
+        written.append(write_summary(report.to_json(), summary_path, overwrite=True,
+                                     name=motion.name)[0])
     g = report.gait.to_json()
     rhythm = (report.motion_gait or report.gait).to_json()["cadence_rhythm_spm"]  # the legs'
     click.echo(f"{motion.num_frames} frames at {motion.fps:g} fps ({motion.duration:.1f} s); "
@@ -970,6 +1006,7 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
                    "walkers.parquet. One file can hold the whole study: rows without a "
                    "recording here are counted, not refused, unless close to a recording "
                    "without a row (a typo).")
+@columns_option
 @click.option("--force", is_flag=True,
               help="Redo recordings whose outputs are complete (a re-run skips them).")
 @click.option("--timeout", type=_Range(0, min_open=True), default=None, metavar="SECONDS",
@@ -980,7 +1017,8 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
           jobs: int | None, scheduler: str | None, model_path: Path | None,
           method_name: str | None, placement: str, fmt: str, skeleton: Path | None,
           rig: str | None, no_calibrate: bool, platform: str | None, height: float | None,
-          walkers_file: Path | None, force: bool, timeout: float | None, units: str) -> None:
+          walkers_file: Path | None, columns: dict[str, str] | None, force: bool,
+          timeout: float | None, units: str) -> None:
     """Reconstruct many RECORDINGS (one walker each) on Dask: a BVH and a gait report per
     recording, summary.csv, walkers.parquet and strides.parquet; resumable (a re-run skips
     finished recordings, redoes walkers whose height changed).
@@ -990,7 +1028,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     prepended where names repeat (also in case alone) or where it is 'summary'."""
     from imuloco.app.batch import TIMEOUT_S, find_recordings, run_batch
 
-    paths = find_recordings(recordings, patterns)
+    paths = find_recordings(recordings, patterns, out_dir=out_dir)
     if not paths:
         raise click.UsageError("no recordings: give files or --glob PATTERN")
     summary = run_batch(paths, out_dir, jobs, model_path, method_name, placement, fmt,
@@ -998,7 +1036,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
                         scheduler=scheduler, platform=platform, unit=units,
                         skeleton=skeleton, height_m=height, walkers=walkers_file,
                         timeout_s=TIMEOUT_S if timeout is None else timeout,
-                        rig=_preset(rig, skeleton))
+                        rig=_preset(rig, skeleton), columns=columns)
     click.echo(f"model: {summary['model']}", err=True)
     click.echo(f"{'name':<28} {'cadence':>8} {'speed':>6} {'step':>6}  status")
     for r in summary["recordings"]:
@@ -1035,50 +1073,70 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
               help="TLS certificate (PEM): serve HTTPS, which phones need for motion sensors.")
 @click.option("--key", "keyfile", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Private key of --cert.")
+@click.option("--https", "self_signed", is_flag=True,
+              help="Serve HTTPS with a certificate made for this session (self-signed: the "
+                   "phone asks once to accept it); instead of --cert/--key.")
 @click.option("--allow-origin", "allow_origins", multiple=True, metavar="ORIGIN",
               help="Also accept browsers on this origin (https://host:port); repeatable.")
 @height_option
 def live(host: str, port: int, model_path: Path | None, method_name: str | None,
          placement: str, calibrate_seconds: float, replay: Path | None, fmt: str, speed: float,
-         loop: bool, certfile: str | None, keyfile: str | None,
+         loop: bool, certfile: str | None, keyfile: str | None, self_signed: bool,
          allow_origins: tuple[str, ...], height: float | None) -> None:
     """Watch a walker live: a phone on the leg streams its sensors (open /phone on it), a
     browser shows the reconstruction as it walks (open /live). Ctrl-C stops."""
     import asyncio
+    import tempfile
 
     from imuloco.errors import MissingExtraError
 
-    try:
+    try:  # the [live] extra
+        from imuloco.app.live import lan
         from imuloco.app.live.server import LiveServer, configure_logging, run, ssl_context
     except ModuleNotFoundError as e:
-        if e.name != "websockets":
+        if e.name not in ("websockets", "segno", "psutil", "cryptography"):
             raise
-        raise MissingExtraError("live mode", "websockets", "live") from None
+        raise MissingExtraError("live mode", e.name, "live") from None
     from imuloco.app.pipeline import choose_model
 
+    if self_signed and certfile:
+        raise click.UsageError("--https makes its own certificate: drop --cert/--key")
     choice = choose_model(method_name, model_path, placement, progress=True)
     server = LiveServer(choice.method, calibrate_seconds, choice.description,
                         allow_origins=allow_origins, height_m=height)
-    ssl = ssl_context(certfile, keyfile) if certfile else None
-    shown = "localhost" if host in ("127.0.0.1", "0.0.0.0", "::") else host
+    shown = lan.shown_host(host)
+    with tempfile.TemporaryDirectory(prefix="imuloco-live-") as tmp:  # the session's key
+        if self_signed:
+            certfile, keyfile = map(str, lan.self_signed([shown, "localhost", "127.0.0.1"],
+                                                         tmp))
+        ssl = ssl_context(certfile, keyfile) if certfile else None
 
-    def started(srv: LiveServer) -> None:
-        click.echo(f"model: {choice}", err=True)
-        urls = srv.urls(shown)
-        click.echo(f"viewer: {urls['live']}\nphone:  {urls['phone']}" +
-                   ("" if host != "127.0.0.1" else "  (--host 0.0.0.0 for a phone on the "
-                                                   "network)"))
-        if not ssl and host != "127.0.0.1":
-            click.echo("phones only give motion sensors to https pages: pass --cert and --key",
-                       err=True)
+        def started(srv: LiveServer) -> None:
+            click.echo(f"model: {choice}", err=True)
+            urls = srv.urls(shown)
+            click.echo(f"viewer: {urls['live']}\nphone:  {urls['phone']}" +
+                       ("" if host != "127.0.0.1" else "  (--host 0.0.0.0 for a phone on the "
+                                                       "network)"))
+            if host == "127.0.0.1":
+                return
+            if shown == "localhost":
+                click.echo("no network address found on this machine: is it on Wi-Fi?",
+                           err=True)
+            click.echo("scan with the phone (on the same network):\n"
+                       + lan.qr_text(urls["phone"]))
+            if self_signed:
+                click.echo(f"https: {lan.PHONE_WARNING}", err=True)
+            elif not ssl:
+                click.echo("phones only give motion sensors to https pages: add --https (or "
+                           "--cert and --key)", err=True)
 
-    configure_logging()
-    replay_args = None if replay is None else {"path": replay, "placement": placement,
-                                               "fmt": fmt, "speed": speed, "loop": loop}
-    try:
-        asyncio.run(run(server, host, port, ssl, replay_args, on_start=started))
-    except KeyboardInterrupt:
-        click.echo("stopped")
+        configure_logging()
+        replay_args = None if replay is None else {"path": replay, "placement": placement,
+                                                   "fmt": fmt, "speed": speed, "loop": loop}
+        try:
+            asyncio.run(run(server, host, port, ssl, replay_args, on_start=started))
+        except KeyboardInterrupt:
+            click.echo("stopped")
 
 
 def main() -> None:

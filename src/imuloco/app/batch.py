@@ -81,6 +81,7 @@ _STRINGS = {"name", "recording", "status", "error", "placement", "method", "mode
             "model_sha256", "walker", "foot"}
 _INTEGERS = {"frames", "steps"}
 RESERVED_NAMES = ("summary",)  # summary.json is the batch's: no recording's NAME.json
+OUTPUT_TABLES = ("summary.csv", "summary.json", "walkers.parquet", "strides.parquet")
 CONNECT_TIMEOUT_S = 30.0  # waiting for a scheduler, then for its first worker
 # a recording's time limit: an hour-long log takes about a minute (docs/results/batch), so an
 # hour means stuck (a file that never ends, a pathological input), not slow
@@ -90,13 +91,25 @@ TIMEOUT_S = 3600.0
 LOCAL_CLUSTER = {"dashboard_address": None, "scheduler_kwargs": {"dashboard_address": ":0"}}
 
 
-def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = ()
-                    ) -> list[Path]:
+def own_output(path: Path, out_dir: str | Path | None) -> bool:
+    """Whether ``path`` is one of a batch's outputs in ``out_dir`` (its tables, a walker's
+    NAME.bvh or NAME.json), which a glob such as ``'*/*.csv'`` matches on a re-run."""
+    if out_dir is None:
+        return False
+    folder = Path(os.path.normpath(Path(out_dir).absolute()))
+    path = Path(os.path.normpath(path.absolute()))
+    return path.parent == folder and (path.name in OUTPUT_TABLES
+                                      or path.suffix.lower() in (".bvh", ".json"))
+
+
+def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = (),
+                    out_dir: str | Path | None = None) -> list[Path]:
     """The recordings named and matched by glob ``patterns`` (``**`` recurses), sorted within
     each pattern, duplicates dropped, in the order given. A file of an unzipped Sensor Logger
     or phyphox export (``study/*/*.csv``, ``study/**/*.csv``: also phyphox's ``meta/``) is
     its folder, which reads the export: one walker named after it. A RealWorld gyroscope file
-    whose ``acc_`` file is among them is dropped too: that file reads the pair, one walker."""
+    whose ``acc_`` file is among them is dropped too: that file reads the pair, one walker.
+    The batch's own outputs in ``out_dir`` (:func:`own_output`) are never recordings."""
     from imuloco.io.sensorlog import export_members
     from imuloco.sensors.reallog import realworld_accelerometer
 
@@ -109,7 +122,12 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
         matches = [m for m in _glob(str(pattern)) if m.is_file() or m.is_dir()]
         if not matches:
             log.warning("no recording matches %r", pattern)
-        found += matches
+        found += [Path(m) for m in matches]
+    own = [p for p in found if own_output(p, out_dir)]
+    if own:
+        log.warning("left out %d file(s) this batch writes in %s (%s)", len(own), out_dir,
+                    ", ".join(sorted({p.name for p in own})[:3]))
+        found = [p for p in found if not own_output(p, out_dir)]
     members: dict[Path, set[str]] = {}  # per folder: the files of its app export
 
     def walker(p: Path) -> Path:
@@ -211,15 +229,15 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
                     placement: str = "right_ankle", fmt: str = "auto", calibrate: bool = True,
                     platform: str | None = None, height_m: float | None = None,
                     unit: str = "cm", skeleton: str | None = None,
-                    timeout_s: float | None = None, rig: str | None = DEFAULT_RIG
-                    ) -> dict[str, Any]:
+                    timeout_s: float | None = None, rig: str | None = DEFAULT_RIG,
+                    columns: dict[str, str] | None = None) -> dict[str, Any]:
     """Reconstruct one recording (a path read here), write ``NAME.bvh`` (lengths in ``unit``)
     (on rig preset ``rig``) and ``NAME.json`` as one set, the JSON naming the BVH's SHA-256.
 
     Returns ``{"row": ..., "strides": [...]}`` (see :func:`walker_rows`); errors are caught and
     reported in the row, as is no result after ``timeout_s`` seconds (None: no limit)."""
     args = (recording, out_dir, name, model_sha256, model, placement, fmt, calibrate, platform,
-            height_m, unit, skeleton, rig)
+            height_m, unit, skeleton, rig, columns)
     if timeout_s is None:
         return _reconstruct_one(*args)
     t0, result, context = time.perf_counter(), [], contextvars.copy_context()  # Dask's worker
@@ -237,7 +255,7 @@ def reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, 
 def _reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str, model: bytes,
                      placement: str, fmt: str, calibrate: bool, platform: str | None,
                      height_m: float | None, unit: str, skeleton: str | None,
-                     rig: str | None
+                     rig: str | None, columns: dict[str, str] | None
                      ) -> dict[str, Any]:
     """:func:`reconstruct_one` without its time limit."""
     from imuloco.app.pipeline import reconstruct_file
@@ -245,10 +263,12 @@ def _reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str,
     t0 = time.perf_counter()
     try:
         fitted = worker_model(model_sha256, model)
-        motion, recon = reconstruct_file(recording, placement=placement, fmt=fmt,
-                                         calibrate=calibrate, fitted=fitted,
-                                         platform=platform, skeleton=skeleton,
-                                         height=height_m)
+        with _warnings_logged() as warned:
+            motion, recon = reconstruct_file(recording, placement=placement, fmt=fmt,
+                                             calibrate=calibrate, fitted=fitted,
+                                             platform=platform, skeleton=skeleton,
+                                             height=height_m, columns=columns)
+        recon.warnings = [w.getMessage() for w in warned]
         recon.seconds = round(time.perf_counter() - t0, 3)
         recon.batch = {"recording": recording, "model_sha256": model_sha256,
                        "placement": placement, "height_m": height_m, "unit": unit,
@@ -263,7 +283,33 @@ def _reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str,
         log.warning("%s: %s: %s", recording, type(e).__name__, e)
         return {"row": error_row(name, recording, e, time.perf_counter() - t0), "strides": []}
     row, strides = walker_rows(name, report)
-    return {"row": row, "strides": strides}
+    return {"row": row, "strides": strides,
+            "warnings": [{"kind": str(w.msg), "text": w.getMessage()} for w in warned]}
+
+
+class _Records(logging.Handler):
+    """Keeps the warnings one thread logs (a worker's task, whose log the user never sees)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.thread, self.records = threading.get_ident(), []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.thread == self.thread:
+            self.records.append(record)
+
+
+@contextlib.contextmanager
+def _warnings_logged():
+    """The warnings logged by this thread in the block: a list of LogRecords, which the
+    batch relays to its terminal and writes into the walker's report (``warnings``)."""
+    handler = _Records()
+    root = logging.getLogger()
+    root.addHandler(handler)
+    try:
+        yield handler.records
+    finally:
+        root.removeHandler(handler)
 
 
 # ---- rows ---------------------------------------------------------------------------------
@@ -426,7 +472,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
               platform: str | None = None, height_m: float | None = None, retries: int = 2,
               unit: str = "cm", skeleton: str | Path | None = None,
               walkers: str | Path | None = None, timeout_s: float | None = TIMEOUT_S,
-              rig: str | None = DEFAULT_RIG
+              rig: str | None = DEFAULT_RIG, columns: dict[str, str] | None = None
               ) -> dict[str, Any]:
     """Reconstruct every recording into ``out_dir`` on Dask (see the module docstring).
 
@@ -456,6 +502,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
         is an error row.
     rig : the rig preset of the BVH files (:func:`imuloco.app.export.write_reconstruction`;
         None with ``skeleton``).
+    columns : a CSV's own names of the generic log's columns
+        (:func:`imuloco.io.sensorlog.parse_columns`), for every recording.
 
     Returns
     -------
@@ -535,7 +583,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
                                     placement=placement, fmt=fmt, calibrate=calibrate,
                                     platform=platform, height_m=heights[n], unit=unit,
                                     skeleton=None if skeleton is None else str(skeleton),
-                                    timeout_s=timeout_s, rig=rig,
+                                    timeout_s=timeout_s, rig=rig, columns=columns,
                                     key=f"imuloco-batch-{job}-{n}", retries=retries,
                                     pure=False)
                 futures.append(fut)
@@ -547,6 +595,8 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
             if fut.status == "finished":
                 res = fut.result()
                 rows[n], strides[n] = res["row"], stride_table(res["strides"])
+                for w in res.get("warnings", ()):  # the worker's, once per kind on the console
+                    log.warning("%s: %s", n, w["text"], extra={"kind": w["kind"]})
             else:  # lost more often than Dask allows, or raised more than ``retries`` times
                 rows[n], strides[n] = error_row(n, r, fut.exception(), 0.0), stride_table([])
             fut.release()

@@ -136,8 +136,8 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
                        platform: str | None = None, overwrite: bool = False,
                        piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS,
                        progress: bool = False, unit: str = "cm",
-                       height: float | None = None, rig: str | None = DEFAULT_RIG
-                       ) -> ReconstructionReport:
+                       height: float | None = None, rig: str | None = DEFAULT_RIG,
+                       columns: dict[str, str] | None = None) -> ReconstructionReport:
     """Import a log, reconstruct it in pieces and write the BVH to ``output`` piece by piece.
 
     Parameters as :func:`imuloco.app.pipeline.reconstruct_file` (``method`` a name, or a fitted
@@ -180,7 +180,8 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
 
     t0 = time.perf_counter()
     require_extras(placement)  # before reading a long log
-    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform)
+    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform,
+                               columns=columns)
     if method is None or isinstance(method, str):
         choice = choose_model(method, model, placement, progress=progress)
     else:

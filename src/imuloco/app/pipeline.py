@@ -23,6 +23,7 @@ import logging
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from importlib.util import find_spec
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -30,6 +31,7 @@ import numpy as np
 
 from imuloco.app.confidence import Confidence
 from imuloco.app.report import MotionInfo, ReconstructionReport, build_report
+from imuloco.app.summary import confidence_markdown, demo_markdown  # noqa: F401 (re-exported)
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
 from imuloco.sensors.placement import PRESETS
@@ -61,6 +63,13 @@ def require_extras(placement: str) -> None:
     (:meth:`imuloco.sensors.placement.Placement.require_extra`)."""
     if placement in PRESETS:
         PRESETS[placement].require_extra()
+
+
+def shipped_placements(method: str = DEFAULT_METHOD) -> list[str]:
+    """The placements ``method`` has a pretrained model of in the package."""
+    from imuloco.data import MODELS_DIR
+
+    return sorted(p.stem.removeprefix(f"{method}_") for p in MODELS_DIR.glob(f"{method}_*.npz"))
 
 
 def shipped_model(method: str, placement: str) -> Path | None:
@@ -133,6 +142,12 @@ def choose_model(method: str | None = None, model: str | Path | None = None,
         method = FALLBACK
         why = (f"no pretrained {DEFAULT_METHOD!r} model is usable here, so the best available "
                f"baseline {method!r} was fitted")
+        if path is None and find_spec("torch") is not None:  # no model for this placement
+            log.warning("no shipped model for %s (models ship for %s): fitting %r on the "
+                        "bundled sample's clips instead, a rough stand-in (on simulated held-out "
+                        "styles 6-8 cm MPJPE, feet sliding 94-188 cm/s: "
+                        "docs/results/placements/); its gait is not to be trusted",
+                        placement, ", ".join(shipped_placements()), method)
     else:
         why = f"method {method!r} has no shipped model for {placement}, so it was fitted"
     from imuloco.io.database import load_sample
@@ -244,7 +259,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
                      fmt: str = "auto", calibrate: bool = True, pin: bool | None = None,
                      progress: bool = False, fitted: Method | ModelChoice | None = None,
                      platform: str | None = None, skeleton: str | Path | None = None,
-                     height: float | None = None) -> tuple[Motion, ReconstructionReport]:
+                     height: float | None = None, columns: dict[str, str] | None = None
+                     ) -> tuple[Motion, ReconstructionReport]:
     """Import a phone's sensor log and reconstruct the wearer's motion.
 
     Parameters
@@ -263,6 +279,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         gait is measured before, on the model's skeleton).
     height : the wearer's body height in metres: the skeleton, and so every length and speed,
         is scaled to it (:func:`imuloco.measures.gait.to_height`) before gait is measured.
+    columns : a CSV's own names of the generic log's columns (``{"time": "timestamp", ...}``,
+        :func:`imuloco.io.sensorlog.parse_columns`).
 
     Returns
     -------
@@ -285,7 +303,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar = tqdm(total=len(steps), desc="reconstruct", unit="step", disable=not progress)
     t0 = time.perf_counter()
     bar.set_postfix_str("reading the log")
-    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform)
+    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform,
+                               columns=columns)
     bar.update()
     bar.set_postfix_str("model")
     if fitted is None:
@@ -512,90 +531,3 @@ def confidence_check(gt: Motion, rec: Motion, confidence: Confidence) -> dict[st
             if sel.any():
                 out[key] = float(actual[sel].mean())
     return to_json(out)
-
-
-def _fmt(v: Any) -> str:
-    return "–" if v is None else (f"{v:.3g}" if isinstance(v, float) else str(v))
-
-
-def confidence_markdown(report: dict[str, Any]) -> list[str]:
-    """The demo report's lines on the method's confidence (predicted beside actual error)."""
-    conf = report.get("confidence") or {}
-    lines = ["## Confidence (the method's predicted error)", ""]
-    if not conf.get("available"):
-        return [*lines, f"None: {conf.get('note') or 'the method gives no confidence'}.", ""]
-    check = report.get("confidence_check") or {}
-
-    def cm(v: float | None) -> str:
-        return "–" if v is None else f"{100 * v:.2f}"
-
-    frac = conf.get("unreliable_fraction")
-    lines += [
-        ("The method predicts, per frame, its rms joint position error (relative to the "
-         "pelvis); here it is set beside the actual error against the ground truth "
-         "(`errors.png` draws both per frame; the viewer shows it and marks flagged frames)."),
-        "",
-        "| | predicted | actual |",
-        "|---|---:|---:|",
-        (f"| mean rms joint position error (cm) | {cm(check.get('mean_predicted_error_m'))} "
-         f"| {cm(check.get('mean_actual_error_m'))} |"),
-        (f"| 90th percentile (cm) | {cm(check.get('p90_predicted_error_m'))} "
-         f"| {cm(check.get('p90_actual_error_m'))} |"),
-        "",
-        (f"Predicted / actual: {_fmt(check.get('ratio'))} (1 is calibrated, below 1 "
-         f"over-confident); Spearman rank correlation over frames: "
-         f"{_fmt(check.get('spearman'))}. Frames flagged unreliable: "
-         + ("not flagged by this method" if frac is None else
-            f"{100 * frac:.1f} % (actual error there {cm(check.get('actual_error_unreliable_m'))}"
-            f" cm, elsewhere {cm(check.get('actual_error_reliable_m'))} cm)") + "."),
-        f"Note: {(conf.get('note') or '–').rstrip('.')}.",
-        "",
-    ]
-    return lines
-
-
-def demo_markdown(report: dict[str, Any]) -> str:
-    """The short human-readable report of :func:`demo`."""
-    calib = "; ".join(
-        f"{c['placement']} sensor turned {c['rotation_deg']:.1f} deg from the segment's frame "
-        f"(up axis from {c['up_from']}, {c['swings']} strides found)"
-        for c in report.get("calibration", [])) or "not run"
-    lines = [
-        "# imuloco demo",
-        "",
-        (f"Clip `{report['clip']}` of the bundled sample; a phone on the right ankle simulated "
-         "with phone noise (`recording.csv`), then imported, calibrated and reconstructed as "
-         "`imuloco reconstruct recording.csv` would."),
-        "",
-        f"- Model: {report['model']}.",
-        f"- Calibration: {calib}.",
-        (f"- Reconstruction: {report['motion']['frames']} frames at "
-         f"{report['motion']['fps']:g} fps; took {report['seconds']} s end to end (rendering "
-         "included)."),
-        "",
-        "## Metrics (reconstruction against the ground truth)",
-        "",
-        "| metric | value |",
-        "|---|---:|",
-        *[f"| {k} | {_fmt(v)} |" for k, v in report["metrics"].items()],
-        "",
-        "## Gait parameters",
-        "",
-        "| parameter | ground truth | reconstruction |",
-        "|---|---:|---:|",
-        *[f"| {k} | {_fmt(report['gait_ground_truth'][k])} | {_fmt(v)} |"
-          for k, v in report["gait"].items()],
-        f"| cadence of the raw signal (Welch) | | {_fmt(report['signal_cadence_spm'])} |",
-        *[f"| {k} | {_fmt(report['plausibility_ground_truth'][k])} | "
-          f"{_fmt(v)} |" for k, v in report["plausibility"].items() if k.endswith("_swing_deg")],
-        f"| shank swing of the raw signal (deg) | | {_fmt(report['signal_swing_deg'])} |",
-        "",
-        *confidence_markdown(report),
-        "## Files",
-        "",
-        ("`reconstruction.bvh` (opens in Blender), `demo.mp4` / `demo.gif` (ground truth "
-         "left, reconstruction right), `demo.html` (interactive viewer, works offline), "
-         "`signals.png`, `phases.png`, `errors.png`, `report.json`."),
-        "",
-    ]
-    return "\n".join(lines)

@@ -13,14 +13,14 @@ are a contract that scripts rely on. The pieces are the measures' typed results
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 from imuloco.app.confidence import Confidence
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
 from imuloco.measures.gait import Gait, Plausibility, signal_rhythm, to_json
-from imuloco.measures.sensorgait import GaitReport
+from imuloco.measures.sensorgait import GaitReport, model_gait_note
 from imuloco.measures.strides import with_confidence
 from imuloco.sensors.placement import get_placement
 from imuloco.sensors.reallog import LogReport
@@ -110,6 +110,7 @@ class ReconstructionReport:
     confidence: Confidence | None = None
     seconds: float = 0.0
     batch: dict[str, Any] | None = None
+    warnings: list[str] | None = None
 
     @property
     def method(self) -> str:
@@ -140,6 +141,8 @@ class ReconstructionReport:
             out["skeleton"] = self.skeleton
         if self.confidence is not None:
             out["confidence"] = self.confidence.to_json()
+        if self.warnings is not None:
+            out["warnings"] = self.warnings
         out["seconds"] = self.seconds
         if self.batch is not None:
             out["batch"] = self.batch
@@ -167,15 +170,21 @@ def build_report(*, recording: LogReport, raw: Recording, model: ModelChoice, pl
     """
     k = raw.placements.index(model.method.placements_[0])
     cadence, swing = signal_rhythm(raw, k)  # the raw signal's, beside the motion's
+    on_shank = get_placement(raw.placements[k]).on_shank
     strides = (None if gait.strides is None else
                with_confidence(gait.strides, confidence.error_m, motion.fps))
+    if gait.motion_gait is None and gait.note is None:  # the motion's gait: say so, and check
+        checks = plausibility.to_json()  # it against the sensor's own rhythm and swing
+        gait = replace(gait, note=model_gait_note(
+            placement, gait.gait.to_json(), cadence, swing if on_shank else None,
+            {side: checks.get(f"{side}_shank_swing_deg") for side in ("left", "right")}))
     return ReconstructionReport(
         recording=recording, calibration=calibration, feet_pinned_by=feet_pinned_by,
         model=model, placement=placement, motion=motion, height_m=height_m, gait=gait.gait,
         gait_source=gait.source, gait_note=gait.note, strides=strides,
         signal_cadence_spm=to_json({"v": cadence})["v"],
         signal_swing_deg=(to_json({"v": swing})["v"]
-                          if get_placement(raw.placements[k]).on_shank else None),
+                          if on_shank else None),
         plausibility=plausibility, motion_gait=gait.motion_gait, pieces=pieces,
         skeleton=skeleton, confidence=confidence,
         seconds=round(time.perf_counter() - started, 2))

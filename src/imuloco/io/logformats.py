@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from imuloco.errors import FormatError, UnknownNameError, excerpt
+from imuloco.errors import FormatError, InputError, UnknownNameError, excerpt
 from imuloco.io.sensorlog import (
     _SENSOR_LOGGER_HEADER,
     Export,
@@ -52,7 +52,9 @@ class LogFormat:
 def _read_phyphox(path: Path, second: Path | None, platform: str | None,
                   export: bool) -> list[Stream]:
     streams = read_phyphox_export(path) if export else read_phyphox(path)
-    return streams + read_phyphox(second) if second is not None else streams
+    if second is not None:  # a second export (zip or folder) or table
+        streams += read_phyphox_export(second) if is_export(second) else read_phyphox(second)
+    return streams
 
 
 def _read_xsens(path: Path, second: Path | None, platform: str | None,
@@ -110,13 +112,24 @@ def detect_format(path: str | Path) -> str:
                                "or 'time,seconds_elapsed' (Sensor Logger), or an Xsens export's "
                                "('// Update Rate: ...' lines, then 'PacketCounter ... Acc_X "
                                f"... Gyr_X ...'), found first column "
-                               f"{excerpt(_split(path, 1, header, _sniff(header)[0])[0])}")
+                               f"{excerpt(_split(path, 1, header, _sniff(header)[0])[0])}; another "
+                               "CSV: name its columns with --columns time=COLUMN,acc_x=COLUMN,...")
 
 
 def read_streams(path: Path, fmt: str = "auto", second: Path | None = None,
-                 platform: str | None = None) -> tuple[str, list[Stream]]:
+                 platform: str | None = None, columns: dict[str, str] | None = None
+                 ) -> tuple[str, list[Stream]]:
     """The format of ``path`` (detected when ``"auto"``) and the streams its reader found;
-    ``second``: a second file (a RealWorld gyroscope, a phyphox gyroscope table)."""
+    ``second``: a second file (a RealWorld gyroscope, a phyphox gyroscope table or export);
+    ``columns``: a CSV's own names of the generic columns (:func:`parse_columns`): read as
+    generic."""
+    if columns:
+        if fmt not in ("auto", "generic"):
+            raise InputError(f"a column mapping is for generic CSV logs, not {fmt}")
+        if second is not None:
+            raise FormatError(second, None, "a second file, but a generic log holds both "
+                                            f"signals in {path.name}: give one file")
+        return "generic", read_generic_csv(path, columns)
     row = log_format(detect_format(path) if fmt == "auto" else fmt)
     if second is not None and not row.second_file:
         raise FormatError(second, None, f"a second file, but a {row.name} log holds both "

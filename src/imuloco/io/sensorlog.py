@@ -314,11 +314,37 @@ def _columns(path: Path, header: list[str], wanted: list[str]) -> list[int]:
 # ---------------------------------------------------------------------------------------------
 # generic
 
-def read_generic_csv(path: str | Path) -> list[Stream]:
+COLUMN_NAMES = ("time", *GENERIC_COLUMNS)  # what --columns maps (time: the time column)
+
+
+def parse_columns(text: str) -> dict[str, str]:
+    """``"time=timestamp,acc_x=ax,..."`` as ``{"time": "timestamp", "acc_x": "ax", ...}``
+    (:data:`COLUMN_NAMES` to a file's header names); UnknownNameError for anything else."""
+    out: dict[str, str] = {}
+    for item in filter(None, (i.strip() for i in text.split(","))):
+        ours, sep, theirs = (p.strip() for p in item.partition("="))
+        ours = "time" if ours == "time_s" else ours
+        if not sep or not theirs or ours not in COLUMN_NAMES or ours in out:
+            raise UnknownNameError(f"column mapping {item!r}: expected NAME=COLUMN once per "
+                                   f"NAME of {list(COLUMN_NAMES)}, e.g. "
+                                   "time=timestamp,acc_x=ax,...")
+        out[ours] = theirs
+    return out
+
+
+def read_generic_csv(path: str | Path, columns: dict[str, str] | None = None) -> list[Stream]:
     """Streams of a generic CSV (see the module docstring): one acc and one gyro per sensor;
-    ``placement`` is the column prefix or ``None`` for the unprefixed single-sensor layout."""
+    ``placement`` is the column prefix or ``None`` for the unprefixed single-sensor layout.
+
+    columns : another CSV's own header names for :data:`COLUMN_NAMES` (:func:`parse_columns`;
+        unnamed ones keep their generic name): one sensor in those columns, the file's other
+        columns ignored, the time column's unit detected as for any log."""
     path = Path(path)
     header, data, lines = _read_table(path)
+    if columns:
+        wanted = {**{n: n for n in COLUMN_NAMES}, "time": "time_s", **columns}
+        idx = _columns(path, header, [wanted[n] for n in COLUMN_NAMES])
+        header, data = ["time_s", *GENERIC_COLUMNS], data[:, idx]
     if not header or header[0] != "time_s":
         raise FormatError(path, 1, f"expected first column 'time_s', found {excerpts(header[:1])}")
     names = header[1:]
@@ -393,8 +419,28 @@ def read_realworld(acc_path: str | Path, gyro_path: str | Path) -> list[Stream]:
 # phyphox
 
 _PHYPHOX = re.compile(r"^(acceleration|linear acceleration|gyroscope) ([xyz]) \((.+)\)$", re.IGNORECASE)
+# a simple experiment's table names an axis only ("X (m/s^2)"): its unit and the file's name
+# ("Accelerometer.csv", "linearAccelerometer.csv", "Gyroscope.csv") say the quantity
+_PHYPHOX_AXIS = re.compile(r"^([xyz]) \((.+)\)$", re.IGNORECASE)
 _UNITS = {"m/s^2": "m/s^2", "m/s²": "m/s^2", "g": "g", "rad/s": "rad/s", "deg/s": "deg/s",
           "°/s": "deg/s"}
+
+
+def _phyphox_column(header: str, file_name: str) -> tuple[str, str, str] | None:
+    """(quantity, axis, unit) of a phyphox column: ``"Acceleration x (m/s^2)"``, or a simple
+    experiment's ``"X (m/s^2)"`` whose unit and file (``Accelerometer.csv``,
+    ``linearAccelerometer.csv``, ``Gyroscope.csv``) say the quantity; None for other
+    columns (time, magnitudes, a magnetometer's)."""
+    m = _PHYPHOX.match(header)
+    if m:
+        return m.group(1).lower(), m.group(2).lower(), m.group(3).strip()
+    m = _PHYPHOX_AXIS.match(header)
+    unit = _UNITS.get(m.group(2).strip()) if m else None
+    if unit is None:
+        return None
+    kind = ("gyroscope" if unit in ("rad/s", "deg/s") else
+            "linear acceleration" if "linear" in file_name.lower() else "acceleration")
+    return kind, m.group(1).lower(), m.group(2).strip()
 
 
 def read_phyphox(path: str | Path, data: BinaryIO | None = None) -> list[Stream]:
@@ -413,21 +459,22 @@ def read_phyphox(path: str | Path, data: BinaryIO | None = None) -> list[Stream]
         if h.lower().startswith("time (s)"):
             last_time = i
             continue
-        m = _PHYPHOX.match(h)
-        if not m:
+        column = _phyphox_column(h, path.name)
+        if column is None:
             continue
-        kind = m.group(1).lower()
+        kind, axis, unit_text = column
         if kind == "linear acceleration":
             raise FormatError(path, 1, f"column {h!r} is acceleration without gravity; export "
-                                       "'Acceleration with g' instead")
+                                       "'Acceleration with g' (in a simple experiment: "
+                                       "'Accelerometer') instead")
         q = "acc" if kind == "acceleration" else "gyro"
-        unit = _UNITS.get(m.group(3).strip())
+        unit = _UNITS.get(unit_text)
         if unit is None:
             raise FormatError(path, 1, f"column {excerpt(h)}: unknown unit; expected "
                                        f"one of {sorted(set(_UNITS))}")
         if last_time is None:
-            raise FormatError(path, 1, f"column {h!r} has no 'Time (s)' column before it")
-        found.setdefault(q, {})[m.group(2).lower()] = i
+            raise FormatError(path, 1, f"column {excerpt(h)} has no 'Time (s)' column before it")
+        found.setdefault(q, {})[axis] = i
         units.setdefault(q, {})[h] = unit
         times[q] = last_time
     if not found:
@@ -604,8 +651,8 @@ def read_phyphox_export(path: str | Path) -> list[Stream]:
     with Export(path) as ex:
         for name in ex.names():
             h = ex.header(name)
-            if not name.lower().endswith(".csv") or "time (s)" not in h or \
-                    not ("acceleration" in h or "gyroscope" in h):
+            if not name.lower().endswith(".csv") or "time (s)" not in h or not any(
+                    _phyphox_column(c.strip().strip('"'), name) for c in re.split(r"[,;\t]", h)):
                 continue
             try:
                 streams += read_phyphox(ex.label(name), ex.open(name))

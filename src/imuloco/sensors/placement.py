@@ -19,6 +19,7 @@ routines are named, not referenced: they live in the layers that read this one.
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass, replace
 from importlib.util import find_spec
 
@@ -138,7 +139,10 @@ def get_placement(name: str | Placement) -> Placement:
     if isinstance(name, Placement):
         return name
     if name not in PRESETS:
-        raise UnknownNameError(f"unknown sensor placement {name!r}; presets: {sorted(PRESETS)}")
+        close = difflib.get_close_matches(str(name), list(PRESETS), n=2, cutoff=0.6)
+        hint = f"did you mean {' or '.join(map(repr, close))}? " if close else ""
+        raise UnknownNameError(f"unknown sensor placement {name!r}; {hint}presets: "
+                               f"{sorted(PRESETS)}")
     return PRESETS[name]
 
 

@@ -177,7 +177,8 @@ FORMAT_NAMES = ("auto", *FORMATS)
 
 
 def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
-                  platform: str | None) -> tuple[str, list[Stream]]:
+                  platform: str | None, columns: dict[str, str] | None = None
+                  ) -> tuple[str, list[Stream]]:
     """Step 1: the format (detected when ``"auto"``) and the streams the reader found
     (:func:`imuloco.io.logformats.read_streams`)."""
     if isinstance(path, (list, tuple)):
@@ -188,7 +189,7 @@ def _read_streams(path: Path | Sequence[Path], fmt: str, gyro_path: Path | None,
     path = Path(path)
     if not path.exists():
         raise MissingInputError(f"{path}: no such file or folder")
-    return read_streams(path, fmt, gyro_path, platform)
+    return read_streams(path, fmt, gyro_path, platform, columns)
 
 
 def recording_name(path: str | Path) -> str:
@@ -351,6 +352,7 @@ class LogOptions:
     max_gap: float = 0.2
     on_gap: str = "warn"
     platform: str | None = None
+    columns: dict[str, str] | None = field(default=None, hash=False)
 
     def __post_init__(self) -> None:
         for name, value, allowed in (("fmt", self.fmt, FORMAT_NAMES),
@@ -389,6 +391,9 @@ def read_log(path: str | Path | Sequence[str | Path], placement: str = "right_an
         on_gap : ``"warn"`` (report, log and interpolate across) or ``"raise"``.
         platform : Sensor Logger only, ``"android"``/``"ios"`` (default: from Metadata.csv, or
         guessed with a warning).
+        columns : a CSV's own names of the generic columns
+        (:func:`imuloco.io.sensorlog.parse_columns`: ``{"time": "timestamp", "acc_x": "ax"}``),
+        read as a generic log.
 
     Returns
     -------
@@ -415,7 +420,7 @@ def read_log(path: str | Path | Sequence[str | Path], placement: str = "right_an
 def _import(path: str | Path | Sequence[str | Path], opts: LogOptions
             ) -> tuple[Recording, LogReport]:
     fmt, streams = _read_streams(path, opts.fmt, None if opts.gyro_path is None
-                                 else Path(opts.gyro_path), opts.platform)
+                                 else Path(opts.gyro_path), opts.platform, opts.columns)
     report = LogReport(fmt, sorted({str(s.path) for s in streams}))
     report.platform = next((s.platform for s in streams if s.platform), None)
     sensors = _sensors(streams, opts.placement)
@@ -443,9 +448,16 @@ def _import(path: str | Path | Sequence[str | Path], opts: LogOptions
         signals[q], found, detected = _units(signals[q], q, unit, declared)
         setattr(report, f"{q}_unit", found)
         setattr(report, f"{q}_unit_detected", detected)
-    for g in report.gaps:
+    if len(report.gaps) == 1:
+        g = report.gaps[0]
         log.warning("%s: no samples from %.3f s to %.3f s (%.3f s gap)", report.files[0],
                     g.start, g.stop, g.stop - g.start)
+    elif report.gaps:  # one line for the file, not one each (the report lists them all)
+        worst = max(report.gaps, key=lambda g: g.stop - g.start)
+        log.warning("%s: %d gaps without samples, %.3f s in all, the longest %.3f s from "
+                    "%.3f s (each in the report's recording.gaps)", report.files[0],
+                    len(report.gaps), sum(g.stop - g.start for g in report.gaps),
+                    worst.stop - worst.start, worst.start)
     if report.gaps and opts.on_gap == "raise":
         worst = max(report.gaps, key=lambda g: g.stop - g.start)
         raise FormatError(report.files[0], None, f"{len(report.gaps)} gap(s) longer than "

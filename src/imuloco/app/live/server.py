@@ -543,10 +543,15 @@ class LiveServer:
         self._send(message.get("type", ""), json.dumps(message, separators=(",", ":")))
 
     def set_status(self, text: str) -> None:
-        """Tell the viewers and the phone."""
+        """Tell the viewers and the phone (while calibrating, also ``calibrating``:
+        ``{"seconds": held, "of": wanted}``, which their calibration screens draw)."""
         self.status = text
         to = self.viewers | ({self.phone} if self.phone is not None else set())
-        self._send("status", json.dumps({"type": "status", "text": text}), to)
+        message: dict = {"type": "status", "text": text}
+        progress = self.session.calibration_progress() if self.session is not None else None
+        if progress is not None:
+            message["calibrating"] = {"seconds": round(progress[0], 2), "of": progress[1]}
+        self._send("status", json.dumps(message), to)
 
     def _status_due(self) -> bool:
         t = self.session.last_t if self.session and self.session.last_t is not None else 0.0
@@ -593,6 +598,8 @@ class LiveServer:
                 await self._publish(await self._in_worker(self.process, rows[i:j]))
                 i = j
             self.set_status(f"replay of {name} finished")
+            log.info("replay of %s finished%s", name, ", playing it again" if loop else
+                     "; the viewer stays open (Ctrl-C stops)")
             if not loop:
                 return
 
@@ -639,6 +646,7 @@ def configure_logging() -> None:
     """One line per event on stderr: the server's own at INFO, websockets' own per-connection
     chatter off (a dropped viewer is one line of ours)."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", datefmt="%H:%M:%S")
+    logging.getLogger().setLevel(logging.INFO)  # also where a handler was there (the CLI's)
     logging.getLogger("websockets").setLevel(logging.WARNING)
 
 

@@ -260,10 +260,16 @@ class LiveSession:
         """Raw samples held (calibration buffer and resampler): bounded, see the class."""
         return self._n + len(self.resampler.buf)
 
+    def calibration_progress(self) -> tuple[float, float] | None:
+        """While calibrating, (seconds of samples held, seconds it wants); else None."""
+        if not self.calibrating:
+            return None
+        return (float(self.last_t - self._raw[0, 0]) if self._n else 0.0), self.calibrate_s
+
     def describe(self) -> str:
         """One line for the user: calibration progress or the frame count."""
         if self.calibrating:
-            span = self.last_t - self._raw[0, 0] if self._n else 0.0
+            span = self.calibration_progress()[0]
             wait = "walk a few steps" if span > self.calibrate_s else "stand still, then walk"
             return f"calibrating: {span:.1f} s of {self.calibrate_s:g} s ({wait})"
         return f"streaming: frame {self.resampler.next}"
