@@ -103,6 +103,7 @@ def test_the_reported_motions_contacts_are_found_once(monkeypatch, log_file,
     """One reconstruction searches its feet's contacts twice: once to pin them, once on the
     reported motion for the gait, the strides and the plausibility checks (it was three
     times)."""
+    import imuloco.methods.postprocess
     import imuloco.phases
     import imuloco.phases.contacts
     import imuloco.phases.gait
@@ -114,7 +115,8 @@ def test_the_reported_motions_contacts_are_found_once(monkeypatch, log_file,
         calls.append(1)
         return real(*a, **k)
 
-    for module in (imuloco.phases, imuloco.phases.contacts, imuloco.phases.gait):
+    for module in (imuloco.phases, imuloco.phases.contacts, imuloco.phases.gait,
+                   imuloco.methods.postprocess):  # each module that binds the name
         monkeypatch.setattr(module, "foot_contacts", counted)
     _, report = pipeline.reconstruct_file(log_file, fitted=ridge_without_demo_clip)
     assert report.feet_pinned_by == "pipeline" and len(calls) == 2
@@ -124,13 +126,17 @@ def test_write_outputs_writes_the_set_and_refuses_to_overwrite(tmp_path, log_fil
                                                               ridge_without_demo_clip):
     from imuloco.app.outputs import Outputs, write_outputs
     from imuloco.errors import ImulocoError, OutputExistsError
+    from imuloco.io.atomic import sha256_file
     from imuloco.io.bvh import read_bvh
 
     motion, report = pipeline.reconstruct_file(log_file, fitted=ridge_without_demo_clip)
     outputs = Outputs(tmp_path / "walk.bvh", tmp_path / "walk.json", unit="m")
     outputs.check()
     assert write_outputs(outputs, report, motion) == [outputs.bvh, outputs.report]
-    assert json.loads(outputs.report.read_text()) == json.loads(json.dumps(report.to_json()))
+    written = json.loads(outputs.report.read_text())
+    assert written.pop("outputs") == {"bvh": outputs.bvh.name,
+                                      "bvh_sha256": sha256_file(outputs.bvh)}
+    assert written == json.loads(json.dumps(report.to_json()))
     assert read_bvh(outputs.bvh).num_frames == motion.num_frames
     with pytest.raises(OutputExistsError, match="--force"):
         outputs.check()

@@ -794,16 +794,16 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
         raise click.BadParameter(f"{video}: expected a .mp4 or .gif file", param_hint="--video")
-    check_motion_output(output, "-o/--output")
-    if report_path is not None:
-        check_report_output(report_path)
-    preset = _preset(rig, skeleton)
     if summary_path is None and report_path is not None:
         summary_path = report_path.with_suffix(".md")
     summaries = [] if summary_path is None else list(summary_paths(summary_path).values())
     inputs = [*recording, *([model_path] if model_path else []), *([skeleton] if skeleton else [])]
-    outputs = Outputs(output, report_path, video, html_path, video_seconds, units, preset)
     check_outputs([output, video, html_path, report_path, *summaries], force, inputs=inputs)
+    check_motion_output(output, "-o/--output")
+    if report_path is not None:
+        check_report_output(report_path)
+    outputs = Outputs(output, report_path, video, html_path, video_seconds, units,
+                      _preset(rig, skeleton))
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
         if video or html_path or skeleton or output.suffix.lower() != ".bvh":
