@@ -14,7 +14,8 @@ mid-stances.
 - Swings: peaks of the gyroscope's norm above SWING_RAD_S, at least MIN_STRIDE_S apart (the
   shank swings once per stride, at 3-6 rad/s; in stance it turns at about 1 rad/s).
 - Mid-stance: the stillest moment (the gyroscope norm's 50 ms maximum, least) between two
-  swings, and before the first and after the last where the shank is that still.
+  swings, and before the first and after the last where the shank turns slower than
+  STANCE_RAD_S.
 - The lever arm: the shank's axis in the sensor from :func:`imuloco.sensors.calibration.
   estimate_mounting`, its length from the placement's position on the shank
   (:mod:`imuloco.sensors.placement`: 0.2 of the shank above the ankle joint, 4.5 cm in front
@@ -87,6 +88,8 @@ def mid_stances(gyro: np.ndarray, rate: float, swing_axis: np.ndarray
     positively (the shank turns the other way in stance, which is how a lively stance's fast
     turning is told from a swing)."""
     sag = gaussian_smooth(gyro @ swing_axis, 0.03 * rate)
+    if -np.percentile(sag, 1) > np.percentile(sag, 99):
+        sag = -sag  # walking backwards: the swing's lobe is the larger one whichever way
     height = max(SWING_RAD_S, 0.4 * float(np.percentile(sag, 99)))
     peaks, _ = find_peaks(sag, height=height, distance=max(1, round(MIN_STRIDE_S * rate)),
                           prominence=1.0)
@@ -99,9 +102,19 @@ def mid_stances(gyro: np.ndarray, rate: float, swing_axis: np.ndarray
     for lo, hi in pairwise(bounds):
         if hi - lo < 3:
             continue
+        # the stance turns the shank against the swing: the middle half of its lobe of the
+        # swing rate below 0 (a swing's end, where the rate changes sign, can be as still)
+        against = np.flatnonzero(sag[lo:hi] < 0)
+        inner = 0 < lo and hi < len(sag) and len(against) > 0
+        if len(against):
+            a, b = lo + int(against[0]), lo + int(against[-1]) + 1
+            q = (b - a) // 4
+            lo, hi = (a + q, b - q) if b - a >= 4 else (a, b)
         i = lo + int(np.argmin(energy[lo:hi]))
-        edge = i <= 1 or i >= len(sag) - 2  # a swing cut by the recording's end, not a stance
-        if energy[i] < (STILL_RAD_S if edge else STANCE_RAD_S):
+        # between two swings is a stance however fast (running); before the first and after
+        # the last, only a stance slow enough, and not at the recording's end (a cut swing)
+        edge = i <= 1 or i >= len(sag) - 2
+        if inner or energy[i] < (STILL_RAD_S if edge else STANCE_RAD_S):
             mids.append(i)
     return peaks, np.asarray(mids, int)
 
