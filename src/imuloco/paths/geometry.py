@@ -44,16 +44,29 @@ def stride_period(footfall_times: np.ndarray, max_stride_s: float = 3.0) -> floa
 def smooth_over(xy: np.ndarray, rate: float, period_s: float) -> np.ndarray:
     """A centred moving average of ``xy`` (T, 2) on a uniform grid at ``rate`` Hz over
     ``period_s`` seconds: over one stride, where one limb's path puts the pelvis on average
-    (the limb alternates ahead of and behind it). The ends are padded by point reflection, so
-    a path walking on at a steady pace keeps its pace to the end (a plain average lags there
-    by half a stride)."""
+    (the limb alternates ahead of and behind it).
+
+    Within half a period of either end the window is not full: there the average is carried
+    on at the pace of the half period next to it (linear extrapolation), not averaged over
+    fewer samples, which would put the pelvis where the limb happened to be when the
+    recording started or stopped (up to half a stride off). A path shorter than two periods
+    is padded by point reflection instead."""
     xy = np.asarray(xy, float)
     n = min(max(1, round(period_s * rate)), len(xy))
-    h = n // 2 + 1
     if len(xy) < 2 or n < 2:
         return xy.copy()
-    head = 2 * xy[0] - xy[h:0:-1] if h < len(xy) else 2 * xy[0] - xy[:0:-1]
-    tail = 2 * xy[-1] - xy[-2:-h - 2:-1] if h < len(xy) else 2 * xy[-1] - xy[-2::-1]
+    h = n // 2
+    if len(xy) >= 2 * n + 2:
+        avg = uniform_filter1d(xy, n, axis=0, mode="nearest")
+        a, b = h, len(xy) - 1 - h  # the first and last samples with a full window
+        k = max(1, h)
+        head = (avg[a + k] - avg[a]) / k
+        tail = (avg[b] - avg[b - k]) / k
+        avg[:a] = avg[a] - np.outer(np.arange(a, 0, -1), head)
+        avg[b + 1:] = avg[b] + np.outer(np.arange(1, len(xy) - b), tail)
+        return avg
+    head = 2 * xy[0] - xy[h + 1:0:-1] if h + 1 < len(xy) else 2 * xy[0] - xy[:0:-1]
+    tail = 2 * xy[-1] - xy[-2:-h - 3:-1] if h + 1 < len(xy) else 2 * xy[-1] - xy[-2::-1]
     padded = np.concatenate([head, xy, tail])
     return uniform_filter1d(padded, n, axis=0, mode="nearest")[len(head):len(head) + len(xy)]
 

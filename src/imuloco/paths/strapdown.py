@@ -102,7 +102,7 @@ def anchored_path(acc: np.ndarray, gyro: np.ndarray, rate: float, anchors: np.nd
         known = seg.apply(np.cross(gyro[lo:hi], lever))
         piv = _open_end(seg.apply(acc[lo:hi]) - G * UP, known,
                         np.zeros(hi - lo, bool) if still is None else still[lo:hi], rate, sign)
-        piv += seg.apply(lever) - seg[start - lo].apply(lever)
+        piv -= seg.apply(lever) - seg[start - lo].apply(lever)  # the sensor to the pivot
         piv[:, 2] = 0.0
         pivot[lo:hi] = pivot[start] + piv - piv[start - lo]
     return pivot, quat, drift
