@@ -12,6 +12,7 @@ ahead of and behind the pelvis), moved half a step width to the body's centre.
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import maximum_filter1d
 
 from imuloco.core.recording import Recording
 from imuloco.errors import UnknownNameError
@@ -26,7 +27,8 @@ from imuloco.paths.geometry import (
     stride_period,
     walking_heading,
 )
-from imuloco.sensors.foottrack import NoWalking, foot_track
+from imuloco.paths.strapdown import anchored_path
+from imuloco.sensors.foottrack import SWING_DPS, ZUPT_GYRO_DPS, NoWalking, foot_track
 
 FEET = ("right_foot", "left_foot")
 NOTE = ("foot-zupt: distance, stride lengths and footfalls from the foot's zero-velocity "
@@ -34,7 +36,8 @@ NOTE = ("foot-zupt: distance, stride lengths and footfalls from the foot's zero-
         "with the gyroscope's bias (yaw is not observable). {pelvis}")
 
 
-def _foot_xy(rec: Recording, placement: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def _foot_xy(rec: Recording, placement: str, trajectory: str
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """The foot's floor path (T, 2) in its own floor frame (origin at its first rest, x along
     its first move), its times (T,), its rests (K,) and the grid's rate; a still path and no
     rests when the foot never walks."""
@@ -43,15 +46,32 @@ def _foot_xy(rec: Recording, placement: str) -> tuple[np.ndarray, np.ndarray, np
         track = foot_track(rec.times, rec.acc[:, k], rec.gyro[:, k])
     except NoWalking:
         return np.zeros((len(rec.times), 2)), rec.times, np.zeros(0, int), rec.rate
-    xy = track.path[:, :2] - track.path[track.rest[0], :2]
-    xy = rotate(xy, -initial_yaw(xy[track.rest]))
-    return xy, track.times, np.asarray(track.rest, int), track.rate
+    lev = track.level.to_numpy()
+    gyro = np.radians(lev[:, 3:])
+    energy = maximum_filter1d(np.linalg.norm(gyro, axis=1), max(1, round(0.05 * track.rate)))
+    # a footfall is a stance's rest still enough for a stance (not the end of a cut swing)
+    rest = track.rest[energy[track.rest] < np.radians(SWING_DPS)]
+    if len(rest) < 2:
+        return np.zeros((len(track.times), 2)), track.times, np.zeros(0, int), track.rate
+    if trajectory == "anchored":
+        path, _, _ = anchored_path(lev[:, :3], gyro, track.rate, rest, np.zeros(3),
+                                   energy < np.radians(ZUPT_GYRO_DPS))
+    else:
+        path = track.path
+    xy = path[:, :2] - path[rest[0], :2]
+    xy = rotate(xy, -initial_yaw(xy[rest]))
+    return xy, track.times, np.asarray(rest, int), track.rate
 
 
 class FootZupt:
     """:class:`imuloco.paths.base.PathEstimator` of a foot sensor (module docstring)."""
 
     name = "foot-zupt"
+    TRAJECTORIES = ("rts", "anchored")
+
+    def __init__(self, trajectory: str = "rts") -> None:
+        self.trajectory = trajectory  # "rts": gaitmap's RtsKalman path (foot_track's);
+        # "anchored": the strapdown of :mod:`imuloco.paths.strapdown` between the same rests
 
     def estimate(self, rec: Recording, placement: str, height_m: float | None = None
                  ) -> BodyPath:
@@ -61,7 +81,10 @@ class FootZupt:
             raise UnknownNameError(f"recording has no sensor at {placement!r}; it has "
                                    f"{rec.placements}")
         feet = [placement] + [f for f in FEET if f != placement and f in rec.placements]
-        tracks = [_foot_xy(rec, f) for f in feet]
+        if self.trajectory not in self.TRAJECTORIES:
+            raise UnknownNameError(f"foot-zupt trajectory must be one of {self.TRAJECTORIES}, "
+                                   f"got {self.trajectory!r}")
+        tracks = [_foot_xy(rec, f, self.trajectory) for f in feet]
         walking = [tr for tr in tracks if len(tr[2])]
         if len(walking) == 2 and len(walking[0][0]) == len(walking[1][0]):
             # both feet, each started half a step width beside the pelvis (floor y is left)
