@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from imuloco.paths.base import Footfall
+from imuloco.paths.base import BodyPath, Footfall
 
 # Half the step width: walkers' feet land about 0.1 m apart (heel centre to heel centre; Perry
 # & Burnfield 2010, Gait Analysis, ch. 1), so each ankle passes ~0.05 m beside the pelvis.
@@ -99,3 +99,9 @@ def footfalls_at(foot: str, times: np.ndarray, xy: np.ndarray, index: np.ndarray
     conf = np.broadcast_to(np.asarray(confidence, float), (len(index),))
     return [Footfall(foot, float(times[i]), np.asarray(xy[i], float).copy(),
                      float(np.clip(c, 0.0, 1.0))) for i, c in zip(index, conf)]
+
+
+def still_path(times: np.ndarray, source: str, why: str) -> BodyPath:
+    """A path that stays where it started (no walking), saying why in its note."""
+    return BodyPath(np.asarray(times, float), np.zeros((len(times), 2)), None, [], [], source,
+                    f"{source}: no path ({why})")

@@ -43,6 +43,7 @@ from imuloco.paths.geometry import (
     initial_yaw,
     rotate,
     smooth_over,
+    still_path,
     stride_period,
     walking_heading,
 )
@@ -132,17 +133,17 @@ class ShankPivot:
         k = rec.placements.index(placement)
         foot = placement.split("_")[0]
         if len(rec.times) < 2 or rec.times[-1] - rec.times[0] < 1.0:
-            return _still(rec.times, self.name, "the recording is shorter than 1 s")
+            return still_path(rec.times, self.name, "the recording is shorter than 1 s")
         x = resample_uniform(rec.times, np.concatenate([rec.acc[:, k], rec.gyro[:, k]], 1), RATE)
         acc, gyro = x[:, :3], x[:, 3:]
         times = rec.times[0] + np.arange(len(x)) / RATE
         try:
             lever, axis = shank_axes(rec.select([placement]), placement, height_m)
         except InputError as e:
-            return _still(times, self.name, str(e))
+            return still_path(times, self.name, str(e))
         peaks, mids = mid_stances(gyro, RATE, axis)
         if len(peaks) == 0 or len(mids) < 2:
-            return _still(times, self.name, "the shank never swings: no walking")
+            return still_path(times, self.name, "the shank never swings: no walking")
         still = maximum_filter1d(np.linalg.norm(gyro, axis=1),
                                  max(1, round(STILL_WINDOW_S * RATE))) < STILL_RAD_S
         ankle, _, drift = anchored_path(acc, gyro, RATE, mids, lever, still)
@@ -157,9 +158,3 @@ class ShankPivot:
         footfalls = footfalls_at(foot, times, xy - origin, mids, conf)
         return BodyPath(times, root - origin, heading, footfalls,
                         strides_from_footfalls(footfalls), self.name, NOTE)
-
-
-def _still(times: np.ndarray, source: str, why: str) -> BodyPath:
-    """A path that stays where it started (no walking), saying why."""
-    return BodyPath(np.asarray(times, float), np.zeros((len(times), 2)), None, [], [], source,
-                    f"{source}: no path ({why})")
