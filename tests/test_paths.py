@@ -124,3 +124,14 @@ def test_unknown_placement_is_named():
 
     with pytest.raises(UnknownNameError, match="no path estimator"):
         estimator_for("head")
+
+
+def test_plot_path_writes_a_png(sample_db, tmp_path):
+    pytest.importorskip("matplotlib")
+    from imuloco.viz.plots import plot_path
+
+    motion = _clip(sample_db, "dataset-2_walk-turn-left_normal_001")
+    truth = path_of_motion(motion)
+    est = ShankPivot().estimate(simulate(motion, ["right_ankle"], seed=0), "right_ankle", 1.7)
+    out = plot_path(est, tmp_path / "path.png", truth)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
