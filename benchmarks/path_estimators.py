@@ -14,6 +14,12 @@ protocol, placement and content the mean absolute error of the distance walked a
 mean stride length (per cent), the stride's in metres and the mean end-point error (per cent
 of the distance walked), and how many clips gave no path. ``--limit`` clips per content and
 dataset (evenly spread), the walker's height from the skeleton.
+
+With ``--real-shin``, only the real ``realworld-shin`` walk (no reference): the shank-pivot
+path's stride, cadence and speed beside the shank's swing read off the raw gyroscope
+(:func:`imuloco.measures.gait.signal_swing`, degrees per stride) and the stride a pendulum
+leg of that swing would take, ``2 x leg x sin(swing / 2)`` (leg 0.53 x the default height):
+a consistency check, nothing fitted.
 """
 
 from __future__ import annotations
@@ -46,7 +52,11 @@ def main() -> None:
     ap.add_argument("--noise", default="phone")
     ap.add_argument("--placements", default="right_ankle,left_ankle,right_foot,lower_back")
     ap.add_argument("-o", "--out", default=None)
+    ap.add_argument("--real-shin", action="store_true")
     args = ap.parse_args()
+    if args.real_shin:
+        real_shin(Path(args.data))
+        return
     placements = args.placements.split(",")
     seeds = [int(s) for s in args.seeds.split(",")]
     rows: dict[tuple[str, str, str], list[dict]] = defaultdict(list)
@@ -91,6 +101,29 @@ def main() -> None:
     print(table)
     if args.out:
         Path(args.out).write_text(table + "\n")
+
+
+def real_shin(data: Path) -> None:
+    """The real shin walk's path beside its swing (module docstring)."""
+    from imuloco.core.recording import Recording
+    from imuloco.measures.gait import signal_cadence, signal_swing
+    from imuloco.paths.shank import DEFAULT_HEIGHT_M, ShankPivot
+    from imuloco.sensors.reallog import read_log
+
+    rec, _ = read_log(data / "realworld-shin" / "acc_walking_shin.csv", placement="right_ankle")
+    k = (rec.times > rec.times[0] + 10) & (rec.times < rec.times[-1] - 10)  # the walk
+    rec = Recording(rec.times[k], rec.acc[k], rec.gyro[k], list(rec.placements))
+    path = ShankPivot().estimate(rec, "right_ankle")
+    lengths = np.array([s.length_m for s in path.strides])
+    swing = signal_swing(rec)
+    leg = 0.53 * DEFAULT_HEIGHT_M  # hip to floor, Winter 2009 Fig. 4.1
+    dur = path.times_s[-1] - path.times_s[0]
+    print(f"realworld-shin: {dur:.0f} s, {len(lengths)} strides, stride mean "
+          f"{lengths.mean():.3f} m (median {np.median(lengths):.3f}, IQR "
+          f"{np.percentile(lengths, 25):.3f}-{np.percentile(lengths, 75):.3f}), distance "
+          f"{path.distance_m():.1f} m, speed {path.distance_m() / dur:.2f} m/s, cadence "
+          f"{signal_cadence(rec):.1f} steps/min; shank swing {swing:.1f} deg per stride, a "
+          f"pendulum leg of {leg:.2f} m: {2 * leg * np.sin(np.radians(swing) / 2):.3f} m")
 
 
 def _line(key: tuple[str, str, str], s: dict, failed: int) -> str:
