@@ -275,7 +275,7 @@ def _path_values(rec: Motion, gt: Motion) -> dict[str, float | None]:
     without strides, or too short for gait phases)."""
     try:
         errs = motion_path_errors(rec, gt)
-    except ValueError:  # InputError included: a clip under two frames
+    except (ValueError, KeyError):  # a clip under two frames, a skeleton without feet
         return {f"path_{k}": None for k in PATH_CLIP_KEYS}
     return {f"path_{k}": (float(errs[k]) if np.isfinite(errs[k]) else None)
             for k in PATH_CLIP_KEYS}
