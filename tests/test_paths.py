@@ -135,3 +135,16 @@ def test_plot_path_writes_a_png(sample_db, tmp_path):
     est = ShankPivot().estimate(simulate(motion, ["right_ankle"], seed=0), "right_ankle", 1.7)
     out = plot_path(est, tmp_path / "path.png", truth)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_times_count_from_the_recordings_start(sample_db):
+    motion = _clip(sample_db, "dataset-2_walk_active_001")
+    rec = simulate(motion, ["right_ankle"], noise="clean", seed=0)
+    late = Recording(rec.times + 100.0, rec.acc, rec.gyro, rec.placements)
+    a, b = estimate_path(rec, "right_ankle", 1.7), estimate_path(late, "right_ankle", 1.7)
+    assert b.times_s[0] == pytest.approx(0.0)
+    assert [f.time_s for f in b.footfalls] == pytest.approx([f.time_s for f in a.footfalls])
+    from imuloco.errors import UnknownNameError
+
+    with pytest.raises(UnknownNameError, match="no sensor at"):
+        estimate_path(rec, "left_ankle")

@@ -3,6 +3,8 @@ the walking direction, and a limb's footfalls."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
@@ -105,3 +107,14 @@ def still_path(times: np.ndarray, source: str, why: str) -> BodyPath:
     """A path that stays where it started (no walking), saying why in its note."""
     return BodyPath(np.asarray(times, float), np.zeros((len(times), 2)), None, [], [], source,
                     f"{source}: no path ({why})")
+
+
+def from_start(path: BodyPath, t0: float) -> BodyPath:
+    """``path`` with its times counted from ``t0`` (the recording's first sample), as
+    :class:`~imuloco.paths.base.BodyPath` states them."""
+    if t0 == 0:
+        return path
+    return replace(path, times_s=path.times_s - t0,
+                   footfalls=[replace(f, time_s=f.time_s - t0) for f in path.footfalls],
+                   strides=[replace(s, start_s=s.start_s - t0, end_s=s.end_s - t0)
+                            for s in path.strides])
