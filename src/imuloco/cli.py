@@ -814,7 +814,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
         pieces = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
                                     not no_calibrate, platform=platform, overwrite=True,
                                     piece_s=piece_seconds, progress=True, unit=units,
-                                    height=height, rig=preset, columns=columns)
+                                    height=height, rig=outputs.rig, columns=columns)
         written = write_outputs(outputs, pieces)  # the report: the BVH is written
         if summary_path:
             written.append(write_summary(pieces.to_json(), summary_path, overwrite=True)[0])

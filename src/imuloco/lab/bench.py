@@ -43,6 +43,12 @@ Protocol details fixed here (see also :mod:`imuloco.lab.protocols`):
   :mod:`imuloco.lab.confidence` checks and calibrates. Each method runs with one BLAS/OpenMP
   thread (threadpoolctl), like a single core, so that timings compare across machines'
   core counts (torch's own thread pool is the method's business).
+- Path (issue 40): each reconstruction's own path (:func:`imuloco.paths.truth.path_of_motion`)
+  against the truth's (:mod:`imuloco.paths.metrics`): per clip ``path_`` + distance ratio,
+  distance and stride length errors (% and m), end-point error (% of the distance walked);
+  per motion type the ratio's mean and the others' mean absolute value over clips
+  (``path_distance_mae_pct``, ``path_stride_mae_pct``, ``path_stride_mae_m``,
+  ``path_end_point_error_pct``).
 
 Everything but the timings is deterministic: the same arguments give the same numbers.
 """
@@ -79,8 +85,18 @@ from imuloco.methods.training import (
     saved_seconds,
     synthesize,
 )
+from imuloco.paths.metrics import motion_path_errors
 
 LATENCY_FRAMES = 300
+# the reconstruction's path against the truth's, per clip (issue 40; keys path_ + these)
+PATH_CLIP_KEYS = ("distance_ratio", "distance_error_pct", "stride_error_m", "stride_error_pct",
+                  "end_point_error_pct")
+# aggregated over clips: summary key -> clip key (the ratio's mean, the others' mean |value|)
+PATH_SUMMARY_KEYS = {"path_distance_ratio": "path_distance_ratio",
+                     "path_distance_mae_pct": "path_distance_error_pct",
+                     "path_stride_mae_pct": "path_stride_error_pct",
+                     "path_stride_mae_m": "path_stride_error_m",
+                     "path_end_point_error_pct": "path_end_point_error_pct"}
 
 
 DataArg = str | Path | Sequence[str | Path] | None
@@ -141,6 +157,12 @@ def aggregate(clips: list[dict[str, Any]]) -> dict[str, Any]:
         v = np.array([c.get(key) for c in clips], dtype=np.float64)  # None: nan
         ok = np.isfinite(v)
         out[key] = float(np.average(v[ok], weights=w[ok])) if ok.any() else None
+    # the path's figures (issue 40): mean over clips of the ratio, mean absolute errors
+    for name, key in PATH_SUMMARY_KEYS.items():
+        v = np.array([c.get(key) for c in clips], dtype=np.float64)
+        v = v[np.isfinite(v)]
+        ratio = key == "path_distance_ratio"
+        out[name] = (float(np.mean(v if ratio else np.abs(v))) if len(v) else None)
     return out
 
 
@@ -233,7 +255,7 @@ def measure(method, test: list[Example], progress: bool = False, name: str = "",
             curves[ex.labels["name"]] = np.sqrt((err[:, 1:] ** 2).mean(axis=1))
             actual = curves[ex.labels["name"]] / metrics.CM
         clips.append({"name": ex.labels["name"], "motion_type": ex.labels.get("content"),
-                      "n_frames": gt.num_frames, **values})
+                      "n_frames": gt.num_frames, **values, **_path_values(rec, gt)})
         if full.error_m is not None:
             rows = _confidence_rows(full, actual, ex.labels)
             if retargeted is not None:
@@ -242,6 +264,20 @@ def measure(method, test: list[Example], progress: bool = False, name: str = "",
     return {"clips": clips, "reconstruct_s": rec_s,
             "per_joint": None if cross else joint_sum / frames, "curves": curves,
             "confidence": confidence}
+
+
+
+
+def _path_values(rec: Motion, gt: Motion) -> dict[str, float | None]:
+    """The reconstruction's path against the truth's (:func:`imuloco.paths.metrics.
+    path_errors`), keys ``path_`` + :data:`PATH_CLIP_KEYS` (None where undefined: a clip
+    without strides, or too short for gait phases)."""
+    try:
+        errs = motion_path_errors(rec, gt)
+    except (ValueError, KeyError):  # a clip under two frames, a skeleton without feet
+        return {f"path_{k}": None for k in PATH_CLIP_KEYS}
+    return {f"path_{k}": (float(errs[k]) if np.isfinite(errs[k]) else None)
+            for k in PATH_CLIP_KEYS}
 
 
 def _confidence_rows(full, actual: np.ndarray, labels: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -393,8 +429,8 @@ def _over_seeds(per_seed: list[dict[str, Any]]) -> dict[str, Any]:
     """Mean of each metric over seeds, its spread (``<key>_std``, ddof 1) and the runs'
     MPJPE; counts from the first run (the test clips are the same)."""
     out = dict(per_seed[0])
-    for key in metrics.METRIC_KEYS:
-        v = [r[key] for r in per_seed if r[key] is not None]
+    for key in (*metrics.METRIC_KEYS, *PATH_SUMMARY_KEYS):
+        v = [r[key] for r in per_seed if r.get(key) is not None]
         out[key] = float(np.mean(v)) if v else None
         out[f"{key}_std"] = float(np.std(v, ddof=1)) if len(v) > 1 else None
     out["mpjpe_cm_per_seed"] = [r["mpjpe_cm"] for r in per_seed]

@@ -23,6 +23,11 @@ GaitDefinition`), the estimate read the same way:
   same time. ``stride_mean_err_pct`` / ``speed_mean_err_pct``: the estimate as a walk's
   summary reports it (the mean of the complete strides, speed from the contacts' span),
   against the same reference.
+- the body's path (issue 40; estimator ``path:<source>``, :mod:`imuloco.paths`, for every
+  placement with a path estimator): ``distance_err_pct``, the path's distance within each
+  bout of a fixed length (ipol-gait's 10 m) against it; ``stride_err_pct`` / ``stride_err_m``,
+  its strides' mean per bout against the reference's; ``path_final_pct`` with Vicon's stride
+  ends (the worn foot's footfalls as its path).
 - ``bouts_ref`` / ``bouts_measured``: the reference's bouts, and those in which the estimate
   has a stride (the errors above average over these only: an estimator that misses a hard
   bout is not scored on it, so its figures read together with this share).
@@ -61,6 +66,9 @@ from imuloco.io.realimu import GaitDefinition, GaitReference, RealTrial, find_da
 from imuloco.measures.gait import to_height, to_json
 from imuloco.measures.sensorgait import SensorGait, not_measured, sensor_gait
 from imuloco.measures.strides import stride_rows
+from imuloco.paths.base import BodyPath
+from imuloco.paths.metrics import walked_distance
+from imuloco.paths.registry import ESTIMATORS, estimate_path
 from imuloco.phases import gait_phases
 
 log = logging.getLogger(__name__)
@@ -294,6 +302,51 @@ def evaluate_gait(gait: SensorGait, trial: RealTrial, estimator: str) -> dict[st
     return row
 
 
+def evaluate_path(trial: RealTrial, placement: str) -> dict[str, Any]:
+    """One result row for the body's path from the sensor at ``placement`` (estimator
+    ``path:<source>``, :mod:`imuloco.paths`) against the reference: per bout, the path's
+    distance within the bout's window against a fixed distance (ipol-gait's 10 m,
+    ``distance_err_pct``) and its strides' mean length against the reference's
+    (``stride_err_pct``, ``stride_err_m``); with Vicon's stride ends, the footfalls' path
+    against them (``path_final_pct``, ``path_mean_m``, as :func:`path_errors`)."""
+    ref = trial.reference
+    height = ref.height_m if np.isfinite(ref.height_m) else None
+    path = estimate_path(trial.recording.select([placement]), placement, height)
+    row: dict[str, Any] = {"dataset": trial.dataset, "recording": trial.name,
+                           "sensor": placement, "estimator": f"path:{path.source}",
+                           "measured": bool(path.strides), "reason": "" if path.strides
+                           else path.note}
+    if not path.strides:
+        return row
+    dist, stride, stride_m = [], [], []
+    for b in ref.bouts:
+        if np.isfinite(b.distance_m):
+            d = walked_distance(_window(path, b.start, b.end))
+            dist.append(_pct(d, b.distance_m))
+        inside = [s.length_m for s in path.strides if s.start_s >= b.start - IC_TOLERANCE_S
+                  and s.end_s <= b.end + IC_TOLERANCE_S]
+        if inside and np.isfinite(b.stride_length_m):
+            stride.append(_pct(float(np.mean(inside)), b.stride_length_m))
+            stride_m.append(float(np.mean(inside)) - b.stride_length_m)
+    row.update(distance_err_pct=_mean(dist), stride_err_pct=_mean(stride),
+               stride_err_m=_mean(stride_m), bouts_ref=len(ref.bouts),
+               bouts_measured=len(stride))
+    if ref.stride_ends is not None and ref.stride_points is not None and len(
+            ref.stride_points) >= 2:
+        own = [f for f in path.footfalls if f.foot == placement.split("_")[0]]
+        if len(own) >= 2:
+            xy = np.stack([f.xy for f in own]) * ([1.0, -1.0] if ref.path_z_down else 1.0)
+            row.update(path_errors(np.array([f.time_s for f in own]), xy, ref.stride_ends,
+                                   ref.stride_points))
+    return row
+
+
+def _window(path: BodyPath, start: float, end: float) -> BodyPath:
+    """``path`` between ``start`` and ``end`` seconds (its pelvis only)."""
+    keep = (path.times_s >= start) & (path.times_s <= end)
+    return BodyPath(path.times_s[keep], path.root_xy[keep], None, [], [], path.source, "")
+
+
 def _stride_mae(gait: SensorGait, ends: np.ndarray, points: np.ndarray) -> float:
     """Mean absolute error of the foot's stride lengths between the reference's stride ends
     (the estimated path's rest positions there against Vicon's)."""
@@ -395,6 +448,8 @@ def run_real(folder: str | Path, out: str | Path | None = None, limit: int | Non
                         rows.append({"dataset": trial.dataset, "recording": trial.name,
                                      "sensor": placement, "estimator": "reconstruction",
                                      "measured": False, "reason": str(e)})
+                if placement in ESTIMATORS:  # the body's path (issue 40)
+                    rows.append(evaluate_path(trial, placement))
             if row := published_path_row(trial):
                 rows.append(row)
     if out is not None:
@@ -404,7 +459,8 @@ def run_real(folder: str | Path, out: str | Path | None = None, limit: int | Non
 
 SUMMARY_KEYS = ("steps_err_pct", "cadence_err_pct", "ic_median_ms", "stride_err_m",
                 "stride_err_pct", "speed_err_pct", "stance_err_pp", "stride_mae_m",
-                "path_final_pct", "stride_mean_err_pct", "speed_mean_err_pct")
+                "path_final_pct", "stride_mean_err_pct", "speed_mean_err_pct",
+                "distance_err_pct")
 
 
 def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -450,7 +506,8 @@ COLUMNS = [("dataset", "data set"), ("sensor", "sensor"), ("estimator", "estimat
            ("bouts_measured_pct", "bouts %"), ("stride_err_m", "stride m"),
            ("stride_err_pct", "stride %"), ("speed_err_pct", "speed %"),
            ("stance_err_pp", "stance pp"),
-           ("stride_mae_m", "stride MAE m"), ("path_final_pct", "path end %")]
+           ("stride_mae_m", "stride MAE m"), ("path_final_pct", "path end %"),
+           ("distance_err_pct", "distance %")]
 
 
 def table(summary: list[dict[str, Any]]) -> str:

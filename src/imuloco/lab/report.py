@@ -26,6 +26,14 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("root_speed_err_cm_s", "speed err cm/s", "{:.1f}"),
     ("path_err_cm", "path err cm", "{:.1f}"),
 )
+# the reconstruction's path against the truth's (issue 40), mean absolute errors over clips
+PATH_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("path_distance_ratio", "distance ratio", "{:.2f}"),
+    ("path_distance_mae_pct", "distance MAE %", "{:.1f}"),
+    ("path_stride_mae_pct", "stride MAE %", "{:.1f}"),
+    ("path_stride_mae_m", "stride MAE m", "{:.3f}"),
+    ("path_end_point_error_pct", "end-point err %", "{:.1f}"),
+)
 # cross-dataset: against the ground truth retargeted onto the training skeleton
 RETARGETED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("mpjpe_retargeted_cm", "MPJPE cm", "{:.2f}"),
@@ -137,6 +145,15 @@ def write_report(
         table(records, COLUMNS, (("method", "method"), ("motion_type", "motion type"),
                                  ("n_clips", "clips"), ("n_frames", "frames"))), "",
     ]
+    if any(r.get("path_distance_ratio") is not None for r in records):
+        lines += [
+            "## The path: where the body went", "",
+            ("The reconstruction's own path (pelvis averaged over a step, strides between its "
+             "feet's mid-stances) against the ground truth's: the distance ratio's mean, mean "
+             "absolute errors of the distance walked and the mean stride length per clip, "
+             "and the end-point error in per cent of the distance walked."), "",
+            table(records, PATH_COLUMNS, (("method", "method"),
+                                          ("motion_type", "motion type"))), ""]
     if any(r.get("mpjpe_retargeted_cm") is not None for r in records):
         lines += [
             "## Against the ground truth retargeted onto the training skeleton", "",

@@ -1,4 +1,5 @@
-"""Static plots (PNG): sensor signals, detected gait phases, reconstruction errors.
+"""Static plots (PNG): sensor signals, detected gait phases, reconstruction errors, the
+body's path seen from above.
 
 Figures are built with matplotlib's object API on the Agg canvas (no pyplot state, no
 display). Every function writes one file and returns its path.
@@ -14,6 +15,7 @@ from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
 from imuloco.io.atomic import atomic_path, check_output
 from imuloco.measures.metrics import joint_errors, rmse_per_frame
+from imuloco.paths.base import BodyPath
 from imuloco.phases.contacts import runs
 from imuloco.phases.gait import GAIT8, GaitPhases
 
@@ -138,3 +140,40 @@ def plot_errors(gt: Motion, rec: Motion, path: str | Path, overwrite: bool = Fal
     right.set_ylabel("RMSE (cm)")
     right.set_title(title, fontsize=9)
     return _save(fig, path, overwrite)
+
+
+def plot_path(path: BodyPath, out: str | Path, truth: BodyPath | None = None,
+              overwrite: bool = False) -> Path:
+    """The body's path seen from above (:class:`imuloco.paths.base.BodyPath`): the pelvis's
+    track, the footfalls (right feet as filled triangles, left as open ones, faded by their
+    confidence) and, when given, the truth's path and footfalls in grey. Equal axes, metres,
+    x the walker's initial heading, y to the left."""
+    from matplotlib.colors import to_rgba  # the [viz] extra, as _figure
+
+    fig = _figure(7, 6)
+    ax = fig.subplots()
+    for p, color, label in ((truth, "0.6", "truth"), (path, "tab:blue", path.source)):
+        if p is None:
+            continue
+        ax.plot(p.root_xy[:, 0], p.root_xy[:, 1], color=color, lw=1.5,
+                label=f"{label}: pelvis, {p.distance_m():.2f} m")
+        for foot, marker in (("right", "v"), ("left", "^")):
+            falls = [f for f in p.footfalls if f.foot == foot]
+            if not falls:
+                continue
+            xy = np.stack([f.xy for f in falls])
+            rgba = np.tile(to_rgba(color), (len(falls), 1))
+            rgba[:, 3] = np.clip([f.confidence for f in falls], 0.2, 1.0)
+            ax.scatter(xy[:, 0], xy[:, 1], marker=marker, s=40, edgecolors=rgba,
+                       facecolors=rgba if foot == "right" else "none",
+                       label=f"{label}: {foot} footfalls")
+    if len(path.root_xy):
+        ax.plot(*path.root_xy[0], "ko", ms=4)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m, initial heading)")
+    ax.set_ylabel("y (m, left)")
+    strides = [s.length_m for s in path.strides]
+    ax.set_title(f"{path.source}: {len(strides)} strides"
+                 + (f", mean {np.mean(strides):.2f} m" if strides else ""), fontsize=9)
+    ax.legend(loc="best", fontsize=7)
+    return _save(fig, out, overwrite)
