@@ -1,0 +1,104 @@
+"""The animation obeys the path (issue 40): a reconstruction's root and footfalls moved onto a
+:class:`imuloco.paths.base.BodyPath`, the learned pose kept.
+
+The rule (:func:`follow`):
+
+- where the path knows its heading (``heading_rad`` not None: foot ZUPT, the truth), the root's
+  horizontal position is the path's ``root_xy`` at each frame, carried into the motion's world
+  frame (origin the motion's first root position, x axis its initial facing);
+- where it knows only distances (stride lengths: shank pivot, lower-back steps), the motion
+  keeps its own direction and each stride's horizontal root displacement is rescaled so that
+  its length is the path's (one gain per stride of the foot with the most strides: the path's
+  root displacement over the stride's time, whose length the estimators take from the stride
+  lengths, over the motion's; frames outside every stride take the nearest stride's gain);
+- the root's height and every joint rotation above the hips are the motion's: the pose
+  relative to the root is unchanged but for the legs, which bend (two-bone IK,
+  :func:`imuloco.methods.postprocess.lock_feet`) only to keep a planted foot where it landed
+  once the root has moved (contacts detected on the moved motion,
+  :func:`imuloco.phases.contacts.foot_contacts`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from imuloco.core.motion import Motion
+from imuloco.methods.postprocess import lock_feet
+from imuloco.paths.base import BodyPath, to_floor
+from imuloco.paths.truth import HEADING_SIGMA_S
+from imuloco.phases.contacts import FEET, foot_contacts
+from imuloco.phases.events import heading_angle
+
+MAX_GAIN = 4.0  # a stride's gain is clipped to [1/MAX_GAIN, MAX_GAIN] (a still motion's stride)
+
+
+def floor_frame(motion: Motion) -> tuple[np.ndarray, float]:
+    """The origin (3,) and initial heading (radians) of ``motion``'s floor frame, as
+    :func:`imuloco.paths.truth.path_of_motion` reads them."""
+    pos = motion.part_positions(["left_hip", "right_hip"])
+    theta = heading_angle(pos[:, 0], pos[:, 1], HEADING_SIGMA_S * motion.fps)
+    return motion.root[0].copy(), float(theta[0])
+
+
+def from_floor(xy: np.ndarray, origin: np.ndarray, heading0: float) -> np.ndarray:
+    """Floor-frame points (..., 2) -> world (X, Z) (..., 2): the inverse of
+    :func:`imuloco.paths.base.to_floor` (height left out)."""
+    c, s = np.cos(heading0), np.sin(heading0)
+    a, b = xy[..., 0], xy[..., 1]
+    return np.stack([s * a + c * b + origin[0], c * a - s * b + origin[2]], axis=-1)
+
+
+def stride_gains(own_xy: np.ndarray, times: np.ndarray, path: BodyPath) -> np.ndarray:
+    """Per-step gains (T-1,) that scale each of ``path``'s strides' displacement in
+    ``own_xy`` (T, 2) (sampled at ``times``) to the path's length (module docstring)."""
+    gains = np.full(len(times) - 1, np.nan)
+    feet = [s.foot for s in path.strides]
+    if not feet:
+        return np.ones(len(times) - 1)
+    foot = max(set(feet), key=feet.count)
+    pt = np.asarray(path.times_s, float)
+    for s in (s for s in path.strides if s.foot == foot and np.isfinite(s.length_m)):
+        a, b = np.searchsorted(times, [s.start_s, s.end_s])
+        b = min(b, len(times) - 1)
+        if b <= a:
+            continue
+        own = float(np.linalg.norm(own_xy[b] - own_xy[a]))
+        ends = [np.interp([times[a], times[b]], pt, path.root_xy[:, k]) for k in range(2)]
+        want = float(np.hypot(ends[0][1] - ends[0][0], ends[1][1] - ends[1][0]))
+        gain = want / own if own > 1e-6 else 1.0
+        gains[a:b] = np.clip(gain, 1 / MAX_GAIN, MAX_GAIN)
+    known = np.flatnonzero(np.isfinite(gains))
+    if not len(known):
+        return np.ones(len(times) - 1)
+    nearest = known[np.clip(np.searchsorted(known, np.arange(len(gains))), 0, len(known) - 1)]
+    left = known[np.clip(np.searchsorted(known, np.arange(len(gains))) - 1, 0, len(known) - 1)]
+    pick = np.where(np.abs(left - np.arange(len(gains))) < np.abs(nearest - np.arange(
+        len(gains))), left, nearest)
+    return gains[pick]
+
+
+def follow(motion: Motion, path: BodyPath, lock: bool = True) -> Motion:
+    """``motion`` with its root's horizontal trajectory on ``path`` and its planted feet held
+    by leg IK (module docstring's rule). ``path``'s times are seconds from the motion's first
+    frame. lock : bend the legs to hold planted feet (False: the root alone moves)."""
+    if motion.num_frames < 2 or len(path.times_s) < 2:
+        return motion
+    origin, heading0 = floor_frame(motion)
+    times = motion.times
+    if path.heading_rad is not None:
+        pt = np.asarray(path.times_s, float)
+        xy = np.stack([np.interp(times, pt, path.root_xy[:, k]) for k in range(2)], axis=-1)
+        xy -= xy[0]  # the motion starts where it starts
+    else:
+        own = to_floor(motion.root, origin, heading0)
+        steps = np.diff(own, axis=0) * stride_gains(own, times, path)[:, None]
+        xy = np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
+    root = motion.root.copy()
+    root[:, [0, 2]] = from_floor(xy, origin, heading0)
+    moved = Motion(motion.skeleton, motion.rotations, root, motion.fps, motion.name)
+    if not lock:
+        return moved
+    c = foot_contacts(moved)  # on the moved motion: its feet are still where the path is right
+    heel = np.stack([c[f"{f}_heel"] for f in FEET], axis=1)
+    toe = np.stack([c[f"{f}_toe"] for f in FEET], axis=1)
+    return lock_feet(moved, heel, toe)
