@@ -173,6 +173,9 @@ class ReconstructionReport:
     signal_swing_deg : for a sensor on the shank, the degrees the raw signal turns through in
         a stride (:func:`imuloco.measures.gait.signal_swing`), against which ``plausibility``'s
         ``{side}_shank_swing_deg`` reads the reconstruction's legs; None for other sensors.
+    path : the body's path that drove the root (:func:`imuloco.paths.follow.path_report`:
+        source, distance, strides, and the followed animation's own); None for a placement
+        without a path estimator.
     skeleton : the user's rig the motion was retargeted onto (``None``: the model's).
     seconds : wall time of the whole reconstruction.
     confidence : the method's per-frame predicted error and unreliable flags
@@ -199,6 +202,7 @@ class ReconstructionReport:
     seconds: float = 0.0
     confidence: Confidence | None = None
     motion_gait: dict[str, Any] | None = None
+    path: dict[str, Any] | None = None
 
     @property
     def method(self) -> str:
@@ -218,6 +222,8 @@ class ReconstructionReport:
                    signal_swing_deg=self.signal_swing_deg, plausibility=self.plausibility)
         if self.motion_gait is not None:
             out["motion_gait"] = self.motion_gait
+        if self.path is not None:
+            out["path"] = self.path
         if self.skeleton is not None:
             out["skeleton"] = self.skeleton
         if self.confidence is not None:
@@ -350,6 +356,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     )
     from imuloco.measures.sensorgait import gait_report
     from imuloco.measures.strides import with_confidence
+    from imuloco.paths.follow import follow_recording
     from imuloco.sensors.placement import get_placement
     from imuloco.sensors.reallog import read_log, recording_name
 
@@ -376,6 +383,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     if height is not None:
         k = height_scale(motion.skeleton, height)
         motion, confidence = to_height(motion, height), confidence.scaled(k)  # lengths
+    motion, path = follow_recording(motion, rec, fitted.placements_[0], height)
     report_name = recording_name(recording_path if isinstance(recording_path, (str, Path))
                                  else recording_path[0])
     motion.name = report_name
@@ -396,7 +404,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         signal_cadence_spm=to_json({"v": cadence})["v"],
         signal_swing_deg=(to_json({"v": swing})["v"]
                           if get_placement(rec.placements[k]).on_shank else None),
-        plausibility=to_json(plausibility(motion)), confidence=confidence,
+        plausibility=to_json(plausibility(motion)), confidence=confidence, path=path,
     )
     if skeleton is not None:
         bar.set_postfix_str(f"retargeting onto {Path(skeleton).name}")

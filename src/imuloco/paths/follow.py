@@ -20,12 +20,16 @@ The rule (:func:`follow`):
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from imuloco.core.motion import Motion
+from imuloco.core.recording import Recording
 from imuloco.methods.postprocess import lock_feet
-from imuloco.paths.base import BodyPath, to_floor
-from imuloco.paths.truth import HEADING_SIGMA_S
+from imuloco.paths.base import BodyPath, Stride, to_floor
+from imuloco.paths.registry import ESTIMATORS, estimate_path
+from imuloco.paths.truth import HEADING_SIGMA_S, path_of_motion
 from imuloco.phases.contacts import FEET, foot_contacts
 from imuloco.phases.events import heading_angle
 
@@ -102,3 +106,49 @@ def follow(motion: Motion, path: BodyPath, lock: bool = True) -> Motion:
     heel = np.stack([c[f"{f}_heel"] for f in FEET], axis=1)
     toe = np.stack([c[f"{f}_toe"] for f in FEET], axis=1)
     return lock_feet(moved, heel, toe)
+
+
+def animation_strides(followed: Motion, path: BodyPath) -> list[Stride]:
+    """The animation's own strides at ``path``'s stride times: the distance its ankle of the
+    stride's foot moved on the floor from the stride's first footfall to its last (contacts
+    detected on a jittery reconstruction split strides; the path's footfall times do not)."""
+    idx = np.clip(np.round(np.array([[s.start_s, s.end_s] for s in path.strides]).reshape(
+        -1, 2) * followed.fps).astype(int), 0, followed.num_frames - 1)
+    ankles = followed.part_positions([f"{f}_ankle" for f in FEET])[:, :, [0, 2]]
+    out = []
+    for s, (a, b) in zip(path.strides, idx):
+        k = FEET.index(s.foot)
+        length = float(np.linalg.norm(ankles[b, k] - ankles[a, k]))
+        dur = s.end_s - s.start_s
+        out.append(Stride(s.foot, s.start_s, s.end_s, length, length / dur if dur > 0
+                          else float("nan"), s.confidence))
+    return out
+
+
+def path_report(path: BodyPath, followed: Motion) -> dict:
+    """The report's ``path``: the path that drove the root (``source``, ``note``,
+    ``distance_m``, ``strides``, ``stride_length_m``) and the animation's own (``animation``:
+    its root's distance from :func:`imuloco.paths.truth.path_of_motion`, its
+    :func:`animation_strides` as ``stride_rows`` and their mean), and
+    ``stride_agreement_pct``: the animation's mean stride against the path's, per cent."""
+    est = path.to_json()
+    own = path_of_motion(followed)
+    anim = dataclasses.replace(own, strides=animation_strides(followed, path)).to_json()
+    for key in ("footfalls", "note", "source"):
+        anim.pop(key)
+    a, b = anim["stride_length_m"], est["stride_length_m"]
+    return {"source": est["source"], "note": est["note"], "distance_m": est["distance_m"],
+            "strides": est["strides"], "stride_length_m": b, "animation": anim,
+            "stride_agreement_pct": round(100 * (a / b - 1), 2) if a and b else None}
+
+
+def follow_recording(motion: Motion, rec: Recording, placement: str,
+                     height_m: float | None = None) -> tuple[Motion, dict | None]:
+    """``motion`` (reconstructed from ``rec``, frame 0 at its first sample) following the path
+    that ``placement``'s estimator (:mod:`imuloco.paths.registry`) reads from ``rec``, and its
+    :func:`path_report`; unchanged and None for a placement without an estimator."""
+    if placement not in ESTIMATORS:
+        return motion, None
+    path = estimate_path(rec, placement, height_m)
+    followed = follow(motion, path)
+    return followed, path_report(path, followed)
