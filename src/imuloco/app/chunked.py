@@ -155,7 +155,8 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     ``gait_source``, ``gait_note`` and ``strides`` as in one piece, the pieces' combined as
     ``motion_gait``), ``pieces`` (their count and seconds) and
     ``confidence`` (:meth:`imuloco.app.confidence.Confidence.to_json` over the whole
-    recording, scaled with ``height``). ``unit``: the BVH's length unit
+    recording, scaled with ``height``) and, for a placement with a path estimator, ``path``
+    (each piece follows it: :class:`imuloco.paths.follow.PieceFollower`). ``unit``: the BVH's length unit
     (:func:`imuloco.io.bvh.write_bvh`).
     ``height``: the wearer's body height in metres; every piece is scaled to it
     (:func:`imuloco.measures.gait.to_height`, the same factor for all) before its gait is
@@ -176,6 +177,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     )
     from imuloco.measures.strides import with_confidence
     from imuloco.methods.training import frame_times
+    from imuloco.paths.follow import PieceFollower, estimated_path
     from imuloco.phases import gait_phases
     from imuloco.sensors.reallog import read_log
 
@@ -193,6 +195,8 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     if pin is None:
         pin = not fitted.pins_feet
     frames = len(frame_times(rec, fitted.fps_))
+    path = estimated_path(rec, fitted.placements_[0], height)
+    follower = PieceFollower(path) if path is not None else None
     gait, checks, sizes, confidences = [], [], [], []
     final: list[Motion] = []  # the last piece
     bar = tqdm(total=frames, desc="reconstruct", unit="frame", disable=not progress)
@@ -204,6 +208,8 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
             if height is not None:  # a uniform scale: the joins stay joined
                 k = height_scale(piece.skeleton, height)
                 piece, conf = to_height(piece, height), conf.scaled(k)  # error_m is a length
+            if follower is not None:
+                piece = follower(piece)
             confidences.append(conf)
             gait.append(gait_parameters(piece, gait_phases(piece)))
             checks.append(plausibility(piece))
@@ -233,5 +239,6 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         **({"strides": sensor["strides"], "motion_gait": motion_gait} if sensor else {}),
         "plausibility": to_json(combine(checks, sizes)),
         "confidence": confidence.to_json(),
+        **({"path": follower.report()} if follower is not None else {}),
         "seconds": round(time.perf_counter() - t0, 2),
     }

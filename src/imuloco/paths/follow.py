@@ -81,18 +81,22 @@ def stride_gains(own_xy: np.ndarray, times: np.ndarray, path: BodyPath) -> np.nd
     return gains[pick]
 
 
-def follow(motion: Motion, path: BodyPath, lock: bool = True) -> Motion:
+def follow(motion: Motion, path: BodyPath, lock: bool = True,
+           frame: tuple[np.ndarray, float] | None = None) -> Motion:
     """``motion`` with its root's horizontal trajectory on ``path`` and its planted feet held
     by leg IK (module docstring's rule). ``path``'s times are seconds from the motion's first
-    frame. lock : bend the legs to hold planted feet (False: the root alone moves)."""
+    frame. lock : bend the legs to hold planted feet (False: the root alone moves).
+    frame : the floor frame's world origin and initial heading (:func:`floor_frame`) for a
+    piece of a longer motion (None: ``motion``'s own, the path's start moved to its start)."""
     if motion.num_frames < 2 or len(path.times_s) < 2:
         return motion
-    origin, heading0 = floor_frame(motion)
+    origin, heading0 = floor_frame(motion) if frame is None else frame
     times = motion.times
     if path.heading_rad is not None:
         pt = np.asarray(path.times_s, float)
         xy = np.stack([np.interp(times, pt, path.root_xy[:, k]) for k in range(2)], axis=-1)
-        xy -= xy[0]  # the motion starts where it starts
+        if frame is None:
+            xy -= xy[0]  # the motion starts where it starts
     else:
         own = to_floor(motion.root, origin, heading0)
         steps = np.diff(own, axis=0) * stride_gains(own, times, path)[:, None]
@@ -125,21 +129,82 @@ def animation_strides(followed: Motion, path: BodyPath) -> list[Stride]:
     return out
 
 
-def path_report(path: BodyPath, followed: Motion) -> dict:
+def path_report(path: BodyPath, followed: Motion | None = None,
+                strides: list[Stride] | None = None, distance_m: float | None = None) -> dict:
     """The report's ``path``: the path that drove the root (``source``, ``note``,
-    ``distance_m``, ``strides``, ``stride_length_m``) and the animation's own (``animation``:
-    its root's distance from :func:`imuloco.paths.truth.path_of_motion`, its
-    :func:`animation_strides` as ``stride_rows`` and their mean), and
-    ``stride_agreement_pct``: the animation's mean stride against the path's, per cent."""
+    ``distance_m``, ``strides``, ``stride_length_m``), the animation's own (``animation``:
+    ``distance_m`` its root's polyline, ``strides``, ``stride_length_m`` and ``stride_rows``
+    its :func:`animation_strides`; of ``followed``, or given as ``strides`` and
+    ``distance_m``) and ``stride_agreement_pct``: the animation's mean stride against the
+    path's, per cent."""
     est = path.to_json()
-    own = path_of_motion(followed)
-    anim = dataclasses.replace(own, strides=animation_strides(followed, path)).to_json()
-    for key in ("footfalls", "note", "source"):
-        anim.pop(key)
+    if followed is not None:
+        strides = animation_strides(followed, path)
+        distance_m = path_of_motion(followed).distance_m()
+    rows = BodyPath(np.zeros(1), np.zeros((1, 2)), None, [], strides or [], "", "").to_json()
+    anim = {"distance_m": round(float(distance_m or 0.0), 4), "strides": rows["strides"],
+            "stride_length_m": rows["stride_length_m"], "stride_rows": rows["stride_rows"]}
     a, b = anim["stride_length_m"], est["stride_length_m"]
     return {"source": est["source"], "note": est["note"], "distance_m": est["distance_m"],
             "strides": est["strides"], "stride_length_m": b, "animation": anim,
             "stride_agreement_pct": round(100 * (a / b - 1), 2) if a and b else None}
+
+
+class PieceFollower:
+    """:func:`follow` for a recording reconstructed in pieces (``--piece-seconds``): call it
+    on each piece in order. With a heading, every piece's root is on the path in the first
+    piece's floor frame (as one piece's); without, each piece keeps its own direction and has
+    its strides rescaled, its root carried on from where the previous followed piece ended;
+    the animation's strides (:func:`animation_strides` of the
+    strides wholly inside a piece) and distance add up for :func:`path_report`."""
+
+    def __init__(self, path: BodyPath) -> None:
+        self.path = path
+        self.strides: list[Stride] = []
+        self.distance_m = 0.0
+        self._offset = np.zeros(3)
+        self._frames = 0
+        self._last: np.ndarray | None = None
+        self._frame: tuple[np.ndarray, float] | None = None
+
+    def __call__(self, piece: Motion) -> Motion:
+        t0 = self._frames / piece.fps
+        t1 = t0 + piece.duration
+        shift = [dataclasses.replace(s, start_s=s.start_s - t0, end_s=s.end_s - t0)
+                 for s in self.path.strides if s.end_s > t0 and s.start_s < t1]
+        local = dataclasses.replace(self.path, times_s=self.path.times_s - t0, strides=shift)
+        if self.path.heading_rad is not None:
+            if self._frame is None:
+                self._frame = floor_frame(piece)
+            moved = follow(piece, local, frame=self._frame)
+        else:
+            root = piece.root.copy()
+            root[:, [0, 2]] += self._offset[[0, 2]]
+            moved = follow(Motion(piece.skeleton, piece.rotations, root, piece.fps,
+                                  piece.name), local)
+        inside = dataclasses.replace(local, strides=[s for s in shift if s.start_s >= 0
+                                                     and s.end_s <= piece.duration])
+        self.strides += [dataclasses.replace(s, start_s=s.start_s + t0, end_s=s.end_s + t0)
+                         for s in animation_strides(moved, inside)]
+        xz = moved.root[:, [0, 2]]
+        if self._last is not None:
+            xz = np.vstack([self._last, xz])
+        self.distance_m += float(np.linalg.norm(np.diff(xz, axis=0), axis=1).sum())
+        self._last = moved.root[-1, [0, 2]].copy()
+        self._offset[[0, 2]] = moved.root[-1, [0, 2]] - piece.root[-1, [0, 2]]
+        self._frames += piece.num_frames
+        return moved
+
+    def report(self) -> dict:
+        """:func:`path_report` of the pieces followed so far."""
+        return path_report(self.path, strides=self.strides, distance_m=self.distance_m)
+
+
+def estimated_path(rec: Recording, placement: str, height_m: float | None = None
+                   ) -> BodyPath | None:
+    """The path ``placement``'s estimator reads from ``rec``; None for a placement without
+    one (:data:`imuloco.paths.registry.ESTIMATORS`)."""
+    return estimate_path(rec, placement, height_m) if placement in ESTIMATORS else None
 
 
 def follow_recording(motion: Motion, rec: Recording, placement: str,
@@ -147,8 +212,8 @@ def follow_recording(motion: Motion, rec: Recording, placement: str,
     """``motion`` (reconstructed from ``rec``, frame 0 at its first sample) following the path
     that ``placement``'s estimator (:mod:`imuloco.paths.registry`) reads from ``rec``, and its
     :func:`path_report`; unchanged and None for a placement without an estimator."""
-    if placement not in ESTIMATORS:
+    path = estimated_path(rec, placement, height_m)
+    if path is None:
         return motion, None
-    path = estimate_path(rec, placement, height_m)
     followed = follow(motion, path)
     return followed, path_report(path, followed)
