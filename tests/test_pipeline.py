@@ -23,6 +23,7 @@ from imuloco.measures.gait import (
     signal_swing,
 )
 from imuloco.ops.rotations import from_rotvec, qrot
+from imuloco.paths.truth import path_of_motion
 from imuloco.phases import gait_phases
 from imuloco.sensors.simulate import simulate
 
@@ -188,6 +189,12 @@ def test_reconstruct_file_gives_a_walk_on_the_training_skeleton(log_file, fitted
     n = min(motion.num_frames, demo_clip.num_frames)
     assert mpjpe(demo_clip.slice(0, n), motion.slice(0, n)) < 12.0
     json.dumps(report.to_json())  # JSON-ready
+    # the shank's path drove the root: the animation's strides are the path's (issue 40)
+    path = report["path"]
+    assert path["source"] == "shank-pivot" and path["strides"] >= 3
+    assert abs(path["stride_agreement_pct"]) < 2
+    truth = path_of_motion(demo_clip).distance_m()
+    assert path["animation"]["distance_m"] == pytest.approx(truth, rel=0.1)
 
 
 def test_calibration_makes_the_phone_orientation_irrelevant(fitted, demo_clip):

@@ -15,8 +15,10 @@ from imuloco.sensors.simulate import simulate
 # the report's keys as `imuloco reconstruct --report` and batch's NAME.json have written them
 REPORT_KEYS = ["recording", "calibration", "feet_pinned_by", "method", "model", "placement",
                "motion", "height_m", "gait", "gait_source", "gait_note", "strides",
-               "signal_cadence_spm", "signal_swing_deg", "plausibility", "confidence",
+               "signal_cadence_spm", "signal_swing_deg", "plausibility", "path", "confidence",
                "seconds"]
+PATH_KEYS = ["source", "note", "distance_m", "strides", "stride_length_m", "animation",
+             "stride_agreement_pct"]
 RECORDING_KEYS = ["files", "format", "duration_s", "source_rate_hz", "samples", "unsorted",
                   "duplicates", "acc_unit", "gyro_unit", "gaps", "time_unit", "platform"]
 
@@ -32,6 +34,7 @@ def test_report_to_json_keeps_the_contract_keys(log_file, ridge_without_demo_cli
     _, report = pipeline.reconstruct_file(log_file, fitted=ridge_without_demo_clip)
     data = json.loads(json.dumps(report.to_json()))
     assert list(data) == REPORT_KEYS
+    assert list(data["path"]) == PATH_KEYS  # issue 40: the path that drove the root
     assert list(data["recording"]) == RECORDING_KEYS
     assert list(data["motion"]) == ["frames", "fps", "duration_s"]
     assert data["method"] == report.method == "ridge"

@@ -146,7 +146,9 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     or lower-back sensor, its own gait with ``gait_source``, ``gait_note`` and ``strides`` as
     in one piece, the pieces' combined as ``motion_gait``), ``pieces`` (their count and
     seconds) and ``confidence`` (:meth:`imuloco.app.confidence.Confidence.to_json` over the
-    whole recording, scaled with ``height``). ``unit``: the BVH's length unit
+    whole recording, scaled with ``height``). and, for a placement with a path estimator, ``path``
+    (each piece follows it: :class:`imuloco.paths.follow.PieceFollower`). ``unit``: the BVH's
+    length unit
     (:func:`imuloco.io.bvh.write_bvh`).
     ``height``: the wearer's body height in metres; every piece is scaled to it
     (:func:`imuloco.measures.gait.to_height`, the same factor for all) before its gait is
@@ -175,6 +177,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     )
     from imuloco.measures.sensorgait import estimator_of, gait_report
     from imuloco.methods.training import frame_times
+    from imuloco.paths.follow import PieceFollower, estimated_path
     from imuloco.phases import gait_phases
     from imuloco.sensors.reallog import read_log
 
@@ -194,6 +197,8 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     if pin is None:
         pin = not fitted.pins_feet
     frames = len(frame_times(rec, fitted.fps_))
+    path = estimated_path(rec, fitted.placements_[0], height)
+    follower = PieceFollower(path) if path is not None else None
     gait, checks, sizes, confidences = [], [], [], []
     final: list = []  # the last piece and its gait phases
     bar = tqdm(total=frames, desc="reconstruct", unit="frame", disable=not progress)
@@ -205,6 +210,8 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
             if height is not None:  # a uniform scale: the joins stay joined
                 k = height_scale(piece.skeleton, height)
                 piece, conf = to_height(piece, height), conf.scaled(k)  # error_m is a length
+            if follower is not None:
+                piece = follower(piece)
             confidences.append(conf)
             phases = gait_phases(piece)  # the piece's contacts: found once, read twice
             gait.append(gait_parameters(piece, phases))
@@ -238,5 +245,6 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         motion=MotionInfo(frames, fitted.fps_, round((frames - 1) / fitted.fps_, 3)),
         height_m=height, gait=walk, plausibility=Plausibility(**combine(checks, sizes)),
         confidence=Confidence.concatenate(confidences), started=t0,
-        pieces=Pieces(len(sizes), piece_s, warmup_s))
+        pieces=Pieces(len(sizes), piece_s, warmup_s),
+        path=None if follower is None else follower.report())
 

@@ -294,6 +294,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
 
     from imuloco.measures.gait import Plausibility, height_scale, to_height
     from imuloco.measures.sensorgait import gait_report
+    from imuloco.paths.follow import follow_recording
     from imuloco.phases import gait_phases
     from imuloco.sensors.reallog import read_log, recording_name
 
@@ -321,6 +322,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     if height is not None:
         k = height_scale(motion.skeleton, height)
         motion, confidence = to_height(motion, height), confidence.scaled(k)  # lengths
+    motion, path = follow_recording(motion, rec, fitted.placements_[0], height)
     report_name = recording_name(recording_path if isinstance(recording_path, (str, Path))
                                  else recording_path[0])
     motion.name = report_name
@@ -339,7 +341,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         recording=log_report, raw=rec, model=choice, placement=placement,
         calibration=info.get("calibration"), feet_pinned_by=info["feet_pinned_by"],
         motion=info_motion, height_m=height, gait=gait, plausibility=checks,
-        confidence=confidence, started=t0, skeleton=rig_json)
+        confidence=confidence, started=t0, skeleton=rig_json, path=path)
     bar.update()
     bar.close()
     return motion, report

@@ -86,6 +86,10 @@ class ReconstructionReport:
         with ``height_m``, on the model's skeleton also when retargeted onto ``skeleton``);
         the JSON's ``confidence`` is its summary.
     seconds : wall time of the whole reconstruction.
+    path : the body's path that drove the root (:func:`imuloco.paths.follow.path_report`:
+        source, distance, strides, and the followed animation's own); None for a placement
+        without a path estimator.
+    warnings : what the import and reconstruction warned of (``batch``; None elsewhere).
     batch : what ``imuloco batch`` ran it with (recording, model hash, placement, height,
         unit), which marks its outputs complete; ``None`` outside a batch.
     """
@@ -111,6 +115,7 @@ class ReconstructionReport:
     seconds: float = 0.0
     batch: dict[str, Any] | None = None
     warnings: list[str] | None = None
+    path: dict[str, Any] | None = None
 
     @property
     def method(self) -> str:
@@ -137,6 +142,8 @@ class ReconstructionReport:
                    plausibility=self.plausibility.to_json())
         if self.motion_gait is not None:
             out["motion_gait"] = self.motion_gait.to_json()
+        if self.path is not None:
+            out["path"] = self.path
         if self.skeleton is not None:
             out["skeleton"] = self.skeleton
         if self.confidence is not None:
@@ -157,8 +164,8 @@ def build_report(*, recording: LogReport, raw: Recording, model: ModelChoice, pl
                  calibration: list[dict[str, Any]] | None, feet_pinned_by: str,
                  motion: MotionInfo, height_m: float | None, gait: GaitReport,
                  plausibility: Plausibility, confidence: Confidence, started: float,
-                 pieces: Pieces | None = None, skeleton: dict[str, Any] | None = None
-                 ) -> ReconstructionReport:
+                 pieces: Pieces | None = None, skeleton: dict[str, Any] | None = None,
+                 path: dict[str, Any] | None = None) -> ReconstructionReport:
     """The report of a reconstruction, in one piece (:func:`imuloco.app.pipeline.
     reconstruct_file`) or in pieces (:func:`imuloco.app.chunked.reconstruct_to_bvh`).
 
@@ -186,5 +193,5 @@ def build_report(*, recording: LogReport, raw: Recording, model: ModelChoice, pl
         signal_swing_deg=(to_json({"v": swing})["v"]
                           if on_shank else None),
         plausibility=plausibility, motion_gait=gait.motion_gait, pieces=pieces,
-        skeleton=skeleton, confidence=confidence,
+        skeleton=skeleton, confidence=confidence, path=path,
         seconds=round(time.perf_counter() - started, 2))
