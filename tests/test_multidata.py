@@ -232,3 +232,36 @@ def test_the_truth_on_the_training_rig_is_the_motion_the_test_clip_was_made_from
     assert moved.skeleton.names == made_from.skeleton.names
     assert moved.num_frames == made_from.num_frames and mpjpe(made_from, moved) < 2.0
     assert mpjpe(sample.clips[8], truths[test.labels[2]["name"]]) < 2.0
+
+
+def test_heldout_actions_leaves_each_action_out_and_trains_on_walking_too(sample):
+    """Relabel two sample clips as actions: each is a fold of its own, trained on every other
+    clip (the walks included); data without any action content is refused by name."""
+    from imuloco.errors import InputError
+
+    db = sample.subset(list(range(len(sample))))
+    db.labels[0] = {**db.labels[0], "content": "bow"}
+    db.labels[1] = {**db.labels[1], "content": "wave-left-hand"}
+    out = folds(db, "heldout-actions")
+    assert [f for f, _, _ in out] == ["bow", "wave-left-hand"]
+    for fold, train, test in out:
+        assert [lab["content"] for lab in test.labels] == [fold]
+        assert len(train) == len(db) - 1 and "walk" in {lab["content"] for lab in train.labels}
+    with pytest.raises(InputError, match="heldout-actions needs clips of one of"):
+        folds(sample, "heldout-actions")
+
+
+def test_body_part_groups_score_only_their_parts(sample):
+    """Arms moved away, legs and trunk untouched: only ``arms_cm`` rises, by the shift."""
+    from imuloco.measures.metrics import evaluate
+    from imuloco.ops.rotations import about_y, qmul
+
+    gt = sample.clips[0]
+    rec = gt.copy()
+    for side in ("left", "right"):
+        j = gt.skeleton.part(f"{side}_shoulder")  # turn the whole arm about the vertical
+        rec.rotations[:, j] = qmul(rec.rotations[:, j], about_y(np.full(gt.num_frames, 0.5)))
+    v = evaluate(gt, rec)
+    assert v["legs_cm"] == pytest.approx(0, abs=1e-9)
+    assert v["trunk_cm"] == pytest.approx(0, abs=1e-9)
+    assert v["arms_cm"] > 1.0

@@ -365,7 +365,8 @@ def _folders(values: tuple[str, ...], hint: str = "--data") -> list[Path] | None
                    "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm] [required "
                    "but with --batch, which defaults to the shipped model].")
 @click.option("--split", "split_name",
-              type=click.Choice([*SPLITS, "heldout-contents", "cross-dataset"]),
+              type=click.Choice([*SPLITS, "heldout-contents", "cross-dataset",
+                                 "heldout-actions"]),
               default="random-clips", show_default=True,
               help="Protocol (imuloco.lab.protocols); cross-dataset takes --train/--test.")
 @noise_option
@@ -379,7 +380,8 @@ def _folders(values: tuple[str, ...], hint: str = "--data") -> list[Path] | None
 @click.option("--seeds", "n_seeds", type=click.IntRange(min=1), default=1, show_default=True,
               help="Train each method with N seeds (seed, seed+1, ...): mean and spread.")
 @click.option("--fold", "fold_names", default=None, metavar="CONTENT[,CONTENT]",
-              help="heldout-contents: run only these folds (left-out contents).")
+              help="heldout-contents, heldout-actions: run only these folds (left-out "
+                   "contents).")
 @click.option("--speed", is_flag=True,
               help="Run the speed benchmark (imuloco.lab.speed) instead.")
 @click.option("--db-frames", default=None,

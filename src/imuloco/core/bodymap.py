@@ -25,6 +25,13 @@ PARTS: tuple[str, ...] = CENTRE_PARTS + tuple(f"{s}_{p}" for s in SIDES for p in
 UPPER_PARTS = ("spine", "chest", "neck", "head") + tuple(
     f"{s}_{p}" for s in SIDES for p in ("shoulder", "elbow", "wrist"))
 LOWER_PARTS = tuple(f"{s}_{p}" for s in SIDES for p in ("hip", "knee", "ankle", "toe"))
+# the body-part groups the bench scores apart: what a leg sensor sees (legs), what it cannot
+# (arms), and what follows from the legs (trunk)
+PART_GROUPS: dict[str, tuple[str, ...]] = {
+    "legs": LOWER_PARTS,
+    "arms": tuple(f"{s}_{p}" for s in SIDES for p in ("shoulder", "elbow", "wrist")),
+    "trunk": ("spine", "chest", "neck", "head"),
+}
 
 # Candidate joint names per part, most specific first. "{S}" is the side's letter (L/R),
 # "{Side}" the side's word (Left/Right), "{s}" the lower-case letter (l/r).

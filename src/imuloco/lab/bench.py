@@ -13,9 +13,13 @@ Protocol details fixed here (see also :mod:`imuloco.lab.protocols`):
 - Aggregation: per motion type and ``all``, each metric is the frame-weighted mean of its
   per-clip values (for per-frame metrics this is the mean over all test frames; for ``dpv``,
   a per-clip sum by definition, clips count by their length). ``foot_skate`` ignores clips
-  without ground-truth contact. ``heldout-contents`` pools the test clips of all its folds
-  (each clip is tested once, by the model trained without its content), so its rows per
-  motion type are the left-out contents.
+  without ground-truth contact. ``heldout-contents`` (and ``heldout-actions``) pools the test
+  clips of all its folds (each clip is tested once, by the model trained without its content),
+  so its rows per motion type are the left-out contents.
+- Body-part groups: ``legs_cm``, ``arms_cm`` and ``trunk_cm`` are the mean position errors of
+  the canonical parts of :data:`imuloco.core.bodymap.PART_GROUPS` (heading frame at the
+  pelvis), on every protocol: run ``mean`` beside a method to see each group against the mean
+  pose (``results.md`` sets them side by side).
 - Seeds: with ``seeds`` N > 1 each method is trained N times (seeds ``seed .. seed+N-1``,
   for the training signals and for a method's own ``seed`` hyperparameter unless the spec
   sets it) on the same test signals; each metric is the mean over the runs, ``<metric>_std`` their
@@ -326,7 +330,8 @@ def run_bench(
     seeds : number of training seeds (see the module docstring).
     train, test : the folders of ``cross-dataset`` (training: one or several; test: one).
     up, skip_frames : how motion files are read (see :func:`imuloco.io.bvh.read_bvh`).
-    only_folds : run only these folds of ``heldout-contents`` (left-out contents).
+    only_folds : run only these folds of ``heldout-contents`` or ``heldout-actions``
+        (left-out contents).
     """
     specs = {m: parse_method_spec(m) for m in methods}
     for name, params in specs.values():  # fail before any work on an unknown or uninstalled

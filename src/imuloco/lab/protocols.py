@@ -6,11 +6,16 @@
 - ``heldout-contents``: one fold per content of :data:`HELDOUT_CONTENTS` present in the data
   (meant for both Bandai-Namco sets together): its clips form the test set, every clip of
   another content the training set. Motion the methods never saw.
+- ``heldout-actions``: as ``heldout-contents``, one fold per content of
+  :data:`HELDOUT_ACTIONS` present (everyday motion that is not walking: the Bandai-Namco action
+  folders), trained on every clip of another content, walking included. Meant for the
+  locomotion and action folders together (``--data`` of all four Bandai-Namco folders).
 - ``cross-dataset``: train on some folders, test on another (other people, another rig); the
   bench gets the two sets separately and compares canonical body parts
   (:func:`imuloco.measures.metrics.evaluate_parts`).
 
-Version 2 added the last two; ``random-clips`` and ``heldout-styles`` split as in version 1,
+Version 2 added ``heldout-contents`` and ``cross-dataset`` (and later ``heldout-actions``, which
+changes no other protocol's split); ``random-clips`` and ``heldout-styles`` split as in version 1,
 so their numbers compare across the two versions.
 
 Test recordings are simulated with seeds offset by
@@ -25,10 +30,17 @@ from imuloco.core.motion import MotionDatabase
 from imuloco.errors import InputError, UnknownNameError
 
 PROTOCOL_VERSION = 2
-SPLITS = ("random-clips", "heldout-styles", "heldout-contents", "cross-dataset")
+SPLITS = ("random-clips", "heldout-styles", "heldout-contents", "cross-dataset",
+          "heldout-actions")
 HELDOUT_CONTENTS = ("walk", "walk-turn-left", "walk-turn-right", "run", "dash", "walk-back",
                     "walk-left", "walk-right")
-MOTION_TYPES = HELDOUT_CONTENTS
+# the contents of bandai-namco-1-actions and bandai-namco-2-actions (../shared/data/README.md)
+HELDOUT_ACTIONS = ("bow", "bye", "byebye", "guide", "call", "dance-short", "kick", "punch",
+                   "respond", "slash", "raise-up-both-hands", "raise-up-left-hand",
+                   "raise-up-right-hand", "wave-both-hands", "wave-left-hand", "wave-right-hand")
+MOTION_TYPES = HELDOUT_CONTENTS + HELDOUT_ACTIONS
+# the protocols with one fold per left-out content, and the contents they leave out
+LEAVE_CONTENT_OUT = {"heldout-contents": HELDOUT_CONTENTS, "heldout-actions": HELDOUT_ACTIONS}
 HELDOUT_STYLES = ("exhausted", "feminine")
 TEST_FRACTION = 0.2
 
@@ -40,18 +52,20 @@ def in_random_test(name: str) -> bool:
 
 def folds(db: MotionDatabase, name: str) -> list[tuple[str, MotionDatabase, MotionDatabase]]:
     """``(fold, train, test)`` of protocol ``name``: one fold named ``"all"`` for a split,
-    one per left-out content for ``heldout-contents``."""
-    if name != "heldout-contents":
+    one per left-out content for ``heldout-contents`` and ``heldout-actions``."""
+    if name not in LEAVE_CONTENT_OUT:
         return [("all", *split(db, name))]
+    contents = LEAVE_CONTENT_OUT[name]
     present = {lab.get("content") for lab in db.labels}
     out = []
-    for content in [c for c in HELDOUT_CONTENTS if c in present]:
+    for content in [c for c in contents if c in present]:
         test = [lab.get("content") == content for lab in db.labels]
         out.append((content, db.subset([i for i, t in enumerate(test) if not t]),
                     db.subset([i for i, t in enumerate(test) if t])))
-    if len(out) < 2:
-        raise InputError(f"heldout-contents needs clips of at least two of the contents "
-                         f"{list(HELDOUT_CONTENTS)}; the data has {sorted(present - {None})}")
+    if not out or any(not len(train) for _, train, _ in out):
+        raise InputError(f"{name} needs clips of one of the contents {list(contents)} and "
+                         f"of another content to train on; the data has "
+                         f"{sorted(present - {None})}")
     return out
 
 

@@ -40,6 +40,12 @@ RETARGETED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("upper_retargeted_cm", "upper cm", "{:.2f}"),
     ("lower_retargeted_cm", "lower cm", "{:.2f}"),
 )
+# the body-part groups (legs, arms, trunk) of imuloco.core.bodymap.PART_GROUPS
+GROUP_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("legs_cm", "legs cm", "{:.2f}"),
+    ("arms_cm", "arms cm", "{:.2f}"),
+    ("trunk_cm", "trunk cm", "{:.2f}"),
+)
 COST_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("train_s", "train s", "{:.1f}"),
     ("offline_fps", "offline fps", "{:.0f}"),
@@ -154,6 +160,7 @@ def write_report(
              "and the end-point error in per cent of the distance walked."), "",
             table(records, PATH_COLUMNS, (("method", "method"),
                                           ("motion_type", "motion type"))), ""]
+    lines += group_section(records)
     if any(r.get("mpjpe_retargeted_cm") is not None for r in records):
         lines += [
             "## Against the ground truth retargeted onto the training skeleton", "",
@@ -168,6 +175,32 @@ def write_report(
     path = out / "results.md"
     atomic_write_text(path, "\n".join(lines) + "\n")
     return path
+
+
+def group_section(records: Sequence[dict[str, Any]], baseline: str = "mean") -> list[str]:
+    """``results.md``'s body-part section: legs, arms and trunk per method and motion type,
+    and, when ``baseline`` (the mean pose) was run beside, where a method is worse than it."""
+    rows = [r for r in records if any(r.get(k) is not None for k, _, _ in GROUP_COLUMNS)]
+    if not rows:
+        return []
+    lines = ["## Body parts: legs, arms, trunk", "",
+             ("Mean position error of each group of canonical parts (legs: hips to toes; arms: "
+              "shoulders to wrists; trunk: spine to head), heading frame at the pelvis."), "",
+             table(rows, GROUP_COLUMNS, (("method", "method"), ("motion_type", "motion type"))),
+             ""]
+    base = {r["motion_type"]: r for r in rows if r["method"] == baseline}
+    if not base:
+        return lines
+    worse = [f"{r['method']} {key[:-3]} on {r['motion_type']} ({r[key]:.2f} against "
+             f"{base[r['motion_type']][key]:.2f} cm)"
+             for r in rows if r["method"] != baseline and r["motion_type"] in base
+             for key, _, _ in GROUP_COLUMNS
+             if r.get(key) is not None and base[r["motion_type"]].get(key) is not None
+             and r[key] > base[r["motion_type"]][key]]
+    lines += [f"Against the mean pose (`{baseline}`): "
+              + ("every group of every method is at least as good." if not worse else
+                 f"{len(worse)} group(s) worse: " + "; ".join(worse) + "."), ""]
+    return lines
 
 
 def _plots(out: Path, per_joint, joint_names, curves, curve_clip: str, fps: float) -> list[str]:

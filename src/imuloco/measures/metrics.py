@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from imuloco.core.bodymap import PART_GROUPS
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.ops.heading import heading_from_hips, to_heading_frame
@@ -309,10 +310,23 @@ def path_error_of(a: np.ndarray, heading_a: np.ndarray, b: np.ndarray, heading_b
 # cross-dataset only: part errors against the ground truth retargeted onto the
 # reconstruction's skeleton (:func:`evaluate_parts`; :func:`evaluate` has no such keys)
 RETARGETED_KEYS = ("mpjpe_retargeted_cm", "upper_retargeted_cm", "lower_retargeted_cm")
+# mean position error of each group of :data:`imuloco.core.bodymap.PART_GROUPS`' canonical
+# parts (heading frame at the pelvis, cm): comparable across skeletons and against the mean pose
+GROUP_KEYS = tuple(f"{g}_cm" for g in PART_GROUPS)
 METRIC_KEYS = ("mpjpe_cm", "rmse_cm", "upper_cm", "lower_cm", "upper_rmse_cm",
                "lower_rmse_cm", "angle_deg", "dpv", "jitter",
                "jitter_gt", "foot_skate_cm_s", "foot_skate_gt_cm_s", "root_speed_err_cm_s",
-               "path_err_cm", *RETARGETED_KEYS)
+               "path_err_cm", *RETARGETED_KEYS, *GROUP_KEYS)
+
+
+def group_errors(err: np.ndarray, index: dict[str, int]) -> dict[str, float]:
+    """:data:`GROUP_KEYS` from per-frame errors ``err`` (T, N), metres, whose column
+    ``index[part]`` is a canonical part's (a part absent from ``index`` is left out)."""
+    out = {}
+    for group, parts in PART_GROUPS.items():
+        cols = [index[p] for p in parts if p in index]
+        out[f"{group}_cm"] = float(err[:, cols].mean() * CM) if cols else None
+    return out
 
 
 def evaluate(gt: Motion, rec: Motion) -> dict[str, float]:
@@ -328,6 +342,8 @@ def evaluate(gt: Motion, rec: Motion) -> dict[str, float]:
     upper, lower = body_halves(gt.skeleton)
     body = np.arange(1, gt.skeleton.num_joints)
     contacts = gt_contacts(gt)
+    mapped = gt.skeleton.body_map or {}
+    parts = {p: gt.skeleton.part(p) for g in PART_GROUPS.values() for p in g if p in mapped}
     return {
         "mpjpe_cm": float(err[:, body].mean() * CM),
         "rmse_cm": float(np.sqrt((err[:, body] ** 2).mean(axis=1)).mean() * CM),
@@ -343,6 +359,7 @@ def evaluate(gt: Motion, rec: Motion) -> dict[str, float]:
         "foot_skate_gt_cm_s": foot_skate(gt, gt, contacts),
         "root_speed_err_cm_s": root_speed_error(gt, rec),
         "path_err_cm": path_error(gt, rec),
+        **group_errors(err, parts),
     }
 
 
@@ -476,5 +493,6 @@ def evaluate_parts_curves(gt: Motion, rec: Motion, retargeted: Motion | None = N
         "root_speed_err_cm_s": speed_error(pg[:, k["pelvis"]], pr[:, k["pelvis"]], gt.fps),
         "path_err_cm": path_error_of(pg[:, k["pelvis"]], hg, pr[:, k["pelvis"]], hr, gt.fps),
         **against,
+        **group_errors(err, k),
     }
     return values, actual, actual_retargeted
