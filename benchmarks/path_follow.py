@@ -6,7 +6,7 @@
 For a few clips of each walking content of ``bandai-namco-1`` (``heldout-contents`` style) and
 of its ``heldout-styles`` walks, simulates the placement's sensor (phone noise, seed 0),
 reconstructs with the shipped learned model (:func:`imuloco.app.pipeline.reconstruct_recording`)
-and compares the motion's own path with the truth's (:func:`imuloco.measures.path
+and compares the motion's own path with the truth's (:func:`imuloco.paths.metrics
 .motion_path_errors`): as reconstructed, after :func:`imuloco.paths.follow.follow` of the
 placement's estimated path (with and without the legs' IK), and after following the truth's path (the follower alone). Also
 the root-relative MPJPE and the foot skate against the truth's own. Prints a markdown table of
@@ -20,7 +20,6 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-from imuloco.measures.path import motion_path_errors
 
 from imuloco.app.pipeline import choose_model, reconstruct_recording
 from imuloco.io.database import load_database
@@ -28,6 +27,7 @@ from imuloco.lab.protocols import HELDOUT_STYLES
 from imuloco.measures.gait import stature
 from imuloco.measures.metrics import foot_skate, mpjpe
 from imuloco.paths.follow import follow
+from imuloco.paths.metrics import motion_path_errors
 from imuloco.paths.registry import estimate_path
 from imuloco.paths.truth import path_of_motion
 from imuloco.sensors.simulate import simulate

@@ -7,11 +7,11 @@ import dataclasses
 
 import numpy as np
 import pytest
-from imuloco.measures.path import path_errors
 
 from imuloco.core.motion import Motion
 from imuloco.measures.metrics import foot_skate, mpjpe
 from imuloco.paths.follow import follow
+from imuloco.paths.metrics import path_errors
 from imuloco.paths.truth import path_of_motion
 
 CLIPS = ["dataset-2_walk_normal_001", "dataset-2_walk-turn-left_normal_001"]
