@@ -70,7 +70,7 @@ from imuloco.io.sensorlog import (
     read_sensor_logger,
     write_generic_csv,
 )
-from imuloco.lab.fuzz_exports import export_attack, export_garbage, export_seeds, read_export
+from imuloco.lab.fuzz_exports import _zip, export_attack, export_garbage, export_seeds, read_export
 from imuloco.lab.fuzz_live import live_attack, live_garbage, live_method, live_seeds, play
 from imuloco.lab.fuzz_real import read_real, real_attack, real_garbage, real_seeds
 from imuloco.lab.fuzz_structure import (
@@ -195,14 +195,6 @@ def _sensor_logger(rec) -> tuple[bytes, bytes]:
                         f"{x:.9g}")
         out.append(("\n".join(rows) + "\n").encode())
     return out[0], out[1]
-
-
-def _zip(files: Files) -> bytes:
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
-        for name, data in files.items():
-            z.writestr(name, data)
-    return buf.getvalue()
 
 
 def _asf_amc(bones: int = 3, frames: int = 6) -> tuple[str, str]:
