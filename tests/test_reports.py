@@ -68,6 +68,7 @@ def test_every_placement_declaration_names_what_exists():
     """Each preset's mounting, gait estimator, extra and shipped model resolve; the tables
     that read the registry agree with it."""
     from imuloco.measures.sensorgait import ESTIMATORS
+    from imuloco.paths.registry import BY_NAME
     from imuloco.sensors.calibration import MOUNTINGS
     from imuloco.sensors.placement import PRESETS
 
@@ -76,7 +77,7 @@ def test_every_placement_declaration_names_what_exists():
         assert p.gait is None or p.gait in ESTIMATORS, name
         assert bool(p.needs) == (p.extra is not None), name
         assert p.model is None or pipeline.shipped_model("learned", name) is not None, name
-        assert p.path_estimator is None  # none yet: imuloco.paths plugs in here
+        assert p.path_estimator is None or p.path_estimator in BY_NAME, name
     assert pipeline.GAIT_EXTRA == {"right_foot": "gaitmap", "left_foot": "gaitmap",
                                    "lower_back": "mobgap"}
     assert {n for n, p in PRESETS.items() if p.gait} == set(pipeline.GAIT_EXTRA)

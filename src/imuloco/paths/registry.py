@@ -1,20 +1,20 @@
-"""One table: which path estimator serves which placement (:func:`estimator_for`)."""
+"""Which path estimator serves which placement (:func:`estimator_for`): each placement names its
+estimator in its declaration (:attr:`imuloco.sensors.placement.Placement.path_estimator`)."""
 
 from __future__ import annotations
 
 from imuloco.core.recording import Recording
 from imuloco.errors import UnknownNameError
 from imuloco.paths.base import BodyPath, PathEstimator
-from imuloco.paths.foot import FEET, FootZupt
+from imuloco.paths.foot import FootZupt
 from imuloco.paths.geometry import from_start
 from imuloco.paths.lowerback import LowerBackSteps
-from imuloco.paths.shank import SHANKS, ShankPivot
+from imuloco.paths.shank import ShankPivot
+from imuloco.sensors.placement import PRESETS
 
-ESTIMATORS: dict[str, type] = {
-    **{p: ShankPivot for p in SHANKS},
-    **{p: FootZupt for p in FEET},
-    "lower_back": LowerBackSteps,
-}
+BY_NAME: dict[str, type] = {c.name: c for c in (ShankPivot, FootZupt, LowerBackSteps)}
+ESTIMATORS: dict[str, type] = {name: BY_NAME[p.path_estimator] for name, p in PRESETS.items()
+                               if p.path_estimator is not None}
 
 
 def estimator_for(placement: str) -> PathEstimator:

@@ -13,7 +13,7 @@ routine of :data:`imuloco.sensors.calibration.MOUNTINGS`), which estimator measu
 from its own signal (``gait``, one of :data:`imuloco.measures.sensorgait.ESTIMATORS`; none:
 the reconstructed motion's gait), the optional extra those need (``extra``, ``needs``), the
 shipped model's name (``imuloco/data/models/<method>_<model>.npz``) and the estimator of the
-walker's path (``path_estimator``, a name :mod:`imuloco.paths` resolves; none yet). The
+walker's path (``path_estimator``, a name :mod:`imuloco.paths.registry` resolves). The
 routines are named, not referenced: they live in the layers that read this one.
 """
 
@@ -97,16 +97,17 @@ class Placement:
 
 # A shoe sensor's calibration and gait read its zero-velocity track (gaitmap), a lower-back
 # sensor's gait Mobilise-D's pipeline (mobgap): the [gait] extra, with pandas.
-_FOOT = {"mounting": "foot", "gait": "foot", "extra": "gait", "needs": ("gaitmap", "pandas")}
+_FOOT = {"mounting": "foot", "gait": "foot", "extra": "gait", "needs": ("gaitmap", "pandas"),
+         "path_estimator": "foot-zupt"}
 _BACK = {"mounting": "lower_back", "gait": "lower_back", "extra": "gait",
-         "needs": ("mobgap", "pandas")}
+         "needs": ("mobgap", "pandas"), "path_estimator": "lower-back-steps"}
 
 PRESETS: dict[str, Placement] = {p.name: p for p in [
     # On the front of the shank just above the ankle, where Eom et al. 2014 strap the phone.
     Placement("right_ankle", "right_knee", "right_ankle", 0.8, (0.0, 0.0, 0.045),
-              mounting="shank", model="right_ankle"),
+              mounting="shank", model="right_ankle", path_estimator="shank-pivot"),
     Placement("left_ankle", "left_knee", "left_ankle", 0.8, (0.0, 0.0, 0.045),
-              mounting="shank", model="left_ankle"),
+              mounting="shank", model="left_ankle", path_estimator="shank-pivot"),
     # Front trouser pocket: upper third of the thigh, towards the outside.
     Placement("right_thigh", "right_hip", "right_knee", 0.3, (-0.04, 0.0, 0.07),
               mounting="thigh"),
