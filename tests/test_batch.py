@@ -348,6 +348,8 @@ def test_a_walker_redone_for_another_height_is_incomplete_until_done(logs, fitte
 def test_a_failed_write_leaves_no_partial_file(logs, fitted, client, tmp_path, monkeypatch):
     import pyarrow.parquet
 
+    from imuloco.errors import ImulocoError
+
     paths, _ = logs
     run_batch(paths[:1], tmp_path, fitted=fitted, scheduler=client)
     before = (tmp_path / "walkers.parquet").read_bytes()
@@ -359,7 +361,7 @@ def test_a_failed_write_leaves_no_partial_file(logs, fitted, client, tmp_path, m
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(pyarrow.parquet, "write_table", disk_full)
-    with pytest.raises(OSError, match="No space"):
+    with pytest.raises(ImulocoError, match="no space left on device writing"):
         run_batch(paths[:2], tmp_path, fitted=fitted, scheduler=client)
     assert (tmp_path / "walkers.parquet").read_bytes() == before
     assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]

@@ -453,7 +453,9 @@ def test_a_report_names_the_bvh_it_belongs_to(log, tmp_path):
     assert code == 0, out
     report = json.loads((tmp_path / "a.json").read_text())
     assert report["outputs"] == {"bvh": "a.bvh", "bvh_sha256": sha256_file(tmp_path / "a.bvh")}
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bvh", "a.json"]
+    # nothing else but the readable summary beside the report (a.md, a-*.png): no temporaries
+    assert {p.name for p in tmp_path.iterdir() if not p.name.startswith("a-")} == {
+        "a.bvh", "a.json", "a.md"}
 
 
 def test_reconstruct_refuses_a_fifo_as_its_recording(tmp_path):

@@ -18,7 +18,7 @@ REPORT_KEYS = ["recording", "calibration", "feet_pinned_by", "method", "model", 
                "signal_cadence_spm", "signal_swing_deg", "plausibility", "path", "confidence",
                "seconds"]
 PATH_KEYS = ["source", "note", "distance_m", "strides", "stride_length_m", "animation",
-             "stride_agreement_pct"]
+             "stride_agreement_pct", "track_xy", "footfalls"]
 RECORDING_KEYS = ["files", "format", "duration_s", "source_rate_hz", "samples", "unsorted",
                   "duplicates", "acc_unit", "gyro_unit", "gaps", "time_unit", "platform"]
 

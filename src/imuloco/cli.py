@@ -796,8 +796,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
         raise click.BadParameter(f"{video}: expected a .mp4 or .gif file", param_hint="--video")
-    if summary_path is None and report_path is not None:
-        summary_path = report_path.with_suffix(".md")
+    if summary_path is None and report_path is not None and report_path.suffix == ".json":
+        summary_path = report_path.with_suffix(".md")  # (another suffix is refused below)
     summaries = [] if summary_path is None else list(summary_paths(summary_path).values())
     inputs = [*recording, *([model_path] if model_path else []), *([skeleton] if skeleton else [])]
     check_outputs([output, video, html_path, report_path, *summaries], force, inputs=inputs)

@@ -65,6 +65,16 @@ class BodyPath:
             return 0.0
         return float(np.linalg.norm(np.diff(self.root_xy, axis=0), axis=1).sum())
 
+    @classmethod
+    def from_report(cls, report: dict) -> BodyPath:
+        """The path as a report's ``path`` keeps it (:func:`imuloco.paths.follow.path_report`:
+        its track, footfalls and source; no strides): enough to draw it from above."""
+        xy = np.asarray(report.get("track_xy") or np.zeros((0, 2)), dtype=float).reshape(-1, 2)
+        falls = [Footfall(f["foot"], f["time_s"], np.asarray(f["xy"], float), f["confidence"])
+                 for f in report.get("footfalls", [])]
+        return cls(np.arange(len(xy), dtype=float), xy, None, falls, [],
+                   report.get("source", ""), report.get("note", ""))
+
     def to_json(self) -> dict:
         """Summary + strides, for the report: ``source``, ``note``, ``duration_s``,
         ``distance_m``, ``end_xy``, ``strides`` (count), ``stride_length_m`` (mean),

@@ -147,7 +147,21 @@ def path_report(path: BodyPath, followed: Motion | None = None,
     a, b = anim["stride_length_m"], est["stride_length_m"]
     return {"source": est["source"], "note": est["note"], "distance_m": est["distance_m"],
             "strides": est["strides"], "stride_length_m": b, "animation": anim,
-            "stride_agreement_pct": round(100 * (a / b - 1), 2) if a and b else None}
+            "stride_agreement_pct": round(100 * (a / b - 1), 2) if a and b else None,
+            "track_xy": track_xy(path), "footfalls": est["footfalls"]}
+
+
+TRACK_S = 0.5  # the report's track of the pelvis: one point every half second
+
+
+def track_xy(path: BodyPath, every_s: float = TRACK_S) -> list[list[float]]:
+    """The pelvis's floor track of ``path`` every ``every_s`` seconds (and its end), metres
+    rounded to cm: what the report's path-from-above plot draws."""
+    t = path.times_s
+    if len(t) == 0:
+        return []
+    keep = np.unique(np.r_[np.searchsorted(t, np.arange(t[0], t[-1], every_s)), len(t) - 1])
+    return [[round(float(x), 2), round(float(y), 2)] for x, y in path.root_xy[keep]]
 
 
 class PieceFollower:

@@ -142,14 +142,17 @@ def plot_errors(gt: Motion, rec: Motion, path: str | Path, overwrite: bool = Fal
     return _save(fig, path, overwrite)
 
 
-def plot_path(path: BodyPath, out: str | Path, truth: BodyPath | None = None,
+def plot_path(path: BodyPath | dict, out: str | Path, truth: BodyPath | None = None,
               overwrite: bool = False) -> Path:
-    """The body's path seen from above (:class:`imuloco.paths.base.BodyPath`): the pelvis's
+    """The body's path seen from above (:class:`imuloco.paths.base.BodyPath`, or a report's
+    ``path``: :meth:`BodyPath.from_report`): the pelvis's
     track, the footfalls (right feet as filled triangles, left as open ones, faded by their
     confidence) and, when given, the truth's path and footfalls in grey. Equal axes, metres,
     x the walker's initial heading, y to the left."""
     from matplotlib.colors import to_rgba  # the [viz] extra, as _figure
 
+    if isinstance(path, dict):
+        path = BodyPath.from_report(path)
     fig = _figure(7, 6)
     ax = fig.subplots()
     for p, color, label in ((truth, "0.6", "truth"), (path, "tab:blue", path.source)):
@@ -173,7 +176,8 @@ def plot_path(path: BodyPath, out: str | Path, truth: BodyPath | None = None,
     ax.set_xlabel("x (m, initial heading)")
     ax.set_ylabel("y (m, left)")
     strides = [s.length_m for s in path.strides]
-    ax.set_title(f"{path.source}: {len(strides)} strides"
-                 + (f", mean {np.mean(strides):.2f} m" if strides else ""), fontsize=9)
+    ax.set_title(f"{path.source}: {len(path.footfalls)} footfalls"
+                 + (f", {len(strides)} strides, mean {np.mean(strides):.2f} m" if strides
+                    else ""), fontsize=9)
     ax.legend(loc="best", fontsize=7)
     return _save(fig, out, overwrite)
