@@ -773,6 +773,11 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html/--skeleton).")
 @height_option
+@click.option("--no-fallback", is_flag=True,
+              help="Keep the model's pose everywhere: do not move the parts the sensor cannot "
+                   "see toward a neutral pose where the motion is unfamiliar, nor the body "
+                   "toward the standing pose where the sensor is still (the report's "
+                   "'fallback' says what the fallback did).")
 @force_option
 @_units_option
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
@@ -781,7 +786,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                 report_path: Path | None, summary_path: Path | None, skeleton: Path | None,
                 rig: str | None, no_calibrate: bool, platform: str | None,
                 columns: dict[str, str] | None, piece_seconds: float | None,
-                height: float | None, force: bool, units: str) -> None:
+                height: float | None, no_fallback: bool, force: bool, units: str) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH or glTF.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -829,7 +834,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
                                       progress=True, platform=platform, skeleton=skeleton,
-                                      height=height, columns=columns)
+                                      height=height, columns=columns,
+                                      fallback=not no_fallback)
     click.echo(f"model: {report.model}", err=True)
     written = write_outputs(outputs, report, motion, progress=True)
     if summary_path:

@@ -184,7 +184,8 @@ def calibrated(rec: Recording) -> tuple[Recording, list[dict[str, Any]]]:
 
 
 def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
-                          pin: bool | None = None) -> tuple[Motion, dict[str, Any]]:
+                          pin: bool | None = None, fallback: bool = True
+                          ) -> tuple[Motion, dict[str, Any]]:
     """Reconstruct a Motion from an imported recording with a fitted method.
 
     Parameters
@@ -196,14 +197,19 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
     pin : move the root so that feet in contact (detected on the reconstruction) do not slide;
         ``None``: unless the method pins its feet itself (``method.pins_feet``: it knows its
         contacts better than a detection on its output).
+    fallback : move the parts the sensor does not see toward a neutral pose where the model
+        does not know the motion, and every part toward the standing pose where the sensor is
+        still (:func:`imuloco.methods.fallback.fallback_recording`; ``--no-fallback``).
 
     Returns
     -------
     The motion at the model's frame rate and a dict with the calibration found
     (``calibration``), ``feet_pinned_by`` and ``confidence`` (the method's per-frame predicted
     error and flags, :class:`imuloco.app.confidence.Confidence`, from
-    :meth:`imuloco.methods.base.Method.reconstruct_full`).
+    :meth:`imuloco.methods.base.Method.reconstruct_full`) and ``fallback`` (what the fallback
+    did, :class:`imuloco.methods.fallback.FallbackReport`).
     """
+    from imuloco.methods.fallback import FallbackReport, fallback_recording
     from imuloco.methods.postprocess import pin_detected_contacts
 
     info: dict[str, Any] = {}
@@ -211,6 +217,10 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
     if calibrate:
         rec, info["calibration"] = calibrated(rec)
     full = method.reconstruct_full(rec)
+    if fallback:  # the per-part fallback toward neutral poses (issue 41): its one call site
+        full, info["fallback"] = fallback_recording(full, rec, method)
+    else:
+        info["fallback"] = FallbackReport(False, note="switched off (--no-fallback)")
     motion = full.motion
     info["confidence"] = Confidence.of(full, motion.fps, f"method {method.name!r}")
     if pin is None:
@@ -259,8 +269,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
                      fmt: str = "auto", calibrate: bool = True, pin: bool | None = None,
                      progress: bool = False, fitted: Method | ModelChoice | None = None,
                      platform: str | None = None, skeleton: str | Path | None = None,
-                     height: float | None = None, columns: dict[str, str] | None = None
-                     ) -> tuple[Motion, ReconstructionReport]:
+                     height: float | None = None, columns: dict[str, str] | None = None,
+                     fallback: bool = True) -> tuple[Motion, ReconstructionReport]:
     """Import a phone's sensor log and reconstruct the wearer's motion.
 
     Parameters
@@ -270,7 +280,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         ``gyroscope_*.csv`` itself).
     model, method, placement : see :func:`choose_model`.
     fmt : log format or ``"auto"``.
-    calibrate, pin : see :func:`reconstruct_recording`.
+    calibrate, pin, fallback : see :func:`reconstruct_recording`.
     progress : show progress bars (tqdm) on stderr.
     fitted : an already fitted method or chosen model (skips :func:`choose_model`).
     platform : Sensor Logger exports: ``"ios"`` or ``"android"`` (default: from the export's
@@ -317,7 +327,7 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     fitted = choice.method
     bar.update()
     bar.set_postfix_str(f"{fitted.name} on {rec.times[-1]:.0f} s")
-    motion, info = reconstruct_recording(rec, fitted, calibrate, pin)
+    motion, info = reconstruct_recording(rec, fitted, calibrate, pin, fallback)
     confidence = info["confidence"]
     if height is not None:
         k = height_scale(motion.skeleton, height)
@@ -341,7 +351,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         recording=log_report, raw=rec, model=choice, placement=placement,
         calibration=info.get("calibration"), feet_pinned_by=info["feet_pinned_by"],
         motion=info_motion, height_m=height, gait=gait, plausibility=checks,
-        confidence=confidence, started=t0, skeleton=rig_json, path=path)
+        confidence=confidence, started=t0, skeleton=rig_json, path=path,
+        fallback=info["fallback"])
     bar.update()
     bar.close()
     return motion, report

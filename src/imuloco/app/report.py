@@ -27,6 +27,7 @@ from imuloco.sensors.reallog import LogReport
 
 if TYPE_CHECKING:
     from imuloco.app.pipeline import ModelChoice
+    from imuloco.methods.fallback import FallbackReport
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,9 @@ class ReconstructionReport:
     path : the body's path that drove the root (:func:`imuloco.paths.follow.path_report`:
         source, distance, strides, and the followed animation's own); None for a placement
         without a path estimator.
+    fallback : what the per-part fallback did (:class:`imuloco.methods.fallback.
+        FallbackReport`: whether it ran and acted, on what share of frames per body-part
+        group); None where it is not run (a reconstruction in pieces).
     warnings : what the import and reconstruction warned of (``batch``; None elsewhere).
     batch : what ``imuloco batch`` ran it with (recording, model hash, placement, height,
         unit), which marks its outputs complete; ``None`` outside a batch.
@@ -116,6 +120,7 @@ class ReconstructionReport:
     batch: dict[str, Any] | None = None
     warnings: list[str] | None = None
     path: dict[str, Any] | None = None
+    fallback: FallbackReport | None = None
 
     @property
     def method(self) -> str:
@@ -148,6 +153,8 @@ class ReconstructionReport:
             out["skeleton"] = self.skeleton
         if self.confidence is not None:
             out["confidence"] = self.confidence.to_json()
+        if self.fallback is not None:
+            out["fallback"] = self.fallback.to_json()
         if self.warnings is not None:
             out["warnings"] = self.warnings
         out["seconds"] = self.seconds
@@ -165,7 +172,8 @@ def build_report(*, recording: LogReport, raw: Recording, model: ModelChoice, pl
                  motion: MotionInfo, height_m: float | None, gait: GaitReport,
                  plausibility: Plausibility, confidence: Confidence, started: float,
                  pieces: Pieces | None = None, skeleton: dict[str, Any] | None = None,
-                 path: dict[str, Any] | None = None) -> ReconstructionReport:
+                 path: dict[str, Any] | None = None,
+                 fallback: FallbackReport | None = None) -> ReconstructionReport:
     """The report of a reconstruction, in one piece (:func:`imuloco.app.pipeline.
     reconstruct_file`) or in pieces (:func:`imuloco.app.chunked.reconstruct_to_bvh`).
 
@@ -193,5 +201,5 @@ def build_report(*, recording: LogReport, raw: Recording, model: ModelChoice, pl
         signal_swing_deg=(to_json({"v": swing})["v"]
                           if on_shank else None),
         plausibility=plausibility, motion_gait=gait.motion_gait, pieces=pieces,
-        skeleton=skeleton, confidence=confidence, path=path,
+        skeleton=skeleton, confidence=confidence, path=path, fallback=fallback,
         seconds=round(time.perf_counter() - started, 2))

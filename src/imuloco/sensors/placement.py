@@ -54,6 +54,10 @@ class Placement:
     model : name of the shipped pretrained models (``<method>_<model>.npz``; ``None``: none).
     path_estimator : name of the estimator of the walker's path (:mod:`imuloco.paths`;
         ``None``: the method's own root path).
+    observes : the body-part groups (:data:`imuloco.core.bodymap.PART_GROUPS`) the sensor
+        sees: a leg sensor its leg (``legs``), the lower back the trunk; the others fall
+        back toward a neutral pose where the model does not know the motion
+        (:mod:`imuloco.methods.fallback`).
     """
 
     name: str
@@ -68,6 +72,7 @@ class Placement:
     needs: tuple[str, ...] = ()
     model: str | None = None
     path_estimator: str | None = None
+    observes: tuple[str, ...] = ()
 
     @property
     def side(self) -> str | None:
@@ -97,30 +102,34 @@ class Placement:
 
 # A shoe sensor's calibration and gait read its zero-velocity track (gaitmap), a lower-back
 # sensor's gait Mobilise-D's pipeline (mobgap): the [gait] extra, with pandas.
-_FOOT = {"mounting": "foot", "gait": "foot", "extra": "gait", "needs": ("gaitmap", "pandas"),
+_FOOT = {"observes": ("legs",), "mounting": "foot", "gait": "foot", "extra": "gait", "needs": ("gaitmap", "pandas"),
          "path_estimator": "foot-zupt"}
-_BACK = {"mounting": "lower_back", "gait": "lower_back", "extra": "gait",
+_BACK = {"observes": ("trunk",), "mounting": "lower_back", "gait": "lower_back", "extra": "gait",
          "needs": ("mobgap", "pandas"), "path_estimator": "lower-back-steps"}
 
 PRESETS: dict[str, Placement] = {p.name: p for p in [
     # On the front of the shank just above the ankle, where Eom et al. 2014 strap the phone.
     Placement("right_ankle", "right_knee", "right_ankle", 0.8, (0.0, 0.0, 0.045),
-              mounting="shank", model="right_ankle", path_estimator="shank-pivot"),
+              mounting="shank", model="right_ankle", path_estimator="shank-pivot",
+              observes=("legs",)),
     Placement("left_ankle", "left_knee", "left_ankle", 0.8, (0.0, 0.0, 0.045),
-              mounting="shank", model="left_ankle", path_estimator="shank-pivot"),
+              mounting="shank", model="left_ankle", path_estimator="shank-pivot",
+              observes=("legs",)),
     # Front trouser pocket: upper third of the thigh, towards the outside.
     Placement("right_thigh", "right_hip", "right_knee", 0.3, (-0.04, 0.0, 0.07),
-              mounting="thigh"),
-    Placement("left_thigh", "left_hip", "left_knee", 0.3, (0.04, 0.0, 0.07), mounting="thigh"),
+              mounting="thigh", observes=("legs",)),
+    Placement("left_thigh", "left_hip", "left_knee", 0.3, (0.04, 0.0, 0.07), mounting="thigh", observes=("legs",)),
     # Belt buckle, in front of the pelvis.
-    Placement("pelvis", "pelvis", None, 0.0, (0.0, 0.0, 0.12)),
+    Placement("pelvis", "pelvis", None, 0.0, (0.0, 0.0, 0.12), observes=("trunk",)),
     # Watch on the back of the forearm just above the wrist.
-    Placement("right_wrist", "right_elbow", "right_wrist", 0.9, (0.0, 0.0, 0.03)),
-    Placement("left_wrist", "left_elbow", "left_wrist", 0.9, (0.0, 0.0, 0.03)),
+    Placement("right_wrist", "right_elbow", "right_wrist", 0.9, (0.0, 0.0, 0.03),
+              observes=("arms",)),
+    Placement("left_wrist", "left_elbow", "left_wrist", 0.9, (0.0, 0.0, 0.03),
+              observes=("arms",)),
     # Phone held in the hand: past the wrist along the forearm's axis.
-    Placement("right_hand", "right_wrist", None, 0.0, (0.0, -0.07, 0.0)),
-    Placement("left_hand", "left_wrist", None, 0.0, (0.0, -0.07, 0.0)),
-    Placement("chest", "chest", None, 0.0, (0.0, 0.0, 0.12)),
+    Placement("right_hand", "right_wrist", None, 0.0, (0.0, -0.07, 0.0), observes=("arms",)),
+    Placement("left_hand", "left_wrist", None, 0.0, (0.0, -0.07, 0.0), observes=("arms",)),
+    Placement("chest", "chest", None, 0.0, (0.0, 0.0, 0.12), observes=("trunk",)),
     # On the shoe over the instep, where foot-worn gait sensors sit: half way from the ankle
     # joint to the toe joint, 4 cm above the bones. The foot's anatomical y runs back to the
     # heel and z up off the instep (dorsal), so a flat foot reads +g on z.
@@ -131,7 +140,7 @@ PRESETS: dict[str, Placement] = {p.name: p for p in [
     # At L5, the back of the belt: behind the pelvis joint, y up the trunk.
     Placement("lower_back", "pelvis", None, 0.0, (0.0, 0.0, -0.10), **_BACK,
               model="lower_back"),
-    Placement("head", "head", None, 0.0, (0.0, 0.08, 0.1)),
+    Placement("head", "head", None, 0.0, (0.0, 0.08, 0.1), observes=("trunk",)),
 ]}
 
 
