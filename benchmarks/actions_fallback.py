@@ -7,7 +7,7 @@ against the mean pose, foot skate against the truth's, strides on standing clips
 frames with an error over twice the walking median that are flagged, and the predicted error
 against the actual one.
 
-    nice -n 10 python benchmarks/actions_fallback.py [--loco-every 6] [--cache DIR]
+    nice -n 10 python benchmarks/actions_fallback.py [--loco-every 20] [--cache DIR]
 """
 from __future__ import annotations
 
@@ -35,18 +35,21 @@ STANDING = ("bye", "raise-up-both-hands", "raise-up-left-hand", "raise-up-right-
             "wave-both-hands", "wave-left-hand", "wave-right-hand")
 
 
-def reconstructions(model, examples, cache: Path | None, tag: str) -> list:
-    """The model's reconstructions of ``examples`` (cached by ``tag`` in ``cache``: our own
-    pickles of a previous run of this script, never a user's file)."""
-    path = None if cache is None else cache / f"{tag}.pkl"
-    if path is not None and path.is_file():
-        with open(path, "rb") as f:
-            return pickle.load(f)
-    out = [model.reconstruct_signals_full(e.signals) for e in examples]
-    if path is not None:
-        cache.mkdir(parents=True, exist_ok=True)
-        with open(path, "wb") as f:
-            pickle.dump(out, f)
+def reconstructions(model, examples, cache: Path | None) -> list:
+    """The model's reconstructions of ``examples``, each cached by clip name in ``cache`` (our
+    own pickles of a previous run of this script, never a user's file)."""
+    out = []
+    for e in examples:
+        path = None if cache is None else cache / f"{e.labels['name']}.pkl"
+        if path is not None and path.is_file():
+            with open(path, "rb") as f:
+                out.append(pickle.load(f))
+            continue
+        out.append(model.reconstruct_signals_full(e.signals))
+        if path is not None:
+            cache.mkdir(parents=True, exist_ok=True)
+            with open(path, "wb") as f:
+                pickle.dump(out[-1], f)
     return out
 
 
@@ -92,7 +95,7 @@ def line(name: str, s: dict) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--loco-every", type=int, default=6,
+    ap.add_argument("--loco-every", type=int, default=20,
                     help="every n-th locomotion clip of each folder")
     ap.add_argument("--cache", type=Path, default=None)
     args = ap.parse_args()
@@ -108,9 +111,10 @@ def main() -> None:
     both = synthesize(acts, list(SHANKS), "phone", 1000)  # the neutral's still frames
     loco_ex = [e for db in loco_db for e in synthesize(db, ["right_ankle"], "phone", 1000)]
     walking = [m for db in loco for m, lab in db if lab.get("content") in
-               ("walk", "walk-turn-left", "walk-turn-right")][::4]
-    fulls = reconstructions(model, act_ex, args.cache, "actions")
-    loco_full = reconstructions(model, loco_ex, args.cache, f"loco{args.loco_every}")
+               ("walk", "walk-turn-left", "walk-turn-right")][::12]
+    fulls = reconstructions(model, act_ex, args.cache)
+    print(f"{len(fulls)} action clips reconstructed", flush=True)
+    loco_full = reconstructions(model, loco_ex, args.cache)
 
     # the walking median error: the threshold of "high error" frames is twice it
     walk_err = np.concatenate([score(e, f)["actual"] for e, f in zip(loco_ex, loco_full)

@@ -16,7 +16,9 @@ from imuloco.sensors.simulate import simulate
 REPORT_KEYS = ["recording", "calibration", "feet_pinned_by", "method", "model", "placement",
                "motion", "height_m", "gait", "gait_source", "gait_note", "strides",
                "signal_cadence_spm", "signal_swing_deg", "plausibility", "path", "confidence",
-               "seconds"]
+               "fallback", "seconds"]
+FALLBACK_KEYS = ["enabled", "acted", "still_fraction", "observes", "frames_fraction",
+                 "mean_weight", "note"]
 PATH_KEYS = ["source", "note", "distance_m", "strides", "stride_length_m", "animation",
              "stride_agreement_pct", "track_xy", "footfalls"]
 RECORDING_KEYS = ["files", "format", "duration_s", "source_rate_hz", "samples", "unsorted",
@@ -36,6 +38,8 @@ def test_report_to_json_keeps_the_contract_keys(log_file, ridge_without_demo_cli
     assert list(data) == REPORT_KEYS
     assert list(data["path"]) == PATH_KEYS  # issue 40: the path that drove the root
     assert list(data["recording"]) == RECORDING_KEYS
+    assert list(data["fallback"]) == FALLBACK_KEYS  # issue 41: what the fallback did
+    assert list(data["fallback"]["frames_fraction"]) == ["legs", "arms", "trunk"]
     assert list(data["motion"]) == ["frames", "fps", "duration_s"]
     assert data["method"] == report.method == "ridge"
     assert data["model"] == "given fitted method 'ridge'" and report.model.source == "given"
