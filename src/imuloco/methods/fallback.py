@@ -23,15 +23,17 @@ The rule (:func:`apply_fallback`), per frame:
   and novelty weights for an unobserved one.
 - **the neutral pose** of the frame is the standing pose where still, the walking mean pose
   where moving, slerped between by the still weight (:class:`NeutralPoses`, built from
-  training motion by :func:`imuloco.lab.neutral.build_neutral`). Each joint's local rotation is slerped
-  toward it by its group's weight (the pelvis's tilt against its heading with the legs'); where
-  the legs stand still the root stops (its horizontal steps scaled by one minus the still
-  weight) and its height is the standing pose's over the floor, so no phantom step remains for
-  the feet pinning and the path follower to turn into strides.
+  training motion by :func:`imuloco.lab.neutral.build_neutral`). Each joint's local rotation
+  is slerped toward it by its group's weight (the pelvis's tilt against its heading with the
+  legs'); where the legs stand still the root stops (its horizontal steps scaled by one minus
+  the still weight), its height is the standing pose's over the floor and both feet are
+  pinned (:func:`imuloco.methods.postprocess.pin_feet`, contact weight the still weight), so
+  no phantom step remains for the gait, the strides and the path follower.
 - **predicted error**: at least ``sqrt(sum_g w_g S_g)``, with ``S_g`` the neutral pose's
   expected squared error of the joints group ``g`` moves over the frame's joint count, on its
-  activity (measured by :func:`imuloco.lab.neutral.build_neutral`); frames where an unobserved part is held
-  more than half way toward neutral are flagged unreliable (the pose there is a guess).
+  activity (measured by :func:`imuloco.lab.neutral.build_neutral`); frames where an
+  unobserved part is held more than half way toward neutral are flagged unreliable (the pose
+  there is a guess).
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d, uniform_filter1d
+from scipy.ndimage import uniform_filter1d
 
 from imuloco.core.bodymap import PART_GROUPS
 from imuloco.core.motion import Motion
@@ -53,7 +55,7 @@ from imuloco.errors import ModelFileError
 from imuloco.io.atomic import atomic_write
 from imuloco.methods import pose
 from imuloco.methods.base import Method, Reconstruction
-from imuloco.methods.postprocess import pin_detected_contacts
+from imuloco.methods.postprocess import pin_feet
 from imuloco.methods.training import model_frames
 from imuloco.ops.rotations import about_y, from_rotvec, normalize, qinv, qmul, to_rotvec
 from imuloco.sensors.placement import get_placement
@@ -300,15 +302,9 @@ def blend_motion(motion: Motion, weights: np.ndarray, still: np.ndarray,
     out = Motion(sk, rot, root, motion.fps, motion.name)
     if n < 2 or not still.any():
         return out
-    # where the legs stand or start to, the feet on the floor hold the root (the blend's
-    # half-bent legs would slide them): its steps mix toward the pinned ones by the still
-    # weight, widened by a window so that a start or stop is covered
-    near = maximum_filter1d(still, max(1, round(motion.fps / 2)) | 1, mode="nearest")
-    pinned = pin_detected_contacts(out).root
-    steps = ((1.0 - near[1:, None]) * np.diff(root[:, [0, 2]], axis=0)
-             + near[1:, None] * np.diff(pinned[:, [0, 2]], axis=0))
-    root[1:, [0, 2]] = root[0, [0, 2]] + np.cumsum(steps, axis=0)
-    return Motion(sk, rot, root, motion.fps, motion.name)
+    # where the legs stand, both feet are on the floor: the root steps so that they do not
+    # slide (the blend's half-bent legs of a start or stop would), weighted by the still weight
+    return pin_feet(out, np.stack([still, still], axis=1))
 
 
 def apply_fallback(full: Reconstruction, signals: np.ndarray, placement: str,
