@@ -231,20 +231,41 @@ def test_the_skeleton_rebuilt_from_vmc_matches_the_reconstructions_bvh(received,
 
 
 def test_a_network_refusal_drops_the_bundle_and_the_session_goes_on(received, fitted,
-                                                                   monkeypatch, caplog):
+                                                                   caplog):
     from imuloco.app.live.session import Frame
     from imuloco.app.live.vmc import VmcSender
 
-    server = received[0]
-    sender = VmcSender(server.session.skeleton, fitted.fps_, "127.0.0.1", 9)
+    sender = VmcSender(received[0].session.skeleton, fitted.fps_, "127.0.0.1", 9)
+    sender.socket.close()
 
-    def refuse(bundle):
-        raise BlockingIOError(11, "Resource temporarily unavailable")
+    class Full:
+        def sendto(self, data, address):
+            raise BlockingIOError(11, "Resource temporarily unavailable")
 
-    monkeypatch.setattr(sender.client, "send", refuse)
+    sender.socket = Full()
     rest = np.tile([0.0, 0.0, 0.0, 1.0], (21, 1))
     frames = [Frame(k, k / 30, k / 30, rest, np.zeros(3), np.zeros((21, 3))) for k in range(3)]
     assert sender.send(frames) == 0
     assert sender.dropped == 3 and sender.sent == 0
     assert sum("dropped" in r.getMessage() for r in caplog.records) == 1
+
+
+def test_the_senders_frames_are_the_unity_rig_presets(fitted, sample_db):
+    """Frame by frame, the sender's motion is :func:`apply_rig`'s on the unity preset (names,
+    offsets, rotations) with the sample's T-pose rest."""
+    from imuloco.app.export import rest_of
+    from imuloco.app.live.session import Frame
+    from imuloco.app.live.vmc import VmcSender
+    from imuloco.core.rigs import apply_rig
+
+    clip = next(c for c in sample_db.clips if c.name == CLIP)
+    sender = VmcSender(clip.skeleton, clip.fps, "127.0.0.1", DEFAULT_PORT)
+    frames = [Frame(k, k / clip.fps, 0.0, clip.rotations[k], clip.root[k],
+                    np.zeros((clip.skeleton.num_joints, 3))) for k in range(0, 60, 7)]
+    got = sender.motion(frames)
     sender.close()
+    want = apply_rig(clip, "unity", rest_of(clip))
+    assert got.skeleton.names == want.skeleton.names
+    np.testing.assert_allclose(got.skeleton.offsets, want.skeleton.offsets, atol=1e-12)
+    np.testing.assert_allclose(got.rotations, want.rotations[0:60:7], atol=1e-12)
+    np.testing.assert_allclose(got.positions(), clip.positions()[0:60:7], atol=1e-9)
