@@ -212,6 +212,10 @@ def main() -> None:
         "bundles_per_s_over_replay": round(len(rows) / span_t, 2),
         "calibration_burst_bundles": burst,
         "bundles_per_s_streaming": round((len(steady) - 1) / float(steady[-1] - steady[0]), 2),
+        # wall-clock seconds the streaming took per second of replay (1: real time kept)
+        "wall_per_replay_second": round(float(steady[-1] - steady[0])
+                                        / float(t[burst:].max() - t[burst:].min()), 3),
+        "load_average_1min": round(os.getloadavg()[0], 1),
         "gap_ms_median": round(float(np.median(gaps)), 1),
         "gap_ms_p95": round(float(np.percentile(gaps, 95)), 1),
         "gap_ms_max": round(float(gaps.max()), 1),

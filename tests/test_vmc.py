@@ -269,3 +269,45 @@ def test_the_senders_frames_are_the_unity_rig_presets(fitted, sample_db):
     np.testing.assert_allclose(got.skeleton.offsets, want.skeleton.offsets, atol=1e-12)
     np.testing.assert_allclose(got.rotations, want.rotations[0:60:7], atol=1e-12)
     np.testing.assert_allclose(got.positions(), clip.positions()[0:60:7], atol=1e-9)
+
+
+def test_live_replay_sends_vmc_from_the_command_line(monkeypatch, fitted, received):
+    """``imuloco live --replay REC --vmc 127.0.0.1:PORT``: the command says where it sends,
+    and the receiver gets a bundle per frame (the server's run is the real one up to serving
+    forever, which this test skips: it replays, then stops)."""
+    from imuloco.app import pipeline
+    from imuloco.app.live import server as live_server
+    from imuloco.app.pipeline import ModelChoice
+
+    async def replay_then_stop(server, host, port, ssl, replay, on_start):
+        await server.start("127.0.0.1", 0, ssl)
+        try:
+            on_start(server)
+            await server.replay(**replay)
+        finally:
+            await server.close()
+        sent.append(server.vmc.sent)
+
+    sent: list[int] = []
+    monkeypatch.setattr(live_server, "run", replay_then_stop)
+    monkeypatch.setattr(live_server, "configure_logging", lambda: None)
+    monkeypatch.setattr(pipeline, "choose_model", lambda *a, **k: ModelChoice(
+        fitted, "given", "ridge"))
+    packets = _Packets()
+    osc = ThreadingOSCUDPServer(("127.0.0.1", 0), packets)
+    osc.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+    threading.Thread(target=osc.serve_forever, daemon=True).start()
+    try:
+        result = CliRunner().invoke(cli, [
+            "live", "--replay", str(received[2]), "--speed", "25", "--calibrate-seconds",
+            str(CALIB_S), "--vmc", f"127.0.0.1:{osc.server_address[1]}"])
+        for _ in range(100):
+            if sent and len(packets.packets) >= sent[0]:
+                break
+            time.sleep(0.02)
+    finally:
+        osc.shutdown()
+        osc.server_close()
+    assert result.exit_code == 0, result.output
+    assert f"vmc:    sending poses to 127.0.0.1:{osc.server_address[1]}" in result.output
+    assert len(packets.packets) == sent[0] == len(received[1])
