@@ -217,4 +217,7 @@ class VmcSender:
         return sent
 
     def close(self) -> None:
+        """Close the socket; one log line with the bundles sent (and dropped)."""
         self.socket.close()
+        log.info("VMC: %d bundles sent to %s:%d%s", self.sent, self.host, self.port,
+                 f", {self.dropped} dropped" if self.dropped else "")
