@@ -101,6 +101,7 @@ def main() -> None:
     ap.add_argument("--actions-only", action="store_true",
                     help="only the action clips' fallback rows (the mean pose's and the "
                          "shipped model's do not change with the rule)")
+    ap.add_argument("--loco-only", action="store_true", help="only the locomotion clips")
     ap.add_argument("--walk-median-cm", type=float, default=None,
                     help="the walking median error (else measured on the walk clips)")
     args = ap.parse_args()
@@ -134,7 +135,8 @@ def main() -> None:
           "| flagged of high (high share) | predicted / actual |")
     print("|---|---|---|---|---|---|---|")
     rows: dict[str, dict[str, list]] = {}
-    contents = [c for c in HELDOUT_ACTIONS if any(e.labels.get("content") == c for e in act_ex)]
+    contents = [c for c in HELDOUT_ACTIONS if any(e.labels.get("content") == c for e in act_ex)
+                and not args.loco_only]
     for c in contents:
         keep = [i for i, e in enumerate(act_ex) if e.labels.get("content") != c]
         neutral = build_neutral([both[i] for i in keep], walking,
@@ -151,7 +153,7 @@ def main() -> None:
                     f.error_m, f.unreliable = np.full(e.motion.num_frames, np.nan), \
                         np.zeros(e.motion.num_frames, bool)
                 rows.setdefault(name, {}).setdefault(c, []).append(score(e, f))
-    for c in ["ALL", "STANDING", *contents]:
+    for c in ["ALL", "STANDING", *contents] if contents else []:
         for name, by in rows.items():
             sel = (functools.reduce(operator.iadd, by.values(), []) if c == "ALL" else
                    functools.reduce(operator.iadd, (by[k] for k in STANDING if k in by), [])

@@ -14,8 +14,8 @@ The rule (:func:`apply_fallback`), per frame:
   2-3.5 (``docs/results/actions/fallback.md``).
 - **novelty**: the method's own score (``learned``: how far the network's features lie from
   its training data's, 1 on familiar motion, :mod:`imuloco.methods.learned.confidence`), 0
-  at ``novelty_low`` and 1 at ``novelty_high``, smoothly between; methods without a novelty
-  score give 0.
+  at ``novelty_low`` (where the shipped model starts flagging frames) and 1 at
+  ``novelty_high``, smoothly between; methods without a novelty score give 0.
 - **observed parts**: the placement declares which body-part groups
   (:data:`imuloco.core.bodymap.PART_GROUPS`) its sensor sees
   (:attr:`imuloco.sensors.placement.Placement.observes`: a shin its leg, the lower back the
@@ -192,7 +192,10 @@ class FallbackRule:
         deviations of the gyro's and the accelerometer's 3 axes together over the window).
     ramp : over ``ramp`` times those the sensor moves (weight 0).
     novelty_low, novelty_high : the method's novelty score at which an unobserved part starts
-        to move toward neutral and at which it is there.
+        to move toward neutral and at which it is there: the shipped shin model's own flag
+        threshold (3.62, the 99 % quantile of held-out training-motion novelty) and 1.5 times
+        it (at 1.5 and 3.0 the arms of runs and dashes, motion the model knows but whose
+        novelty reads 2-4, fell to the walking pose: dash 3.9 -> 8.0 cm MPJPE).
     flag_weight : frames where an unobserved part's weight is over this are flagged.
     """
 
@@ -200,8 +203,8 @@ class FallbackRule:
     still_gyro: float = 0.3
     still_acc: float = 1.0
     ramp: float = 2.5
-    novelty_low: float = 1.5
-    novelty_high: float = 3.0
+    novelty_low: float = 3.6
+    novelty_high: float = 5.4
     flag_weight: float = 0.5
 
     def still(self, signals: np.ndarray, fps: float, sensor: int = 0) -> np.ndarray:
