@@ -166,3 +166,24 @@ def test_switched_off_the_pipeline_gives_the_methods_output(sample_db,
     assert info["fallback"].to_json()["enabled"] is False
     _on, info = reconstruct_recording(rec, method)
     assert info["fallback"].to_json()["enabled"] is True
+
+
+def test_cli_no_fallback_is_in_the_report(tmp_path, sample_db, ridge_without_demo_clip):
+    import json
+
+    from click.testing import CliRunner
+
+    from imuloco.cli import cli
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.sensors.simulate import simulate
+
+    rec = simulate(sample_db.clips[0].slice(0, 120), ["right_ankle"], 100.0, "phone", seed=5)
+    log = write_generic_csv(rec, tmp_path / "walk.csv")
+    model = ridge_without_demo_clip.save(tmp_path / "r.npz")
+    for flag, enabled in (["--no-fallback"], False), ([], True):
+        report = tmp_path / f"r{enabled}.json"
+        result = CliRunner().invoke(cli, ["reconstruct", str(log), "--model", str(model), "-o",
+                                          str(tmp_path / f"m{enabled}.bvh"), "--report",
+                                          str(report), *flag])
+        assert result.exit_code == 0, result.output
+        assert json.loads(report.read_text())["fallback"]["enabled"] is enabled
