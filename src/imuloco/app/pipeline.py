@@ -350,37 +350,30 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
 def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequence[Path] = (),
                    html: Path | None = None, overwrite: bool = False, progress: bool = False,
                    max_seconds: float | None = None,
-                   confidence: Sequence[Confidence | None] | None = None) -> list[Path]:
-    """Write the stick-figure video(s) (``.mp4``/``.gif``, frames drawn once; one video is
-    streamed to its encoder, as a long recording's frames do not fit in memory) and the HTML
-    viewer of ``motions`` side by side; ``confidence`` (per motion, or None) is shown in the
-    viewer (predicted error per frame, unreliable frames marked)."""
+                   confidence: Sequence[Confidence | None] | None = None,
+                   start: float | None = None, end: float | None = None) -> list[Path]:
+    """Write the stick-figure video(s) (``.mp4``/``.gif``: each frame drawn once and streamed
+    to every encoder, so memory does not grow with the recording; a GIF is cut at
+    :data:`imuloco.viz.skeleton.GIF_MAX_SECONDS`) of the window ``start`` to ``end`` seconds
+    (at most ``max_seconds``) and the HTML viewer of ``motions`` side by side (whole).
+    ``confidence`` (per motion, or None) is drawn in the videos' strip and the viewer
+    (predicted error per frame, unreliable frames marked)."""
     from imuloco.io.atomic import check_outputs
     from imuloco.viz.html import write_viewer
-    from imuloco.viz.skeleton import StickRenderer, write_video
+    from imuloco.viz.skeleton import render_videos
 
     check_outputs([*video, html], overwrite)
+    conf = list(confidence) if confidence is not None else [None] * len(motions)
+    error_m = [None if c is None else c.error_m for c in conf]
+    unreliable = [None if c is None else c.unreliable for c in conf]
     out = []
     if video:
-        renderer = StickRenderer(motions, titles)
-        stop = None if max_seconds is None else int(max_seconds * renderer.fps) + 1
-        # GIFs at about 15 fps (browsers slow faster GIFs down), MP4 at the motion's rate
-        steps = [max(1, round(renderer.fps / 15)) if p.suffix.lower() == ".gif" else 1
-                 for p in video]
-        if len(video) == 1:
-            frames = renderer.iter_frames(steps[0], stop=stop, progress=progress)
-            out.append(write_video(frames, video[0], renderer.fps / steps[0], overwrite))
-        else:
-            frames = renderer.frames(stop=stop, progress=progress)
-            for path, step in zip(video, steps):
-                out.append(write_video(frames[::step], path, renderer.fps / step, overwrite))
+        out += render_videos(motions, video, titles, start=start, end=end,
+                             max_seconds=max_seconds, error_m=error_m, unreliable=unreliable,
+                             overwrite=overwrite, progress=progress)
     if html is not None:
-        conf = list(confidence) if confidence is not None else [None] * len(motions)
         out.append(write_viewer(motions, html, titles, title=" vs ".join(titles),
-                                overwrite=overwrite,
-                                error_m=[None if c is None else c.error_m for c in conf],
-                                unreliable=[None if c is None else c.unreliable
-                                            for c in conf]))
+                                overwrite=overwrite, error_m=error_m, unreliable=unreliable))
     return out
 
 
