@@ -954,7 +954,7 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
     --start/--end render a window of a long one."""
     import numpy as np
 
-    from imuloco.app.pipeline import render_outputs
+    from imuloco.app.render import render_outputs
     from imuloco.io.atomic import check_outputs
     from imuloco.io.motionfile import read_motion
     from imuloco.viz.skeleton import frame_strip, frame_window
