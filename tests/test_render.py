@@ -57,6 +57,9 @@ class FakeWriter:
     def __exit__(self, *exc):
         return False
 
+    def close(self):
+        self.closed_at = FakeWriter.renderer.drawn
+
     def send(self, frame):
         renderer = FakeWriter.renderer
         canvas = np.asarray(renderer.canvas.buffer_rgba())
@@ -82,6 +85,7 @@ def test_frames_go_to_the_encoders_one_at_a_time(tmp_path, walk, monkeypatch, sm
     assert [n for n, _ in gif.sent] == list(range(1, 31, 2))  # every other one, 1 s of them
     assert all(same for _, same in mp4.sent + gif.sent)  # the canvas itself, no copies
     assert mp4.fps == 30 and gif.fps == 15
+    assert gif.closed_at == 29  # finished (its ffmpeg's frames let go) once its last was sent
 
 
 def _peak_bytes(walk, path, end: float) -> int:

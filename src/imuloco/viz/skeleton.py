@@ -112,7 +112,8 @@ def follow_azimuth(motion: Motion, offset_deg: float = 30.0, sigma_s: float = 1.
 
 def _bones(skeleton: Skeleton) -> np.ndarray:
     """(B, 2) parent-child joint index pairs."""
-    return np.array([(int(p), j) for j, p in enumerate(skeleton.parents) if p >= 0])
+    return np.array([(int(p), j) for j, p in enumerate(skeleton.parents) if p >= 0],
+                    dtype=int).reshape(-1, 2)
 
 
 FOOT_PARTS = ("left_ankle", "right_ankle", "left_toe", "right_toe")
@@ -209,7 +210,7 @@ class StickRenderer:
             self.figure.text((k + 0.5) / n, 0.95, self.titles[k], ha="center", va="center",
                              fontsize=10)
             self.axes.append(ax)
-        self.sides = [np.array([joint_sides(m.skeleton)[j] for _, j in b])
+        self.sides = [np.array(joint_sides(m.skeleton))[b[:, 1]]  # each bone's child's side
                       for m, b in zip(self.motions, self.bones)]
         if legend:
             self._legend(strip_px / h, LEGEND_PX / h)
@@ -237,6 +238,8 @@ class StickRenderer:
         if any(c is not None for c in self.contacts):
             handles.append(Line2D([], [], ls="none", marker="o", ms=4.5, color=CONTACT_COLOR))
             labels.append("foot on the floor")
+        if not handles:  # a skeleton without bones
+            return
         self.figure.legend(handles, labels, loc="center", ncol=len(handles), fontsize=7,
                            frameon=False, handlelength=1.4, handletextpad=0.4,
                            columnspacing=1.0, borderaxespad=0.0,
@@ -338,11 +341,13 @@ class StickRenderer:
         x0 = int(box.x0)
         width = int(np.ceil(advance)) + 2
         glyphs = {}
+        pixels = np.asarray(self.canvas.buffer_rgba())
         for c in CLOCK_CHARS:
             self.canvas.restore_region(self.background)
+            pixels[rows, x0:x0 + width] = 255  # on white, whatever a long title put there
             text.set_text(c)
             self.figure.draw_artist(text)
-            glyphs[c] = np.asarray(self.canvas.buffer_rgba())[rows, x0:x0 + width].copy()
+            glyphs[c] = pixels[rows, x0:x0 + width].copy()
         text.remove()
         columns = [x0 + round(i * advance) for i in range(chars)]
         return rows, columns, width, glyphs
@@ -498,6 +503,11 @@ class VideoWriter:
         self._writer.send(frame)
         self.frames += 1
 
+    def close(self) -> None:
+        """Finish the file before the block ends (nothing more to send); the block's end then
+        does nothing more."""
+        self._stack.close()
+
     def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
                  tb: TracebackType | None) -> bool:
         return bool(self._stack.__exit__(kind, value, tb))
@@ -622,6 +632,8 @@ def render_videos(motions: Sequence[Motion], paths: Sequence[str | Path],
             for writer, r in zip(writers, plans):
                 if t in r:
                     writer.send(image)
+                    if t == r[-1]:  # a GIF's ffmpeg lets go of the frames it held
+                        writer.close()
             bar.update()
         bar.set_postfix_str("finishing " + ", ".join(p.name for p in paths))
     return paths
