@@ -404,6 +404,19 @@ class _Bench(click.Group):
 _OLD = "single"  # the hidden command of the old spelling
 
 
+class _OldContext(click.Context):
+    @property
+    def command_path(self) -> str:
+        return self.parent.command_path if self.parent else super().command_path
+
+
+class _OldCommand(click.Command):
+    """The old spelling's command: its usage lines and errors say ``imuloco bench``, as
+    before, not the hidden command's name."""
+
+    context_class = _OldContext
+
+
 @cli.group(cls=_Bench)
 def bench() -> None:
     """Measure the methods and the app: the protocol bench (run), speed, fuzzing, real
@@ -446,7 +459,7 @@ def bench_run(method_names: str, split_name: str, noise: str, placement: str,
               train_items: tuple[str, ...], test_items: tuple[str, ...], n_seeds: int,
               fold_names: str | None, out: Path, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
-    # heavy (numpy, the methods): on use, so that --help stays fast; as in each bench below
+    # heavy (numpy, the methods): on use, so that --help stays fast (as in each bench)
     from imuloco.lab.bench import run_bench
     from imuloco.lab.report import COLUMNS, table
 
@@ -472,7 +485,7 @@ def bench_speed(method_names: str, data_items: tuple[str, ...], db_frames: str |
                 against: str | None, out: Path) -> None:
     """Time online reconstruction against database size (imuloco.lab.speed); write
     speed.json and speed.md."""
-    from imuloco.lab.speed import speed_benchmark, speed_table
+    from imuloco.lab.speed import speed_benchmark, speed_table  # heavy: on use
 
     data = _folders(data_items)
     frames = _whole_numbers(db_frames, "--db-frames") or None
@@ -488,7 +501,7 @@ def bench_speed(method_names: str, data_items: tuple[str, ...], db_frames: str |
 def bench_fuzz(inputs: int, readers: str | None, seed: int, out: Path) -> None:
     """Read N generated malformed inputs per reader (imuloco.lab.fuzz) and write fuzz.md and
     fuzz.json."""
-    from imuloco.lab.fuzz import READERS, write_fuzz
+    from imuloco.lab.fuzz import READERS, write_fuzz  # heavy: on use
 
     chosen = tuple(_csv(readers)) or READERS
     unknown = sorted(set(chosen) - set(READERS))
@@ -510,6 +523,7 @@ def bench_fuzz(inputs: int, readers: str | None, seed: int, out: Path) -> None:
 def bench_real(real_dir: Path, limit: int | None, baseline: bool, out: Path) -> None:
     """The real-data gait protocol on the data sets in DIR (real IMUs with references,
     imuloco.lab.real)."""
+    # heavy: on use
     from imuloco.app.pipeline import GAIT_EXTRA, require_extras
     from imuloco.lab.real import run_real, summarize, table
 
@@ -529,7 +543,7 @@ def bench_real(real_dir: Path, limit: int | None, baseline: bool, out: Path) -> 
 @_out_option("batch_bench.md and batch_bench.json")
 def bench_batch(walkers: int, method_names: str | None, placement: str, out: Path) -> None:
     """The batch benchmark (imuloco.lab.batchbench) on N simulated walkers of 60 s."""
-    from imuloco.lab.batchbench import batch_benchmark, markdown
+    from imuloco.lab.batchbench import batch_benchmark, markdown  # heavy: on use
 
     click.echo(markdown(batch_benchmark(walkers, out, method=method_names,
                                         placement=placement)))
@@ -545,14 +559,37 @@ def bench_batch(walkers: int, method_names: str | None, placement: str, out: Pat
 def bench_load(load_dirs: tuple[str, ...], against: str | None, out: Path) -> None:
     """Time loading the motion folders DIR (repeat or comma-separate): numpy parse, reader,
     cold and warm cache."""
-    from imuloco.lab.loadspeed import load_benchmark, table
+    from imuloco.lab.loadspeed import load_benchmark, table  # heavy: on use
 
     folders = _folders(load_dirs, "DIR")
     click.echo(table(load_benchmark(folders, out, against), against))
     click.echo(f"wrote {out / 'load.json'} and {out / 'load.md'}")
 
 
-@bench.command(_OLD, hidden=True)
+@bench.command("live", short_help="The live server under load, and after sensor dropouts.")
+@click.option("--viewers", type=click.IntRange(min=1), default=100, show_default=True,
+              help="Browser viewers connected at once.")
+@click.option("--seconds", type=_Range(0, min_open=True), default=20.0, show_default=True,
+              help="How long the phone streams.")
+@click.option("--no-abuse", is_flag=True,
+              help="The phone only streams (no oversized, flooding or extra clients).")
+@_out_option("load.json and dropout.json")
+def bench_live(viewers: int, seconds: float, no_abuse: bool, out: Path) -> None:
+    """Load-test the live server on 127.0.0.1 (a simulated phone and --viewers browsers, with
+    abusive messages) and measure the recovery after sensor dropouts (imuloco.lab.livebench;
+    needs the [live] extra; Linux)."""
+    try:  # heavy: on use; and the [live] extra
+        from imuloco.lab.livebench import live_benchmark, summaries
+    except ModuleNotFoundError as e:
+        if (e.name or "").split(".")[0] != "websockets":
+            raise
+        raise MissingExtraError("the live bench", e.name, "live") from None
+
+    click.echo(summaries(*live_benchmark(out, viewers, seconds, abuse=not no_abuse)))
+    click.echo(f"wrote {out / 'load.json'} and {out / 'dropout.json'}")
+
+
+@bench.command(_OLD, cls=_OldCommand, hidden=True)
 @click.option("--method", "method_names", default=None,
               help=METHODS_HELP + " [required but with --batch, which defaults to the shipped "
                                   "model].")
