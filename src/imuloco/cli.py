@@ -30,7 +30,6 @@ from imuloco.app.console import console
 from imuloco.core.bodymap import PARTS
 from imuloco.errors import ImulocoError, InputError, MissingExtraError, UnknownNameError
 from imuloco.io.atomic import FULL, atomic_write, check_output, check_outputs
-from imuloco.methods.registry import describe, method_names, parse_params
 
 
 class Commands(click.Group):
@@ -344,6 +343,7 @@ def phases(motion_file: Path, as_json: bool, reference: str, up: str, skip_frame
 @cli.command()
 def methods() -> None:
     """List the reconstruction methods with one line each (without importing them)."""
+    from imuloco.methods.registry import describe, method_names  # 50 ms (ast): on use
     found = [describe(name) for name in method_names()]
     width = max(len(m.name) for m in found)
     for m in found:
@@ -608,13 +608,17 @@ def bench_live(viewers: int, seconds: float, no_abuse: bool, out: Path) -> None:
               help="With --fuzz: readers, comma separated [default: all].")
 @click.option("--real", "real_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
               default=None, help="Instead: bench real DIR.")
-@click.option("--baseline", is_flag=True, help="With --real: as bench real's.")
+@click.option("--baseline", is_flag=True,
+              help="With --real: also measure the gait of the motion the placement's shipped "
+                   "model reconstructs (the right-ankle one where it has none).")
 @click.option("--batch", "batch_walkers", type=click.IntRange(1), default=None, metavar="N",
               help="Instead: bench batch N.")
 @click.option("--load", "load_dirs", multiple=True, metavar="DIR",
               help="Instead: bench load DIR (repeat or comma-separate).")
 @click.option("--against", default=None, metavar="REV",
-              help="With --load or --speed: as theirs.")
+              help="With --load: also time the BVH reader of this git commit and report the "
+                   "largest difference of its Motions from today's; with --speed: also each "
+                   "method's code at this commit, in the same run.")
 @_reading_options
 @click.pass_context
 def bench_single(ctx: click.Context, method_names: str | None, speed: bool,
@@ -689,6 +693,7 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
     from imuloco.lab.bench import data_label, load_data
     from imuloco.lab.protocols import split
     from imuloco.methods import get_method, method_class
+    from imuloco.methods.registry import parse_params
 
     check_outputs([output, mirrored_path], force)
     if mirrored_path is not None and not hasattr(method_class(method_name), "mirrored"):
