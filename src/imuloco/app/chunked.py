@@ -33,6 +33,7 @@ from imuloco.core.rigs import DEFAULT_RIG, MODEL, apply_rig
 from imuloco.measures.gait import Gait, Plausibility
 from imuloco.measures.sensorgait import GaitReport
 from imuloco.methods.base import Reconstruction
+from imuloco.methods.fallback import FallbackReport
 
 PIECE_SECONDS = 600.0  # 10 min: 18,000 frames at 30 fps, ~100 MB of analysis
 WARMUP_SECONDS = 20.0  # longer than any method's window (learned: 120 frames = 4 s)
@@ -246,5 +247,6 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         height_m=height, gait=walk, plausibility=Plausibility(**combine(checks, sizes)),
         confidence=Confidence.concatenate(confidences), started=t0,
         pieces=Pieces(len(sizes), piece_s, warmup_s),
-        path=None if follower is None else follower.report())
+        path=None if follower is None else follower.report(),
+        fallback=FallbackReport(False, note="not run on a reconstruction in pieces"))
 
