@@ -63,7 +63,8 @@ class Pieces:
 class ReconstructionReport:
     """What a reconstruction found, as typed fields; :meth:`to_json` gives the JSON report.
 
-    recording : the import (:class:`imuloco.sensors.reallog.LogReport`).
+    recording : the import (:class:`imuloco.sensors.reallog.LogReport`); its ``sensors``
+        (file, clock offset and rule, whether the model read it) are the JSON's ``sensors``.
     calibration : per placement, the rotation found (``None``: not calibrated).
     feet_pinned_by : ``"method"``, ``"pipeline"`` or ``"none"``.
     model : where the model came from (:class:`imuloco.app.pipeline.ModelChoice`).
@@ -125,7 +126,8 @@ class ReconstructionReport:
     def to_json(self) -> dict[str, Any]:
         """The JSON report (keys in this order; ``calibration`` only when calibrated, the
         other optional keys only when set)."""
-        out: dict[str, Any] = {"recording": self.recording.to_json()}
+        out: dict[str, Any] = {"recording": self.recording.to_json(),
+                               "sensors": [s.to_json() for s in self.recording.sensors]}
         if self.calibration is not None:
             out["calibration"] = self.calibration
         out.update(feet_pinned_by=self.feet_pinned_by, method=self.method,

@@ -26,7 +26,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import correlate, correlation_lags
+from scipy.signal import correlate
 
 from imuloco.core.recording import Recording
 from imuloco.errors import FormatError, InputError
@@ -95,12 +95,12 @@ def align_by_xcorr(ref: Recording, other: Recording, k_ref: int = 0, k_other: in
     """
     dt = float(np.median(np.diff(ref.times)))
     a, b = _jolts(ref, k_ref), _jolts(other, k_other)
-    n = int(round(window_s / dt))
-    ia, ib = _first_jolt(a, n + int(round(max_offset_s / dt))), _first_jolt(b, n)
+    n = round(window_s / dt)
+    ia, ib = _first_jolt(a, n + round(max_offset_s / dt)), _first_jolt(b, n)
     if ia is None or ib is None:
         return float("nan"), 0.0
-    m = int(round(REFINE_S / dt))
-    w = int(round(STOMP_WINDOW_S / dt))
+    m = round(REFINE_S / dt)
+    w = round(STOMP_WINDOW_S / dt)
     lo = max(ib - m, 0)
     bw = b[lo:lo + w]  # other's stomps, from a little before the first
     start = ia - (ib - lo) - m  # ref's index matching bw[0] at lag -m

@@ -153,15 +153,15 @@ def still_start(motion: Motion, seconds: float) -> Motion:
     :func:`add_stomps`' stomps: stand still, stomp, then move), then :data:`EASE_S` seconds
     in which it speeds up from rest (its first ``EASE_S / 2`` seconds played at a speed
     rising linearly from 0 to 1: no jump of velocity)."""
-    n = int(round(seconds * motion.fps))
-    u = np.arange(int(round(EASE_S * motion.fps))) / motion.fps  # output seconds of the ease
+    n = round(seconds * motion.fps)
+    u = np.arange(round(EASE_S * motion.fps)) / motion.fps  # output seconds of the ease
     src = u * u / (2 * EASE_S) * motion.fps  # source frame: speed rises from 0 to 1
     i = np.minimum(src.astype(int), motion.num_frames - 2)
     w = (src - i)[:, None]
     rot = (1 - w[..., None]) * motion.rotations[i] + w[..., None] * motion.rotations[i + 1]
     rot /= np.linalg.norm(rot, axis=-1, keepdims=True)  # steps of a frame: nlerp is enough
     root = (1 - w) * motion.root[i] + w * motion.root[i + 1]
-    rest = int(round(EASE_S / 2 * motion.fps))
+    rest = round(EASE_S / 2 * motion.fps)
     return Motion(motion.skeleton,
                   np.concatenate([np.repeat(motion.rotations[:1], n, 0), rot,
                                   motion.rotations[rest:]]),
