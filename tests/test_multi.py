@@ -197,3 +197,20 @@ def test_simulated_files_on_two_clocks_reconstruct_from_both(tmp_path, pair_mode
     wrist = report["sensors"][1]
     assert wrist["placement"] == "left_wrist" and wrist["used"]
     assert wrist["aligned_by"] == "xcorr" and abs(wrist["offset_s"] - 1.5) < FRAME_S
+
+
+# ---- the path from every sensor of one kind -------------------------------------------------
+def test_two_feet_give_one_path_from_both(walk):
+    pytest.importorskip("gaitmap")
+    from imuloco.paths.registry import estimate_path
+
+    rec = simulate(walk, ["right_foot", "left_foot", "left_wrist"], noise="phone", seed=0)
+    right = estimate_path(rec.select(["right_foot"]), "right_foot")
+    left = estimate_path(rec.select(["left_foot"]), "left_foot")
+    both = estimate_path(rec, "right_foot")  # the wrist has no path estimator: left out
+    assert {f.foot for f in both.footfalls} == {"left", "right"}
+    assert len(both.footfalls) == len(right.footfalls) + len(left.footfalls)
+    mean = (right.root_xy + np.stack([np.interp(right.times_s, left.times_s, left.root_xy[:, k])
+                                      for k in range(2)], 1)) / 2
+    np.testing.assert_allclose(both.root_xy, mean, atol=1e-9)
+    assert "right_foot, left_foot" in both.note

@@ -126,12 +126,12 @@ class ReconstructionReport:
     def to_json(self) -> dict[str, Any]:
         """The JSON report (keys in this order; ``calibration`` only when calibrated, the
         other optional keys only when set)."""
-        out: dict[str, Any] = {"recording": self.recording.to_json(),
-                               "sensors": [s.to_json() for s in self.recording.sensors]}
+        out: dict[str, Any] = {"recording": self.recording.to_json()}
         if self.calibration is not None:
             out["calibration"] = self.calibration
         out.update(feet_pinned_by=self.feet_pinned_by, method=self.method,
                    model=self.model.description, placement=self.placement,
+                   sensors=[s.to_json() for s in self.recording.sensors],
                    motion=self.motion.to_json())
         if self.pieces is not None:
             out["pieces"] = self.pieces.to_json()
