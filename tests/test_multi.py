@@ -200,17 +200,28 @@ def test_simulated_files_on_two_clocks_reconstruct_from_both(tmp_path, pair_mode
 
 
 # ---- the path from every sensor of one kind -------------------------------------------------
-def test_two_feet_give_one_path_from_both(walk):
-    pytest.importorskip("gaitmap")
+def test_two_shins_give_one_path_from_both(walk):
     from imuloco.paths.registry import estimate_path
 
-    rec = simulate(walk, ["right_foot", "left_foot", "left_wrist"], noise="phone", seed=0)
-    right = estimate_path(rec.select(["right_foot"]), "right_foot")
-    left = estimate_path(rec.select(["left_foot"]), "left_foot")
-    both = estimate_path(rec, "right_foot")  # the wrist has no path estimator: left out
+    rec = simulate(walk, ["right_ankle", "left_ankle", "left_wrist"], noise="phone", seed=0)
+    right = estimate_path(rec.select(["right_ankle"]), "right_ankle")
+    left = estimate_path(rec.select(["left_ankle"]), "left_ankle")
+    both = estimate_path(rec, "right_ankle")  # the wrist has no path estimator: left out
     assert {f.foot for f in both.footfalls} == {"left", "right"}
     assert len(both.footfalls) == len(right.footfalls) + len(left.footfalls)
     mean = (right.root_xy + np.stack([np.interp(right.times_s, left.times_s, left.root_xy[:, k])
                                       for k in range(2)], 1)) / 2
     np.testing.assert_allclose(both.root_xy, mean, atol=1e-9)
-    assert "right_foot, left_foot" in both.note
+    assert "right_ankle, left_ankle" in both.note
+
+
+def test_two_feet_are_read_once_by_their_own_estimator(walk):
+    pytest.importorskip("gaitmap")
+    from imuloco.paths.foot import FootZupt
+    from imuloco.paths.registry import estimate_path
+
+    rec = simulate(walk, ["right_foot", "left_foot"], noise="phone", seed=0)
+    both = estimate_path(rec, "right_foot")
+    own = FootZupt().estimate(rec, "right_foot")  # it puts the pelvis between the feet itself
+    assert len(both.footfalls) == len(own.footfalls)
+    np.testing.assert_allclose(both.root_xy, own.root_xy, atol=1e-9)

@@ -1,11 +1,12 @@
 """Which path estimator serves which placement (:func:`estimator_for`): each placement names its
 estimator in its declaration (:attr:`imuloco.sensors.placement.Placement.path_estimator`).
 
-A recording with several sensors whose placements declare the same estimator (two feet: two
-zero-velocity tracks; two shins: two shank pivots) gives one path from all of them
-(:func:`fuse_paths`): the root is the mean of their roots, the heading their circular mean,
-the footfalls and strides those of every sensor. Sensors with another estimator, or none (a
-wrist), leave the path to the primary sensor's.
+A recording with several sensors whose placements declare the same estimator (two shins: two
+shank pivots) gives one path from all of them (:func:`fuse_paths`): the root is the mean of
+their roots, the heading their circular mean, the footfalls and strides those of every sensor.
+An estimator that reads every sensor of its kind itself (``reads_all_sensors``: foot-zupt puts
+the pelvis between both feet's zero-velocity tracks) is run once. Sensors with another
+estimator, or none (a wrist), leave the path to the primary sensor's.
 """
 
 from __future__ import annotations
@@ -41,8 +42,9 @@ def estimate_path(rec: Recording, placement: str, height_m: float | None = None)
     if placement not in rec.placements:
         raise UnknownNameError(f"recording has no sensor at {placement!r}; it has "
                                f"{rec.placements}")
-    same = [p for p in rec.placements if p != placement
-            and PRESETS[p].path_estimator == PRESETS[placement].path_estimator]
+    same = [] if getattr(estimator, "reads_all_sensors", False) else [
+        p for p in rec.placements if p != placement
+        and PRESETS[p].path_estimator == PRESETS[placement].path_estimator]
     paths = [from_start(estimator.estimate(rec, p, height_m), float(rec.times[0]))
              for p in [placement, *same]]
     return fuse_paths(paths, [placement, *same]) if same else paths[0]
