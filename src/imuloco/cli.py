@@ -255,6 +255,8 @@ def _parse_sensors(ctx: click.Context, param: click.Parameter, values: tuple[str
                    ) -> list[tuple[str, Path]]:
     """``--sensor PLACEMENT=FILE`` (repeatable) as (placement, file) pairs, each file
     existing, before any work (:func:`imuloco.sensors.multi.parse_sensor`)."""
+    if not values:
+        return []
     from imuloco.sensors.multi import parse_sensor  # numpy, scipy: on use (--help stays fast)
 
     out = []
