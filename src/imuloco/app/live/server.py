@@ -261,14 +261,21 @@ class LiveServer:
         model skeleton's).
     follow_path : the walker's root follows the path the sensor measures (see
         :class:`LiveSession`; its estimate on a thread of its own); False: the model's root.
+    vmc : (host, port) of a VMC protocol receiver every frame is also sent to
+        (:mod:`imuloco.app.live.vmc`; ``None``: none).
     """
 
     def __init__(self, method, calibrate_s: float = 5.0, note: str = "", token: str | None = None,
                  allow_origins: Iterable[str] = (), limits: Limits = Limits(),
                  require_token: bool | None = None, height_m: float | None = None,
-                 follow_path: bool = True) -> None:
+                 follow_path: bool = True, vmc: tuple[str, int] | None = None) -> None:
         probe = LiveSession(method, calibrate_s, height_m=height_m,
                             follow_path=False)  # fails early: offline
+        self.vmc = None
+        if vmc is not None:  # python-osc (the [live] extra) is needed for --vmc only
+            from imuloco.app.live.vmc import VmcSender
+
+            self.vmc = VmcSender(probe.skeleton, method.fps_, *vmc)
         self.height_m = height_m
         self.follow_path = follow_path
         self.method = method
@@ -503,6 +510,8 @@ class LiveServer:
                     "type": "calibrated", "rotations": c.rotations.tolist(), "samples": c.samples,
                     "seconds": round(c.seconds, 3), "details": c.details})))
             out += [("pose", json.dumps(m, separators=(",", ":"))) for m in frames_to_json(got)]
+            if self.vmc is not None:
+                self.vmc.send(got)
             frames += len(got)
         if s.dropouts > dropouts:
             log.info("%d dropout(s) over %g s without samples: the model restarted, the walker "
@@ -638,6 +647,8 @@ class LiveServer:
         self._worker.shutdown(wait=True)
         if self.session is not None:
             self.session.close()
+        if self.vmc is not None:
+            self.vmc.close()
 
 
 def ssl_context(certfile: str | Path, keyfile: str | Path | None = None) -> ssl_module.SSLContext:
