@@ -1168,29 +1168,38 @@ RENDER_TYPES = (".mp4", ".gif", ".html", ".png")
               help="Folder for MOTION.mp4, MOTION.gif and MOTION.html (video, GIF and viewer).")
 @click.option("-o", "--output", "outputs", multiple=True, type=_file(),
               help="File(s) to write: .mp4, .gif, .html or .png (a strip of frames).")
+@click.option("--start", type=_Range(min=0), default=None, metavar="SECONDS",
+              help="Videos and frame strip from this time on [default: the start].")
+@click.option("--end", type=_Range(min=0), default=None, metavar="SECONDS",
+              help="Videos and frame strip up to this time [default: the end].")
 @click.option("--seconds", type=_Range(0, min_open=True), default=None,
-              help="Only the first seconds (videos).")
+              help="At most this many seconds from --start (videos, frame strip).")
+@click.option("--gif/--no-gif", default=True, show_default=True,
+              help="With --out: MOTION.gif too, a preview of at most 30 s (an MP4 has no "
+                   "cap; a longer window's GIF is cut, with a message).")
 @click.option("--report", "report_file", type=_existing_file(), default=None,
               help="MOTION's reconstruction report (reconstruct --report, batch's NAME.json): "
-                   "the viewer shows its predicted error per second and unreliable segments.")
+                   "the videos and viewer show its predicted error and unreliable segments.")
 @force_option
 def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
-           outputs: tuple[Path, ...], seconds: float | None, report_file: Path | None,
-           force: bool) -> None:
+           outputs: tuple[Path, ...], start: float | None, end: float | None,
+           seconds: float | None, gif: bool, report_file: Path | None, force: bool) -> None:
     """Render a MOTION file (BVH, ...) as stick-figure video, HTML viewer or frame strip:
-    into a folder (--out DIR) and/or to named files (-o FILE, repeatable)."""
+    into a folder (--out DIR) and/or to named files (-o FILE, repeatable). Videos are
+    streamed to the encoder frame by frame (memory does not grow with the recording);
+    --start/--end render a window of a long one."""
     # heavy (numpy, matplotlib, the app): on use, so that --help stays fast
     import numpy as np
 
     from imuloco.app.confidence import Confidence
-    from imuloco.app.pipeline import render_outputs
+    from imuloco.app.render import render_outputs
     from imuloco.io.motionfile import read_motion
-    from imuloco.viz.skeleton import frame_strip
+    from imuloco.viz.skeleton import frame_strip, frame_window
 
     if out_dir is None and not outputs:
         raise click.UsageError("give --out DIR or -o FILE")
     outputs = (*outputs, *(out_dir / f"{motion_file.stem}{ext}" for ext in RENDER_TYPES[:3]
-                           if out_dir is not None))
+                           if out_dir is not None and (gif or ext != ".gif")))
     bad = [str(p) for p in outputs if p.suffix.lower() not in RENDER_TYPES]
     if bad:
         raise click.BadParameter(f"unsupported output type(s) {bad}: use .mp4, .gif, .html "
@@ -1205,15 +1214,16 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
     if gt_file is not None:
         motions, titles = [read_motion(gt_file), motion], ["ground truth", titles[0]]
         confidence = [None, *confidence]
+    first, stop = frame_window(motions[0], start, end, seconds)  # refused before any work
     videos = [p for p in outputs if p.suffix.lower() in (".mp4", ".gif")]
     html = next((p for p in outputs if p.suffix.lower() == ".html"), None)
     written = render_outputs(motions, titles, videos, html, overwrite=True, progress=True,
-                             max_seconds=seconds, confidence=confidence)
+                             max_seconds=seconds, confidence=confidence, start=start,
+                             end=end)
     for p in outputs:
         if p.suffix.lower() == ".png":
-            span = motion.duration if seconds is None else min(seconds, motion.duration)
-            written.append(frame_strip(motions, np.linspace(0, span, 8), p, titles,
-                                       overwrite=True))
+            times = np.linspace(first, stop - 1, 8) / motions[0].fps
+            written.append(frame_strip(motions, times, p, titles, overwrite=True))
     click.echo("wrote " + ", ".join(str(p) for p in written))
 
 
