@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shutil
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.data import shared_data_dir
+from imuloco.errors import FormatError
 from imuloco.ops.rotations import about_y
 
 
@@ -82,6 +84,25 @@ def read_mp4_frames(path: Path, width: int, height: int) -> np.ndarray:
 def read_mp4():
     """:func:`read_mp4_frames`, for tests that check written videos."""
     return read_mp4_frames
+
+
+def _reads_cleanly(reader: Callable, path: Path):
+    """``reader(path)``, which must either refuse the file with a FormatError naming it (then
+    None) or return streams of finite times and values (then them)."""
+    try:
+        streams = reader(path)
+    except FormatError as e:
+        assert e.path == str(path)
+        return None
+    assert all(np.isfinite(s.times).all() and np.isfinite(s.values).all() for s in streams)
+    return streams
+
+
+@pytest.fixture
+def reads_cleanly():
+    """:func:`_reads_cleanly`, the readers' property tests' verdict on a mutated input (the
+    mutations: :mod:`imuloco.lab.mutations`)."""
+    return _reads_cleanly
 
 
 @pytest.fixture(scope="module")

@@ -23,10 +23,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imuloco.core.recording import Recording
-from imuloco.errors import InputError
+from imuloco.errors import InputError, MissingExtraError
 from imuloco.measures.gait import height_scale
 from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import about_y, qmul, qrot
+from imuloco.sensors.calibration import calibrate, mounting_of
 
 log = logging.getLogger(__name__)
 
@@ -326,9 +327,6 @@ class LiveSession:
         self._join = self._recent[-1][0] if self._recent else None
 
     def _calibrate(self, final: bool = False) -> bool:
-        from imuloco.errors import MissingExtraError
-        from imuloco.sensors.calibration import calibrate, mounting_of
-
         raw, s = self._raw[:self._n], self.num_sensors
         t = raw[:, 0]
         rec = Recording(t, raw[:, 1:1 + 3 * s].reshape(-1, s, 3),
