@@ -3,10 +3,11 @@
 ``imuloco bench --fuzz N`` runs :func:`run_fuzz`: for each reader (BVH, ASF/AMC, sensor-log
 tables, :func:`~imuloco.sensors.reallog.read_log`, model files, the real-data folders of
 :func:`~imuloco.io.realimu.read_trials`: :mod:`imuloco.lab.fuzz_real`, Xsens text exports
-read by ``read_log``: :mod:`imuloco.lab.fuzz_xsens`) it builds small
-valid files from the bundled sample (:func:`seed_files`), derives N inputs from them by random
-mutation (bytes, lines, cells) and by the structured attacks of issue 18 (a timestamp jumping by days, rows a
-nanosecond apart, cells of 1e308, ``Frame Time`` of 1000 s, 20,000 nested joints, ASF units of
+read by ``read_log``: :mod:`imuloco.lab.fuzz_xsens`; one row each in :data:`READER_TABLE`) it
+builds small valid files from the bundled sample (:func:`seed_files`), derives N inputs from
+them by random edits (bytes, lines, cells: :mod:`imuloco.lab.mutations`, the engine the
+readers' tests use too) and by the structured attacks of issue 18 (a timestamp jumping by days,
+rows a nanosecond apart, cells of 1e308, ``Frame Time`` of 1000 s, 20,000 nested joints, ASF units of
 5e-324, forged array shapes, decompression bombs, deep JSON headers, ...) and those of issue 42
 (:mod:`imuloco.lab.fuzz_structure`: structure-aware BVH and AMC, zip-member bombs, output
 targets; every input of these readers is such an attack), and reads each in a worker
