@@ -11,8 +11,8 @@ lower-back walk repeated end to end); ``batch`` of 3 recordings; and
 goes to ``stdout/NN-COMMAND.out``. ``compare`` captures again into ``--work`` (a temporary
 folder by default) and compares every file of GOLDEN with its namesake: JSON key by key, CSV and
 Parquet cell by cell (numbers within 1e-9), BVH and other text line by line (numbers within
-1e-9), printed output line by line (a line that differs only in numbers and speaks of time, as
-``in 3.2 s``, is a timing), everything else (video, images) by existence. Timings and dates
+1e-9), printed output line by line (numbers followed by a unit of time, as ``166 s``, are
+timings), everything else (video, images) by existence. Timings and dates
 (``seconds``, ``trained_at``, ...: see ``IGNORED``) are not compared. Keys, columns or files
 present only in the new output are listed as additions (an allowed extension) without failing,
 as are keys in another order (JSON objects are unordered); a missing or changed one fails.
@@ -49,8 +49,8 @@ IGNORED = {"seconds", "trained_at", "elapsed_s", "wall_s", "fit_s", "reconstruct
            # a model file's size: its header holds the training's date
            "model_bytes"}
 TOL = 1e-9
-# a printed line that speaks of time: its numbers are timings
-TIMING = re.compile(r"\d\s*(?:s|ms|min|seconds?)\b|/s\b|fps|elapsed|took|\bETA\b|it/s")
+# what follows a printed number that is a timing: a unit of time or of a rate
+TIMING = re.compile(r"\s*(?:s|ms|min|seconds?|it/s|/s|x real ?time)\b")
 NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
@@ -156,6 +156,15 @@ def same_line(a: str, b: str) -> bool:
             and all(same_number(float(x), float(y)) for x, y in zip(na, nb)))
 
 
+def timings_only(a: str, b: str) -> bool:
+    """Two printed lines that differ only in numbers followed by a unit of time."""
+    ma, mb = list(NUMBER.finditer(a)), list(NUMBER.finditer(b))
+    if NUMBER.sub("#", a) != NUMBER.sub("#", b) or len(ma) != len(mb):
+        return False
+    return all(same_number(float(x.group()), float(y.group())) or TIMING.match(a, x.end())
+               for x, y in zip(ma, mb))
+
+
 def compare_csv(old: Path, new: Path, where: str, diffs: list[str], added: list[str]) -> None:
     with old.open() as f:
         a = list(csv.DictReader(f))
@@ -197,7 +206,7 @@ def compare_file(old: Path, new: Path, where: str, diffs: list[str], added: list
         for i, (x, y) in enumerate(zip(a, b)):
             if x == y or same_line(x, y):
                 continue
-            if NUMBER.sub("#", x) == NUMBER.sub("#", y) and TIMING.search(x):
+            if timings_only(x, y):
                 added.append(f"{where}:{i + 1}: timing {x.strip()!r}, now {y.strip()!r}")
             else:
                 diffs.append(f"{where}:{i + 1}: {x.strip()!r}, now {y.strip()!r}")
