@@ -33,6 +33,7 @@ from tqdm.auto import tqdm
 
 from imuloco.app.confidence import Confidence
 from imuloco.app.export import write_reconstruction
+from imuloco.app.render import render_outputs
 from imuloco.app.report import MotionInfo, ReconstructionReport, build_report
 from imuloco.app.summary import confidence_markdown, demo_markdown  # noqa: F401 (re-exported)
 from imuloco.core.motion import Motion
@@ -58,9 +59,7 @@ from imuloco.sensors.calibration import calibrate
 from imuloco.sensors.placement import PRESETS
 from imuloco.sensors.reallog import read_log, recording_name
 from imuloco.sensors.simulate import simulate
-from imuloco.viz.html import write_viewer
 from imuloco.viz.plots import plot_errors, plot_phases, plot_signals
-from imuloco.viz.skeleton import StickRenderer, write_video
 
 if TYPE_CHECKING:
     from imuloco.methods.base import Method
@@ -341,39 +340,6 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar.update()
     bar.close()
     return motion, report
-
-
-def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequence[Path] = (),
-                   html: Path | None = None, overwrite: bool = False, progress: bool = False,
-                   max_seconds: float | None = None,
-                   confidence: Sequence[Confidence | None] | None = None) -> list[Path]:
-    """Write the stick-figure video(s) (``.mp4``/``.gif``, frames drawn once; one video is
-    streamed to its encoder, as a long recording's frames do not fit in memory) and the HTML
-    viewer of ``motions`` side by side; ``confidence`` (per motion, or None) is shown in the
-    viewer (predicted error per frame, unreliable frames marked)."""
-    check_outputs([*video, html], overwrite)
-    out = []
-    if video:
-        renderer = StickRenderer(motions, titles)
-        stop = None if max_seconds is None else int(max_seconds * renderer.fps) + 1
-        # GIFs at about 15 fps (browsers slow faster GIFs down), MP4 at the motion's rate
-        steps = [max(1, round(renderer.fps / 15)) if p.suffix.lower() == ".gif" else 1
-                 for p in video]
-        if len(video) == 1:
-            frames = renderer.iter_frames(steps[0], stop=stop, progress=progress)
-            out.append(write_video(frames, video[0], renderer.fps / steps[0], overwrite))
-        else:
-            frames = renderer.frames(stop=stop, progress=progress)
-            for path, step in zip(video, steps):
-                out.append(write_video(frames[::step], path, renderer.fps / step, overwrite))
-    if html is not None:
-        conf = list(confidence) if confidence is not None else [None] * len(motions)
-        out.append(write_viewer(motions, html, titles, title=" vs ".join(titles),
-                                overwrite=overwrite,
-                                error_m=[None if c is None else c.error_m for c in conf],
-                                unreliable=[None if c is None else c.unreliable
-                                            for c in conf]))
-    return out
 
 
 def demo(out_dir: str | Path, method: str | None = None, model: str | Path | None = None,
