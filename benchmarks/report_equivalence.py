@@ -50,7 +50,7 @@ IGNORED = {"seconds", "trained_at", "elapsed_s", "wall_s", "fit_s", "reconstruct
            "model_bytes"}
 TOL = 1e-9
 # what follows a printed number that is a timing: a unit of time or of a rate
-TIMING = re.compile(r"\s*(?:s|ms|min|seconds?|it/s|/s|x real ?time)\b")
+TIMING = re.compile(r"\s*(?:s|ms|min|seconds?|[a-z ]*/(?:s|min)|x real ?time)\b")
 NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
