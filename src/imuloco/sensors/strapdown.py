@@ -17,6 +17,7 @@ import numpy as np
 from scipy.integrate import cumulative_trapezoid
 from scipy.spatial.transform import Rotation
 
+from imuloco.ops.rotations import IDENTITY, from_rotvec, normalize, qmul
 from imuloco.sensors.noise import G
 
 UP = np.array([0.0, 0.0, 1.0])
@@ -24,16 +25,19 @@ UP = np.array([0.0, 0.0, 1.0])
 
 def integrate_gyro(gyro: np.ndarray, rate: float) -> Rotation:
     """Orientations (T,) of a sensor from its body-frame angular velocity (T, 3) rad/s on a
-    uniform grid at ``rate`` Hz, the first the identity: ``R[i+1] = R[i] exp(w[i] / rate)``."""
-    steps = Rotation.from_rotvec(gyro[:-1] / rate)
+    uniform grid at ``rate`` Hz, the first the identity: ``R[i+1] = R[i] exp(w[i] / rate)``.
+
+    scipy has no cumulative product of rotations, and one ``Rotation`` per sample costs
+    ~0.6 ms: the product is a parallel prefix scan (Hillis & Steele) of vectorised
+    quaternion products, log2(T) passes."""
     q = np.empty((len(gyro), 4))
-    q[0] = (0.0, 0.0, 0.0, 1.0)
-    cur = Rotation.identity()
-    # scipy has no cumulative product of rotations: a loop over samples (~10 us each)
-    for i, step in enumerate(steps):
-        cur = cur * step
-        q[i + 1] = cur.as_quat()
-    return Rotation.from_quat(q)
+    q[0] = IDENTITY
+    q[1:] = from_rotvec(np.asarray(gyro[:-1], float) / rate)
+    d = 1
+    while d < len(q):
+        q[d:] = qmul(q[:-d], q[d:])  # the right side is built from the previous pass
+        d *= 2
+    return Rotation.from_quat(normalize(q))
 
 
 def level(orientation: Rotation, acc: np.ndarray) -> Rotation:
