@@ -251,6 +251,33 @@ columns_option = click.option(
          "the time unit are detected).")
 
 
+def _parse_sensors(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]
+                   ) -> list[tuple[str, Path]]:
+    """``--sensor PLACEMENT=FILE`` (repeatable) as (placement, file) pairs, each file
+    existing, before any work (:func:`imuloco.sensors.multi.parse_sensor`)."""
+    if not values:
+        return []
+    from imuloco.sensors.multi import parse_sensor  # numpy, scipy: on use (--help stays fast)
+
+    out = []
+    for v in values:
+        try:
+            name, file = parse_sensor(v)
+        except ImulocoError as e:
+            raise click.BadParameter(str(e), param_hint="--sensor") from None
+        if not file.exists():
+            raise click.BadParameter(f"{file}: no such file or folder", param_hint="--sensor")
+        out.append((name, file))
+    return out
+
+
+sensor_option = click.option(
+    "--sensor", "sensors", multiple=True, metavar="PLACEMENT=FILE", callback=_parse_sensors,
+    help="A further sensor's log (repeatable), e.g. left_wrist=watch.csv: put on the "
+         "recording's clock by Unix timestamps, else by a stomp at the start (stand still, "
+         "stomp twice); the shipped model reading all the sensors is chosen.")
+
+
 def _parse_columns(value: str | None) -> dict[str, str] | None:
     """``--columns`` as a mapping (:func:`imuloco.io.sensorlog.parse_columns`), before any
     work."""
@@ -891,24 +918,60 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
               help="Sampling rate, Hz (as reconstruct reads logs).")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
               help="Seed of the noise draws.")
-@click.option("-o", "--output", required=True, type=_file(),
-              help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s).")
+@click.option("-o", "--output", required=True, type=click.Path(path_type=Path),
+              help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s); a "
+                   "folder for --layout sensorlogger or files.")
+@click.option("--layout", type=click.Choice(["generic", "sensorlogger", "files"]),
+              default="generic", show_default=True,
+              help="generic: one CSV; sensorlogger: an iPhone's Sensor Logger export folder, "
+                   "with the watch's WristMotion.csv for left_wrist; files: one generic CSV "
+                   "per sensor, PLACEMENT.csv (for reconstruct --sensor).")
+@click.option("--stomp", is_flag=True,
+              help="Stand still 2 s and stomp twice before the motion (the start that aligns "
+                   "sensors' clocks; after the last sensor's clock started).")
+@click.option("--clock-offset", "clock_offsets", multiple=True, metavar="PLACEMENT=SECONDS",
+              help="--layout files: that sensor's clock runs this far behind (repeatable).")
 @force_option
 def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: int,
-             output: Path, force: bool) -> None:
-    """Simulate body-worn phone sensors on MOTION_FILE and write them as generic CSV."""
+             output: Path, layout: str, stomp: bool, clock_offsets: tuple[str, ...],
+             force: bool) -> None:
+    """Simulate body-worn phone sensors on MOTION_FILE and write them as generic CSV (or a
+    Sensor Logger export, or one file per sensor)."""
     # heavy (numpy, scipy): on use, so that --help stays fast
     from imuloco.io.motionfile import read_motion
     from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.io.sensorwrite import write_sensor_files, write_sensor_logger
+    from imuloco.sensors import simulate as sim
     from imuloco.sensors.placement import get_placement
-    from imuloco.sensors.simulate import simulate as simulate_sensors
 
     places = _csv(placement)
     for p in places:
         get_placement(p)  # an unknown preset is refused before reading anything
-    check_output(output, force, inputs=[motion_file])
-    rec = simulate_sensors(read_motion(motion_file), places, rate=rate, noise=noise, seed=seed)
-    write_generic_csv(rec, output, overwrite=True)
+    offsets = {}
+    for item in clock_offsets:
+        name, _sep, value = item.partition("=")
+        try:
+            offsets[name.strip()] = float(value)
+        except ValueError:
+            raise click.BadParameter(f"{item!r}: expected PLACEMENT=SECONDS",
+                                     param_hint="--clock-offset") from None
+    if offsets and layout != "files":
+        raise click.UsageError("--clock-offset writes one file per sensor: add --layout files")
+    if layout == "generic":
+        check_output(output, force, inputs=[motion_file])
+    motion = read_motion(motion_file)
+    stomps: tuple[float, ...] = ()
+    if stomp:  # after the last device started: its clock runs the most behind
+        late = max([0.0, *offsets.values()])
+        motion = sim.still_start(motion, sim.STOMP_LEAD_S + late)
+        stomps = tuple(late + t for t in sim.STOMP_AT_S)
+    rec = sim.simulate(motion, places, rate=rate, noise=noise, seed=seed, stomps=stomps)
+    if layout == "sensorlogger":
+        write_sensor_logger(rec, output, overwrite=force)
+    elif layout == "files":
+        write_sensor_files(rec, output, offsets, overwrite=force)
+    else:
+        write_generic_csv(rec, output, overwrite=True)
     click.echo(f"wrote {output}: {rec.num_samples} samples, {len(places)} sensor(s) "
                f"({', '.join(places)}), {rec.times[-1] - rec.times[0]:.2f} s, noise {noise}")
 
@@ -938,6 +1001,7 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @calibrate_option
 @platform_option
 @columns_option
+@sensor_option
 @click.option("--piece-seconds", type=_Range(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html/--skeleton).")
@@ -949,8 +1013,9 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                 video_seconds: float | None, html_path: Path | None,
                 report_path: Path | None, summary_path: Path | None, skeleton: Path | None,
                 rig: str | None, no_calibrate: bool, platform: str | None,
-                columns: dict[str, str] | None, piece_seconds: float | None,
-                height: float | None, force: bool, units: str) -> None:
+                columns: dict[str, str] | None, sensors: list[tuple[str, Path]],
+                piece_seconds: float | None, height: float | None, force: bool,
+                units: str) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH or glTF.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
@@ -969,7 +1034,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     if summary_path is None and report_path is not None and report_path.suffix == ".json":
         summary_path = report_path.with_suffix(".md")  # (another suffix is refused below)
     summaries = [] if summary_path is None else list(summary_paths(summary_path).values())
-    inputs = [*recording, *([model_path] if model_path else []), *([skeleton] if skeleton else [])]
+    inputs = [*recording, *(f for _, f in sensors), *([model_path] if model_path else []),
+              *([skeleton] if skeleton else [])]
     check_outputs([output, video, html_path, report_path, *summaries], force, inputs=inputs)
     check_motion_output(output, "-o/--output")
     if report_path is not None:
@@ -978,6 +1044,8 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                       _preset(rig, skeleton))
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
+        if sensors:
+            raise click.UsageError("--piece-seconds reads one log: drop --sensor")
         if video or html_path or skeleton or output.suffix.lower() != ".bvh":
             raise click.UsageError("--piece-seconds writes a BVH on a --rig preset only: "
                                    "drop --video/--html/--skeleton, write a .bvh")
@@ -997,7 +1065,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
                                       progress=True, platform=platform, skeleton=skeleton,
-                                      height=height, columns=columns)
+                                      height=height, columns=columns, sensors=sensors)
     click.echo(f"model: {report.model}", err=True)
     written = write_outputs(outputs, report, motion, progress=True)
     if summary_path:

@@ -56,8 +56,9 @@ from imuloco.ops.rotations import angle
 from imuloco.paths.follow import follow_recording
 from imuloco.phases import foot_contacts, gait_phases
 from imuloco.sensors.calibration import calibrate
+from imuloco.sensors.multi import read_sensors
 from imuloco.sensors.placement import PRESETS
-from imuloco.sensors.reallog import read_log, recording_name
+from imuloco.sensors.reallog import recording_name
 from imuloco.sensors.simulate import simulate
 from imuloco.viz.plots import plot_errors, plot_phases, plot_signals
 
@@ -102,6 +103,31 @@ def shipped_model(method: str, placement: str) -> Path | None:
     return path if path is not None and path.is_file() else None
 
 
+def shipped_combination(method: str, placements: Sequence[str], primary: str) -> Path | None:
+    """The shipped model of ``method`` that reads several of the recording's ``placements``,
+    ``primary`` among them: ``<method>_<a>+<b>[+...].npz`` (its placements in its name), the
+    one reading the most; None when none matches."""
+    found = []
+    for path in MODELS_DIR.glob(f"{method}_*+*.npz"):
+        names = path.stem.removeprefix(f"{method}_").split("+")
+        if primary in names and set(names) <= set(placements):
+            found.append((len(names), path.name, path))
+    return max(found)[2] if found else None
+
+
+def ignored_sensors(placements: Sequence[str], method) -> list[str]:
+    """The recording's sensors (``placements``) the fitted ``method`` does not read; a warning
+    names them (a second sensor is never dropped silently)."""
+    ignored = [p for p in placements if p not in method.placements_]
+    if ignored:
+        log.warning("the model reads %s only: the recording's %s sensor(s) %s are ignored (no "
+                    "shipped model reads %s; train one with imuloco train --placement %s)",
+                    "+".join(method.placements_), len(ignored), ", ".join(ignored),
+                    "+".join([*method.placements_, *ignored]),
+                    ",".join([*method.placements_, *ignored]))
+    return ignored
+
+
 @dataclass(frozen=True)
 class ModelChoice:
     """The fitted method that will reconstruct and where it came from.
@@ -124,7 +150,8 @@ class ModelChoice:
 
 def choose_model(method: str | None = None, model: str | Path | None = None,
                  placement: str = "right_ankle", exclude: Sequence[str] = (),
-                 progress: bool = False, db=None) -> ModelChoice:
+                 progress: bool = False, db=None,
+                 available: Sequence[str] | None = None) -> ModelChoice:
     """The fitted method that will reconstruct, with its source (see the module docstring).
 
     Parameters
@@ -135,17 +162,24 @@ def choose_model(method: str | None = None, model: str | Path | None = None,
     exclude : clip names left out when a method is fitted on the bundled sample (the demo
         leaves its own clip out).
     db : the bundled sample when already loaded.
+    available : every sensor the recording has (``placement`` first; ``None``: only it). A
+        shipped model reading several of them (:func:`shipped_combination`) is preferred to
+        ``placement``'s own; a model file may read any of them.
     """
     require_extras(placement)
     if model is not None:
         fitted = load_model(model)
-        if placement not in fitted.placements_:
+        have = [placement] if available is None else list(available)
+        if placement not in fitted.placements_ or not set(fitted.placements_) <= set(have):
             raise InputError(f"{model}: the model was trained for {fitted.placements_}, not "
-                             f"{placement!r} (--placement {fitted.placements_[0]} reads it)")
+                             f"{'+'.join(have)!r} (--placement {fitted.placements_[0]} reads "
+                             "it, with --sensor for its other sensors)")
         return ModelChoice(fitted, "file", f"model file {model} (method {fitted.name!r})",
                            Path(model))
     name = DEFAULT_METHOD if method is None else method
-    path = shipped_model(name, placement)
+    several = None if not available or len(available) < 2 else shipped_combination(
+        name, available, placement)
+    path = several or shipped_model(name, placement)
     if path is not None:
         try:
             return ModelChoice(load_model(path), "shipped",
@@ -262,7 +296,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
                      fmt: str = "auto", calibrate: bool = True, pin: bool | None = None,
                      progress: bool = False, fitted: Method | ModelChoice | None = None,
                      platform: str | None = None, skeleton: str | Path | None = None,
-                     height: float | None = None, columns: dict[str, str] | None = None
+                     height: float | None = None, columns: dict[str, str] | None = None,
+                     sensors: Sequence[tuple[str, str | Path]] = ()
                      ) -> tuple[Motion, ReconstructionReport]:
     """Import a phone's sensor log and reconstruct the wearer's motion.
 
@@ -284,6 +319,10 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         is scaled to it (:func:`imuloco.measures.gait.to_height`) before gait is measured.
     columns : a CSV's own names of the generic log's columns (``{"time": "timestamp", ...}``,
         :func:`imuloco.io.sensorlog.parse_columns`).
+    sensors : further sensors, ``(placement, file)`` each, put on the log's clock
+        (:func:`imuloco.sensors.multi.read_sensors`). With several sensors the shipped model
+        reading them is chosen (:func:`choose_model`'s ``available``); a sensor no model reads
+        is named in a warning and in the report's ``sensors`` (``used``: false).
 
     Returns
     -------
@@ -299,17 +338,24 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar = tqdm(total=len(steps), desc="reconstruct", unit="step", disable=not progress)
     t0 = time.perf_counter()
     bar.set_postfix_str("reading the log")
-    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform,
-                               columns=columns)
+    rec, log_report = read_sensors(recording_path, sensors, placement=placement, fmt=fmt,
+                                   platform=platform, columns=columns)
+    if placement not in rec.placements:  # a file that names its sensors: its first leads
+        placement = rec.placements[0]
+        require_extras(placement)
+    available = [placement, *(p for p in rec.placements if p != placement)]
     bar.update()
     bar.set_postfix_str("model")
     if fitted is None:
-        choice = choose_model(method, model, placement, progress=progress)
+        choice = choose_model(method, model, placement, progress=progress, available=available)
     elif isinstance(fitted, ModelChoice):
         choice = fitted
     else:
         choice = ModelChoice(fitted, "given", f"given fitted method {fitted.name!r}")
     fitted = choice.method
+    ignored = ignored_sensors(rec.placements, fitted)
+    for source in log_report.sensors:
+        source.used = source.placement not in ignored
     bar.update()
     bar.set_postfix_str(f"{fitted.name} on {rec.times[-1]:.0f} s")
     motion, info = reconstruct_recording(rec, fitted, calibrate, pin)

@@ -61,6 +61,7 @@ class FootZupt:
     """:class:`imuloco.paths.base.PathEstimator` of a foot sensor (module docstring)."""
 
     name = "foot-zupt"
+    reads_all_sensors = True  # both feet's tracks, when the recording has both (docstring)
     TRAJECTORIES = ("rts", "anchored")
 
     def __init__(self, trajectory: str = "anchored") -> None:
