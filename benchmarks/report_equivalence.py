@@ -7,13 +7,19 @@
 on the right ankle, the right foot and the lower back and ``reconstruct --report`` of each;
 ``reconstruct --piece-seconds 10 --report`` of a 45 s recording (the right-ankle and the
 lower-back walk repeated end to end); ``batch`` of 3 recordings; and
-``bench --method mean,ridge --split heldout-styles --limit 4``. ``compare`` captures again into
-``--work`` (a temporary folder by default) and compares every file of GOLDEN with its namesake:
-JSON key by key, CSV and Parquet cell by cell (numbers within 1e-9), BVH and other text line by
-line (numbers within 1e-9), everything else (video, images) by existence. Timings and dates
-(``seconds``, ``trained_at``, ...: see ``IGNORED``) are not compared. Keys or columns present
-only in the new output are listed as additions (an allowed extension) without failing, as
-are keys in another order (JSON objects are unordered); a missing or changed one fails. Prints one line per difference and exits 1 on any.
+``bench --method mean,ridge --split heldout-styles --limit 4``; each command's printed output
+goes to ``stdout/NN-COMMAND.out``. ``compare`` captures again into ``--work`` (a temporary
+folder by default) and compares every file of GOLDEN with its namesake: JSON key by key, CSV and
+Parquet cell by cell (numbers within 1e-9), BVH and other text line by line (numbers within
+1e-9), printed output line by line (numbers followed by a unit of time, as ``166 s``, are
+timings), everything else (video, images) by existence. Timings and dates
+(``seconds``, ``trained_at``, ...: see ``IGNORED``) are not compared. Keys, columns or files
+present only in the new output are listed as additions (an allowed extension) without failing,
+as are keys in another order (JSON objects are unordered); a missing or changed one fails.
+Prints one line per difference and exits 1 on any.
+
+    PYTHONPATH=OLD/src python benchmarks/report_equivalence.py capture GOLDEN   # an old tree
+    python benchmarks/report_equivalence.py compare GOLDEN --work NEW            # this tree
 """
 
 from __future__ import annotations
@@ -43,15 +49,24 @@ IGNORED = {"seconds", "trained_at", "elapsed_s", "wall_s", "fit_s", "reconstruct
            # a model file's size: its header holds the training's date
            "model_bytes"}
 TOL = 1e-9
+# what follows a printed number that is a timing: a unit of time or of a rate
+TIMING = re.compile(r"\s*(?:s|ms|min|seconds?|[a-z ]*/(?:s|min)|x real ?time)\b")
 NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
+# where run() writes each command's printed output, and how many it has run
+STDOUT: list = [None, 0]
+
+
 def run(*args: str | Path) -> None:
-    """Run one ``imuloco`` command; stop with its output if it fails."""
+    """Run one ``imuloco`` command; stop with its output if it fails. Its standard output is
+    kept in ``stdout/NN-COMMAND.out`` (progress bars, on standard error, are not)."""
     cmd = ["imuloco", *map(str, args)]
     done = subprocess.run(cmd, check=False, capture_output=True, text=True)
     if done.returncode:
         sys.exit(f"{' '.join(cmd)} failed:\n{done.stdout}{done.stderr}")
+    STDOUT[1] += 1
+    (STDOUT[0] / f"{STDOUT[1]:02d}-{args[0]}.out").write_text(done.stdout)
 
 
 def repeat_csv(src: Path, dst: Path, seconds: float) -> None:
@@ -74,6 +89,8 @@ def capture(out: Path) -> None:
     rec, res = out / "recordings", out / "reconstruct"
     rec.mkdir(parents=True)
     res.mkdir()
+    STDOUT[:] = [out / "stdout", 0]
+    STDOUT[0].mkdir()
     run("demo", "--out", out / "demo")
     walk = SAMPLE / f"{WALKS[0]}.bvh"
     for p in PLACEMENTS:
@@ -139,6 +156,15 @@ def same_line(a: str, b: str) -> bool:
             and all(same_number(float(x), float(y)) for x, y in zip(na, nb)))
 
 
+def timings_only(a: str, b: str) -> bool:
+    """Two printed lines that differ only in numbers followed by a unit of time."""
+    ma, mb = list(NUMBER.finditer(a)), list(NUMBER.finditer(b))
+    if NUMBER.sub("#", a) != NUMBER.sub("#", b) or len(ma) != len(mb):
+        return False
+    return all(same_number(float(x.group()), float(y.group())) or TIMING.match(a, x.end())
+               for x, y in zip(ma, mb))
+
+
 def compare_csv(old: Path, new: Path, where: str, diffs: list[str], added: list[str]) -> None:
     with old.open() as f:
         a = list(csv.DictReader(f))
@@ -171,6 +197,19 @@ def compare_file(old: Path, new: Path, where: str, diffs: list[str], added: list
     elif suffix == ".parquet":
         compare_values(pq.read_table(old).to_pylist(), pq.read_table(new).to_pylist(), where,
                        diffs, added)
+    elif suffix == ".out":
+        a, b = old.read_text().splitlines(), new.read_text().splitlines()
+        if FOLDERS[1]:
+            b = [line.replace(*reversed(FOLDERS)) for line in b]
+        if len(a) != len(b):
+            diffs.append(f"{where}: {len(a)} lines, now {len(b)}")
+        for i, (x, y) in enumerate(zip(a, b)):
+            if x == y or same_line(x, y):
+                continue
+            if timings_only(x, y):
+                added.append(f"{where}:{i + 1}: timing {x.strip()!r}, now {y.strip()!r}")
+            else:
+                diffs.append(f"{where}:{i + 1}: {x.strip()!r}, now {y.strip()!r}")
     elif suffix in {".bvh", ".md", ".txt"}:
         a, b = old.read_text().splitlines(), new.read_text().splitlines()
         if len(a) != len(b):
@@ -192,6 +231,8 @@ def compare(golden: Path, work: Path) -> int:
     for old in files:
         rel = old.relative_to(golden)
         compare_file(old, work / rel, str(rel), diffs, added)
+    added += [f"{p.relative_to(work)}: new file" for p in sorted(work.rglob("*"))
+              if p.is_file() and not (golden / p.relative_to(work)).exists()]
     for line in added:
         print(f"added: {line}")
     for line in diffs:

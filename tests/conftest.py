@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import shutil
 import subprocess
+import threading
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +17,7 @@ import pytest
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
 from imuloco.data import shared_data_dir
+from imuloco.errors import FormatError
 from imuloco.ops.rotations import about_y
 
 
@@ -82,6 +88,90 @@ def read_mp4_frames(path: Path, width: int, height: int) -> np.ndarray:
 def read_mp4():
     """:func:`read_mp4_frames`, for tests that check written videos."""
     return read_mp4_frames
+
+
+def _reads_cleanly(reader: Callable, path: Path):
+    """``reader(path)``, which must either refuse the file with a FormatError naming it (then
+    None) or return streams of finite times and values (then them)."""
+    try:
+        streams = reader(path)
+    except FormatError as e:
+        assert e.path == str(path)
+        return None
+    assert all(np.isfinite(s.times).all() and np.isfinite(s.values).all() for s in streams)
+    return streams
+
+
+@pytest.fixture
+def reads_cleanly():
+    """:func:`_reads_cleanly`, the readers' property tests' verdict on a mutated input (the
+    mutations: :mod:`imuloco.lab.mutations`)."""
+    return _reads_cleanly
+
+
+def _wait_for(check, timeout: float = 30.0):
+    """``check()``'s first truthy value, polled every 50 ms; AssertionError after ``timeout``
+    seconds."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = check()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError("timed out")
+
+
+@pytest.fixture
+def wait_for():
+    """:func:`_wait_for`, for the browser tests that wait for a page's state."""
+    return _wait_for
+
+
+@contextlib.contextmanager
+def _serve_threaded(method, calibrate_s: float, ssl_context=None):
+    """A LiveServer of ``method`` listening on a free loopback port (over TLS with
+    ``ssl_context``), its event loop in a thread: yields (server, loop)."""
+    pytest.importorskip("websockets")
+    from imuloco.app.live.server import LiveServer  # the [live] extra's
+
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, daemon=True)
+    thread.start()
+    server = LiveServer(method, calibrate_s=calibrate_s)
+    asyncio.run_coroutine_threadsafe(server.start("127.0.0.1", 0, ssl_context), loop).result(20)
+    try:
+        yield server, loop
+    finally:
+        asyncio.run_coroutine_threadsafe(server.close(), loop).result(20)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(20)
+        loop.close()
+
+
+@pytest.fixture
+def serve_threaded():
+    """:func:`_serve_threaded`, for the tests of the live pages in a browser."""
+    return _serve_threaded
+
+
+# a page script's function: the live page drawn once, then its canvas's pixels of one colour
+COUNT_PIXELS_JS = """
+    function countPixels(r, g, b) {
+      imuloco.draw();
+      const c = document.getElementById('view');
+      const px = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+      let n = 0;
+      for (let i = 0; i < px.length; i += 4)
+        if (px[i] === r && px[i + 1] === g && px[i + 2] === b) n++;
+      return n;
+    }
+"""
+
+
+@pytest.fixture
+def count_pixels_js() -> str:
+    """:data:`COUNT_PIXELS_JS`, to prepend to a script that calls ``countPixels(r, g, b)``."""
+    return COUNT_PIXELS_JS
 
 
 @pytest.fixture(scope="module")

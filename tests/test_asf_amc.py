@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from mutations import byte_mutations
 
 from imuloco.core.bodymap import PARTS, resolve_body_map
 from imuloco.errors import FormatError
 from imuloco.io.asf_amc import find_asf, read_asf, read_asf_amc
 from imuloco.io.motionfile import read_motion
+from imuloco.lab.mutations import mutations
 
 U = 0.0254 / 0.45  # metres per CMU length unit
 
@@ -324,8 +324,8 @@ def read_or_format_error(a: Path, b: Path) -> None:
 
 @settings(derandomize=True, max_examples=200, deadline=None,
           suppress_health_check=[HealthCheck.too_slow])
-@given(asf=st.one_of(byte_mutations(LEG_ASF), st.just(LEG_ASF.encode())),
-       amc=st.one_of(byte_mutations(LEG_AMC), st.just(LEG_AMC.encode())))
+@given(asf=st.one_of(mutations(LEG_ASF), st.just(LEG_ASF.encode())),
+       amc=st.one_of(mutations(LEG_AMC), st.just(LEG_AMC.encode())))
 def test_byte_mutations_fail_only_with_format_error(tmp_path_factory, asf: bytes, amc: bytes):
     d = tmp_path_factory.getbasetemp()
     a, b = d / "bytes.asf", d / "bytes.amc"

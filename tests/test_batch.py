@@ -442,10 +442,10 @@ def test_a_worker_lost_mid_task_is_retried_elsewhere(logs, fitted, tmp_path, mon
 
     from distributed.core import Status
 
-    from imuloco.app import pipeline
+    from imuloco.app import batch
 
     paths, _ = logs
-    real, calls = pipeline.reconstruct_file, []
+    real, calls = batch.reconstruct_file, []
 
     def lose_worker(*args, **kwargs):
         calls.append(distributed.get_worker().address)
@@ -457,7 +457,7 @@ def test_a_worker_lost_mid_task_is_retried_elsewhere(logs, fitted, tmp_path, mon
                 time.sleep(0.05)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(pipeline, "reconstruct_file", lose_worker)
+    monkeypatch.setattr(batch, "reconstruct_file", lose_worker)  # where batch looks it up
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                                   **LOCAL_CLUSTER) as cluster, \
             distributed.Client(cluster) as c:
@@ -540,18 +540,18 @@ def test_a_stuck_recording_becomes_an_error_row(logs, fitted, client, tmp_path, 
     done."""
     import threading
 
-    from imuloco.app import pipeline
+    from imuloco.app import batch
 
     paths, _ = logs
     release = threading.Event()
-    real = pipeline.reconstruct_file
+    real = batch.reconstruct_file
 
     def stuck_on_the_first(recording, **kw):
         if Path(recording) == paths[0].absolute() and release.wait(60):
             raise RuntimeError("released")  # as a read from a FIFO that never ends
         return real(recording, **kw)
 
-    monkeypatch.setattr(pipeline, "reconstruct_file", stuck_on_the_first)
+    monkeypatch.setattr(batch, "reconstruct_file", stuck_on_the_first)
     summary = run_batch(paths[:2], tmp_path, fitted=fitted, scheduler=client, timeout_s=2.0)
     release.set()
     rows = summary["recordings"]

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
-from mutations import byte_mutations
 
 from imuloco.core.motion import Motion
 from imuloco.errors import FormatError
 from imuloco.io.bvh import UNITS, read_bvh, write_bvh
+from imuloco.lab.mutations import mutations
 from imuloco.ops.kinematics import point_on_segment
 from imuloco.ops.rotations import (
     from_6d,
@@ -667,7 +667,7 @@ def read_or_format_error(path: Path) -> Motion | None:
 
 
 @settings(SETTINGS, max_examples=300)
-@given(data=byte_mutations(TWO_JOINT))
+@given(data=mutations(TWO_JOINT))
 def test_byte_mutations_fail_only_with_format_error(tmp_path_factory, data: bytes):
     path = tmp_path_factory.getbasetemp() / "bytes.bvh"
     path.write_bytes(data)

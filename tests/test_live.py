@@ -386,7 +386,6 @@ def test_session_buffers_stay_bounded_whatever_the_timestamps(fitted):
 # ---- access and limits, with the real websockets library on 127.0.0.1 -----------------------
 def _serve(fitted, **kwargs):
     """An async context: a LiveServer on a free loopback port and its ws:// base address."""
-    import contextlib
 
     from imuloco.app.live.server import LiveServer
 
@@ -650,46 +649,11 @@ def test_a_dropped_viewer_is_one_log_line(fitted, phone, caplog):
 
 
 # ---- the pages in a real headless browser (skipped without selenium and Debian chromium) -----
-@contextlib.contextmanager
-def _serve_threaded(method):
-    """A LiveServer of ``method`` listening on a free loopback port, its event loop in a
-    thread: yields (server, loop)."""
-    pytest.importorskip("websockets")
-    import threading
-
-    from imuloco.app.live.server import LiveServer
-
-    loop = asyncio.new_event_loop()
-    thread = threading.Thread(target=loop.run_forever, daemon=True)
-    thread.start()
-    server = LiveServer(method, calibrate_s=CALIB_S)
-    asyncio.run_coroutine_threadsafe(server.start("127.0.0.1", 0), loop).result(20)
-    try:
-        yield server, loop
-    finally:
-        asyncio.run_coroutine_threadsafe(server.close(), loop).result(20)
-        loop.call_soon_threadsafe(loop.stop)
-        thread.join(20)
-        loop.close()
-
-
 @pytest.fixture
-def threaded_server(fitted):
+def threaded_server(fitted, serve_threaded):
     """A LiveServer listening on a free loopback port, its event loop in a thread."""
-    with _serve_threaded(fitted) as served:
+    with serve_threaded(fitted, CALIB_S) as served:
         yield served
-
-
-def _wait_for(check, timeout: float = 30.0):
-    import time
-
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        value = check()
-        if value:
-            return value
-        time.sleep(0.05)
-    raise AssertionError("timed out")
 
 
 def test_live_page_is_served_with_the_viewers_stick_figure_script(threaded_server):
@@ -711,7 +675,7 @@ def test_live_page_is_served_with_the_viewers_stick_figure_script(threaded_serve
     assert "StickFigure" not in get("/phone")
 
 
-def test_phone_page_sends_device_motion_in_si_units(threaded_server, browser):
+def test_phone_page_sends_device_motion_in_si_units(threaded_server, browser, wait_for):
     from selenium.webdriver.common.by import By
 
     server, _ = threaded_server
@@ -720,7 +684,7 @@ def test_phone_page_sends_device_motion_in_si_units(threaded_server, browser):
     server.process = lambda rows: (received.append(rows.copy()), process(rows))[1]
     browser.get(f"http://127.0.0.1:{server.port}/phone")
     browser.find_element(By.ID, "start").click()
-    _wait_for(lambda: server.phone is not None)
+    wait_for(lambda: server.phone is not None)
     # a phone lying on its back, turning: m/s^2 with gravity, rotationRate in deg/s
     browser.execute_script("""
         for (let i = 0; i < 20; i++) {
@@ -728,7 +692,7 @@ def test_phone_page_sends_device_motion_in_si_units(threaded_server, browser):
             accelerationIncludingGravity: {x: 0.5, y: -1.0, z: 9.8},
             rotationRate: {alpha: 90, beta: 180, gamma: -45}, interval: 10}));
         }""")
-    _wait_for(lambda: sum(len(r) for r in received) >= 20)
+    wait_for(lambda: sum(len(r) for r in received) >= 20)
     rows = np.concatenate(received)
     assert np.all(np.diff(rows[:, 0]) >= 0) and rows[0, 0] > 0  # seconds, not ms
     assert rows[-1, 0] - rows[0, 0] < 5.0
@@ -740,7 +704,8 @@ def test_phone_page_sends_device_motion_in_si_units(threaded_server, browser):
     assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
 
 
-def test_live_page_draws_the_replayed_walker(threaded_server, browser, sample_db, tmp_path):
+def test_live_page_draws_the_replayed_walker(threaded_server, browser, sample_db, tmp_path,
+                                             wait_for):
     from imuloco.io.sensorlog import write_generic_csv
 
     server, loop = threaded_server
@@ -748,11 +713,11 @@ def test_live_page_draws_the_replayed_walker(threaded_server, browser, sample_db
     path = write_generic_csv(simulate(clip, ["right_ankle"], 100.0, "phone", 13),
                              tmp_path / "walk.csv")
     browser.get(f"http://127.0.0.1:{server.port}/live")
-    _wait_for(lambda: browser.execute_script("return imuloco.state().skel !== null"))
+    wait_for(lambda: browser.execute_script("return imuloco.state().skel !== null"))
     replay = asyncio.run_coroutine_threadsafe(server.replay(path, speed=4.0), loop)
-    _wait_for(lambda: browser.execute_script("return imuloco.state().pose !== null"))
+    wait_for(lambda: browser.execute_script("return imuloco.state().pose !== null"))
     first = browser.execute_script("return imuloco.state().pose")
-    _wait_for(lambda: browser.execute_script("return imuloco.state().pose")[0] != first[0])
+    wait_for(lambda: browser.execute_script("return imuloco.state().pose")[0] != first[0])
     replay.result(60)
     state = browser.execute_script("return imuloco.state()")
     assert len(state["pose"]) == 3 * fitted_joints(server)
@@ -838,7 +803,8 @@ def test_a_shoe_sensor_is_calibrated_from_its_strides_then_streamed(sample_db):
     assert abs(up[0]) < 1.5 and up[1] > 3.0 and up[2] > 5.0, up
 
 
-def test_live_page_shows_the_predicted_error_and_flags(fitted, browser, sample_db, tmp_path):
+def test_live_page_shows_the_predicted_error_and_flags(fitted, browser, sample_db, tmp_path,
+                                                      wait_for, serve_threaded, count_pixels_js):
     """Pose messages carry the stream's confidence through the server to the page, which
     writes the predicted error and tints a flagged walker."""
     from imuloco.io.sensorlog import write_generic_csv
@@ -847,28 +813,23 @@ def test_live_page_shows_the_predicted_error_and_flags(fitted, browser, sample_d
     clip = next(c for c in sample_db.clips if c.name == CLIP)
     path = write_generic_csv(simulate(clip, ["right_ankle"], 100.0, "phone", 13),
                              tmp_path / "walk.csv")
-    with _serve_threaded(_Confident(fitted)) as (server, loop):
+    with serve_threaded(_Confident(fitted), CALIB_S) as (server, loop):
         browser.get(f"http://127.0.0.1:{server.port}/live")
-        _wait_for(lambda: browser.execute_script("return imuloco.state().skel !== null"))
+        wait_for(lambda: browser.execute_script("return imuloco.state().skel !== null"))
         browser.get_log("browser")  # drop what earlier tests' pages logged
         replay = asyncio.run_coroutine_threadsafe(server.replay(path, speed=1.0), loop)
         seen = {True: None, False: None}
 
         def both() -> bool:
-            got = browser.execute_script("""
-                imuloco.draw();
-                const c = document.getElementById('view');
-                const px = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
-                let amber = 0;
-                for (let i = 0; i < px.length; i += 4)
-                  if (px[i] === 255 && px[i + 1] === 176 && px[i + 2] === 0) amber++;
+            got = browser.execute_script(count_pixels_js + """
+                const amber = countPixels(255, 176, 0);
                 const line = document.getElementById('confidence');
                 return [imuloco.state().confidence, line.textContent, line.className, amber];""")
             if got[0]["errorM"] is not None and seen[got[0]["unreliable"]] is None:
                 seen[got[0]["unreliable"]] = got
             return all(seen.values())
 
-        _wait_for(both, 60)
+        wait_for(both, 60)
         replay.result(60)
         assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     (c, text, cls, amber), (c2, text2, cls2, amber2) = seen[True], seen[False]

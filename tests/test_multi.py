@@ -137,11 +137,13 @@ def test_sensors_recorded_apart_are_refused_by_name(tmp_path, pair_rec):
 def test_the_model_reading_every_sensor_is_chosen(monkeypatch, tmp_path, pair_model,
                                                   ridge_without_demo_clip):
     import imuloco.data
+    from imuloco.app import pipeline
     from imuloco.app.pipeline import choose_model, shipped_combination
 
     shutil.copy(pair_model, tmp_path / pair_model.name)
     ridge_without_demo_clip.save(tmp_path / "ridge_right_ankle.npz")
     monkeypatch.setattr(imuloco.data, "MODELS_DIR", tmp_path)
+    monkeypatch.setattr(pipeline, "MODELS_DIR", tmp_path)  # where the pipeline looks it up
     assert shipped_combination("ridge", PAIR, "right_ankle") == tmp_path / pair_model.name
     assert shipped_combination("ridge", ["right_ankle", "left_ankle"], "right_ankle") is None
     both = choose_model("ridge", placement="right_ankle", available=PAIR)

@@ -9,8 +9,6 @@ import asyncio
 import re
 import shlex
 import ssl
-import threading
-import time
 import urllib.request
 from pathlib import Path
 
@@ -138,34 +136,20 @@ def test_self_signed_certificate_names_its_hosts(tmp_path):
     ssl_context(cert, key)  # loads as a server's TLS context
 
 
-def _wait_for(check, timeout: float = 30.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        value = check()
-        if value:
-            return value
-        time.sleep(0.05)
-    raise AssertionError("timed out")
-
-
 def test_live_page_over_https_shows_calibration_then_the_walker(browser, tmp_path, sample_db,
-                                                                ridge_without_demo_clip):
+                                                                ridge_without_demo_clip,
+                                                                wait_for, serve_threaded,
+                                                                count_pixels_js):
     """The README's live command, on loopback: the page over the session's self-signed
     HTTPS is a secure context (phones give it their motion sensors), draws the calibration's
     progress while the phone stands still, then the replayed walker; the replay's end is
     logged for the terminal."""
     pytest.importorskip("websockets")
     from imuloco.app.live import lan
-    from imuloco.app.live.server import LiveServer, ssl_context
+    from imuloco.app.live.server import ssl_context
 
     cert, key = lan.self_signed(["localhost", "127.0.0.1"], tmp_path)
-    loop = asyncio.new_event_loop()
-    thread = threading.Thread(target=loop.run_forever, daemon=True)
-    thread.start()
-    server = LiveServer(ridge_without_demo_clip, calibrate_s=4.0)
-    asyncio.run_coroutine_threadsafe(
-        server.start("127.0.0.1", 0, ssl_context(cert, key)), loop).result(20)
-    try:
+    with serve_threaded(ridge_without_demo_clip, 4.0, ssl_context(cert, key)) as (server, loop):
         urls = server.urls("localhost")
         assert urls["live"].startswith("https://localhost:")
         # the certificate is the one served (Python's client trusts it when told to)
@@ -173,7 +157,7 @@ def test_live_page_over_https_shows_calibration_then_the_walker(browser, tmp_pat
         with urllib.request.urlopen(urls["phone"], context=ctx, timeout=10) as r:
             assert "devicemotion" in r.read().decode()
         browser.get(urls["live"])
-        _wait_for(lambda: browser.execute_script("return imuloco.state().skel !== null"))
+        wait_for(lambda: browser.execute_script("return imuloco.state().skel !== null"))
         assert browser.execute_script("return window.isSecureContext") is True
         # a phone standing still for 2 s: the calibration screen, half full
         rows = np.zeros((200, 7))
@@ -181,18 +165,11 @@ def test_live_page_over_https_shows_calibration_then_the_walker(browser, tmp_pat
         rows[:, 2] = 9.81
         loop.call_soon_threadsafe(server.start_session)
         loop.call_soon_threadsafe(server.feed, rows)
-        state = _wait_for(lambda: browser.execute_script(
+        state = wait_for(lambda: browser.execute_script(
             "const s = imuloco.state(); return s.calibrating && s.calibrating.seconds > 1.9 "
             "? s.calibrating : null"))
         assert state["of"] == 4.0
-        green = browser.execute_script("""
-            imuloco.draw();
-            const c = document.getElementById('view');
-            const px = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
-            let n = 0;
-            for (let i = 0; i < px.length; i += 4)
-              if (px[i] === 0x44 && px[i + 1] === 0xaa && px[i + 2] === 0x77) n++;
-            return n;""")
+        green = browser.execute_script(count_pixels_js + "return countPixels(0x44, 0xaa, 0x77);")
         assert green > 100  # the progress bar is drawn
         clip = next(c for c in sample_db.clips if c.name == DEMO_CLIP)
         path = write_generic_csv(simulate(clip, ["right_ankle"], 100.0, "phone", DEMO_SEED),
@@ -202,12 +179,7 @@ def test_live_page_over_https_shows_calibration_then_the_walker(browser, tmp_pat
             mp.setattr("imuloco.app.live.server.log.info",
                        lambda msg, *a: logged.append(msg % a))
             asyncio.run_coroutine_threadsafe(server.replay(path, speed=4.0), loop).result(90)
-        _wait_for(lambda: browser.execute_script("return imuloco.state().pose !== null"))
+        wait_for(lambda: browser.execute_script("return imuloco.state().pose !== null"))
         assert browser.execute_script("return imuloco.state().calibrating") is None
         assert any(m.startswith("replay of recording.csv finished") for m in logged)
         assert not [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
-    finally:
-        asyncio.run_coroutine_threadsafe(server.close(), loop).result(20)
-        loop.call_soon_threadsafe(loop.stop)
-        thread.join(20)
-        loop.close()

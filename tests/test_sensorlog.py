@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from mutations import reads_cleanly
 
 from imuloco.core.recording import Recording
 from imuloco.errors import FormatError
@@ -495,7 +494,7 @@ def test_platform_without_metadata_is_guessed_with_a_warning(walk_rec, tmp_path,
 @settings(max_examples=80, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.binary(max_size=300) | st.text(alphabet="0123456789.,;-e\n\t\"#na ", max_size=300))
-def test_any_bytes_as_a_table_fail_cleanly_or_read_finite(tmp_path, content):
+def test_any_bytes_as_a_table_fail_cleanly_or_read_finite(tmp_path, reads_cleanly, content):
     from imuloco.io.sensorlog import read_generic_csv, read_phyphox
 
     path = tmp_path / "any.csv"

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
-from mutations import byte_mutations, reads_cleanly
 
 from imuloco.errors import FormatError
 from imuloco.io.logformats import detect_format
 from imuloco.io.xsens import read_xsens, unwrap_counter
+from imuloco.lab.mutations import mutations
 from imuloco.sensors.reallog import read_log
 
 N = 300  # packets at 100 Hz: 3 s
@@ -182,10 +182,10 @@ def test_empty_endless_or_binary_files_are_refused_quickly(tmp_path, text):
 
 @settings(max_examples=60, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(byte_mutations("// Update Rate: 100.0Hz\nPacketCounter\tSampleTimeFine\tAcc_X\tAcc_Y\t"
+@given(mutations("// Update Rate: 100.0Hz\nPacketCounter\tSampleTimeFine\tAcc_X\tAcc_Y\t"
                       "Acc_Z\tGyr_X\tGyr_Y\tGyr_Z\n" + "".join(
                           f"{65530 + k}\t\t0.1\t9.8\t0.2\t{k % 5}\t0.1\t-0.3\n" for k in range(6))))
-def test_mutated_exports_fail_cleanly_or_read_finite(tmp_path, data):
+def test_mutated_exports_fail_cleanly_or_read_finite(tmp_path, reads_cleanly, data):
     path = tmp_path / "mt.txt"
     path.write_bytes(data)
     reads_cleanly(read_xsens, path)

@@ -55,13 +55,20 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from tqdm.auto import tqdm
+
 from imuloco.app.outputs import Outputs, write_outputs
+from imuloco.app.pipeline import choose_method, load_rig, reconstruct_file, require_extras
 from imuloco.app.walkers import Walkers, read_walkers
 from imuloco.core.rigs import DEFAULT_RIG, check_rig_name
 from imuloco.errors import ImulocoError, InputError, MissingExtraError, OutputExistsError
 from imuloco.io.atomic import atomic_write, check_output, clean_stale, sha256_file
 from imuloco.io.folderlock import FolderLock
+from imuloco.io.sensorlog import export_members
 from imuloco.measures.strides import STRIDE_FIELDS
+from imuloco.methods import load_model
+from imuloco.methods.modelfile import save_model
+from imuloco.sensors.reallog import realworld_accelerometer, recording_name
 
 log = logging.getLogger(__name__)
 
@@ -110,9 +117,6 @@ def find_recordings(paths: Sequence[str | Path] = (), patterns: Sequence[str] = 
     its folder, which reads the export: one walker named after it. A RealWorld gyroscope file
     whose ``acc_`` file is among them is dropped too: that file reads the pair, one walker.
     The batch's own outputs in ``out_dir`` (:func:`own_output`) are never recordings."""
-    from imuloco.io.sensorlog import export_members
-    from imuloco.sensors.reallog import realworld_accelerometer
-
     found: list[Path] = [Path(p) for p in paths]
     for p in found:
         if p.exists() and not (p.is_file() or p.is_dir()):
@@ -189,8 +193,6 @@ def output_names(paths: Sequence[Path]) -> list[str]:
     (:data:`RESERVED_NAMES`). Names differ also where the file system ignores case
     (``a/Alice.csv``, ``b/alice.csv``: ``a_Alice``, ``b_alice``), so no recording's outputs
     replace another's."""
-    from imuloco.sensors.reallog import recording_name
-
     full = [Path(os.path.normpath(p.absolute())) for p in paths]  # "." and bare names named
     own = [recording_name(p) for p in full]
     folded = [n.casefold() for n in own]
@@ -213,8 +215,6 @@ _MODELS_LOCK = threading.Lock()
 
 def worker_model(sha256: str, data: bytes):
     """The fitted method of the model file ``data`` (bytes), loaded once per process."""
-    from imuloco.methods import load_model
-
     with _MODELS_LOCK:
         if sha256 not in _MODELS:
             with tempfile.TemporaryDirectory(prefix="imuloco-model-") as tmp:
@@ -258,8 +258,6 @@ def _reconstruct_one(recording: str, out_dir: str, name: str, model_sha256: str,
                      rig: str | None, columns: dict[str, str] | None
                      ) -> dict[str, Any]:
     """:func:`reconstruct_one` without its time limit."""
-    from imuloco.app.pipeline import reconstruct_file
-
     t0 = time.perf_counter()
     try:
         fitted = worker_model(model_sha256, model)
@@ -366,7 +364,7 @@ def _complete_report(out: Path, name: str, recording: str, sha256: str, unit: st
 
 def _schema(fields: Sequence[str], extra: Sequence = ()):
     """The columns ``fields`` typed, then the pyarrow fields ``extra``."""
-    import pyarrow as pa
+    import pyarrow as pa  # the [dist] extra's
 
     return pa.schema([*((f, pa.string() if f in _STRINGS else
                          pa.int64() if f in _INTEGERS else pa.float64()) for f in fields),
@@ -376,7 +374,7 @@ def _schema(fields: Sequence[str], extra: Sequence = ()):
 def stride_table(strides: list[dict]):
     """Stride rows as a pyarrow Table: columnar, so a study's millions of strides fit in memory
     (about 100 bytes a stride, against about 1 kB as dicts)."""
-    import pyarrow as pa
+    import pyarrow as pa  # the [dist] extra's
 
     return pa.Table.from_pylist(strides, schema=_schema(("walker", *STRIDE_FIELDS)))
 
@@ -386,7 +384,7 @@ def write_tables(out: Path, rows: list[dict], strides: list, inputs: Sequence[Pa
     """Write ``summary.csv``, ``walkers.parquet`` and ``strides.parquet`` (from the walkers'
     :func:`stride_table`, in order) atomically; ``extra``: pyarrow fields of the study's own
     columns (:class:`imuloco.app.walkers.Walkers`) that follow batch's in the rows."""
-    import pyarrow as pa
+    import pyarrow as pa  # the [dist] extra's
     import pyarrow.parquet as pq
 
     def whole(v: Any) -> Any:
@@ -415,7 +413,7 @@ def dask_client(scheduler=None, jobs: int | None = None):
     a LocalCluster of ``jobs`` single-threaded worker processes (``None``/``-1``: one per CPU)
     closed afterwards."""
     try:
-        from distributed import Client, LocalCluster
+        from distributed import Client, LocalCluster  # the [dist] extra's
     except ImportError:
         raise MissingExtraError("batch", "distributed", "dist") from None
     if isinstance(scheduler, Client):
@@ -513,11 +511,6 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     (complete from an earlier run), ``ok`` (done + skipped), ``failed``, ``frames``
     (reconstructed), ``strides`` and ``recordings`` (rows in input order).
     """
-    from tqdm.auto import tqdm
-
-    from imuloco.app.pipeline import choose_method, require_extras
-    from imuloco.methods.modelfile import save_model
-
     require_extras(placement)  # on this machine, before starting any worker
     paths = [Path(p) for p in recordings]
     if not paths:
@@ -529,8 +522,6 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     recs = [os.path.normpath(p.absolute()) for p in paths]
     out = Path(out_dir).absolute()
     if skeleton is not None:
-        from imuloco.app.pipeline import load_rig
-
         load_rig(skeleton)  # refuse a rig that cannot be mapped before any work
         rig = None  # the BVHs are on the user's rig
     elif rig is not None:
@@ -567,7 +558,7 @@ def run_batch(recordings: Sequence[str | Path], out_dir: str | Path, jobs: int |
     for n, _ in todo:  # a walker redone for another height is incomplete until it is done
         (out / f"{n}.json").unlink(missing_ok=True)
     with dask_client(scheduler, jobs) as client:
-        from distributed import as_completed
+        from distributed import as_completed  # the [dist] extra's
 
         t0 = time.perf_counter()
         workers = len(client.scheduler_info(n_workers=-1)["workers"])

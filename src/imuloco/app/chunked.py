@@ -18,22 +18,46 @@ and summarised over the whole recording (a few bytes per frame).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from imuloco.app.confidence import Confidence
 from imuloco.app.export import rest_of
+from imuloco.app.pipeline import (
+    ModelChoice,
+    calibrated,
+    choose_model,
+    feet_pinned_by,
+    ignored_sensors,
+    require_extras,
+)
 from imuloco.app.report import MotionInfo, Pieces, ReconstructionReport, build_report
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
 from imuloco.core.rigs import DEFAULT_RIG, MODEL, apply_rig
-from imuloco.measures.gait import Gait, Plausibility
-from imuloco.measures.sensorgait import GaitReport
+from imuloco.io.bvh import write_bvh_pieces
+from imuloco.measures.gait import (
+    Gait,
+    Plausibility,
+    gait_parameters,
+    height_scale,
+    plausibility,
+    to_height,
+)
+from imuloco.measures.sensorgait import GaitReport, estimator_of, gait_report
 from imuloco.methods.base import Reconstruction
 from imuloco.methods.fallback import FallbackReport
+from imuloco.methods.postprocess import pin_detected_contacts
+from imuloco.methods.training import frame_times, model_frames
+from imuloco.ops.rotations import about_y, qmul, qrot
+from imuloco.paths.follow import PieceFollower, estimated_path
+from imuloco.phases import gait_phases
+from imuloco.sensors.reallog import read_log
 
 PIECE_SECONDS = 600.0  # 10 min: 18,000 frames at 30 fps, ~100 MB of analysis
 WARMUP_SECONDS = 20.0  # longer than any method's window (learned: 120 frames = 4 s)
@@ -42,8 +66,6 @@ LONG_SECONDS = 1800.0  # recordings longer than this are reconstructed in pieces
 
 def _yaw(q: np.ndarray) -> np.ndarray:
     """Heading angle (radians about +Y) of rotations q (..., 4): where they turn +Z."""
-    from imuloco.ops.rotations import qrot
-
     f = qrot(q, np.broadcast_to([0.0, 0.0, 1.0], q.shape[:-1] + (3,)))
     return np.arctan2(f[..., 0], f[..., 2])
 
@@ -53,8 +75,6 @@ def continue_from(piece: Motion, at: int, root_rotation: np.ndarray, root: np.nd
     """``piece`` turned about the vertical and moved horizontally so that its frame ``at`` has
     the root heading of ``root_rotation`` (4,) and the horizontal root position of ``root``
     (3,), metres."""
-    from imuloco.ops.rotations import about_y, qmul, qrot
-
     turn = about_y(_yaw(root_rotation) - _yaw(piece.rotations[at, 0]))
     rotations = piece.rotations.copy()
     rotations[:, 0] = qmul(np.broadcast_to(turn, rotations[:, 0].shape), rotations[:, 0])
@@ -84,9 +104,6 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
     """:func:`reconstruct_pieces` with each piece's confidence: consecutive
     :class:`imuloco.methods.base.Reconstruction` pieces (``error_m``, ``unreliable`` cut as
     the motion)."""
-    from imuloco.methods.postprocess import pin_detected_contacts
-    from imuloco.methods.training import model_frames
-
     fps = method.fps_
     rec = rec.select(method.placements_)
     # the grid Method.reconstruct reads: (F, 6 S), ~50 MB for 10 h
@@ -158,31 +175,6 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     skeleton as it is), its T-pose rest :func:`imuloco.app.export.rest_of` the first piece,
     used for every piece.
     """
-    import time
-
-    from tqdm.auto import tqdm
-
-    from imuloco.app.pipeline import (
-        ModelChoice,
-        calibrated,
-        choose_model,
-        feet_pinned_by,
-        ignored_sensors,
-        require_extras,
-    )
-    from imuloco.io.bvh import write_bvh_pieces
-    from imuloco.measures.gait import (
-        gait_parameters,
-        height_scale,
-        plausibility,
-        to_height,
-    )
-    from imuloco.measures.sensorgait import estimator_of, gait_report
-    from imuloco.methods.training import frame_times
-    from imuloco.paths.follow import PieceFollower, estimated_path
-    from imuloco.phases import gait_phases
-    from imuloco.sensors.reallog import read_log
-
     t0 = time.perf_counter()
     require_extras(placement)  # before reading a long log
     rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform,

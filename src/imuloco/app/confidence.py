@@ -21,6 +21,9 @@ from typing import Any
 
 import numpy as np
 
+from imuloco.errors import FormatError
+from imuloco.phases.contacts import clean_mask, runs
+
 MAX_SEGMENTS = 50  # the report lists at most this many unreliable segments (the longest)
 MERGE_GAP_S = 0.5  # flagged runs less than this apart are one segment
 MAX_BINS = 3600  # error_m_per_second: one value a second up to an hour, wider bins beyond
@@ -36,8 +39,6 @@ def flagged_segments(flags: np.ndarray, fps: float, merge_gap_s: float = MERGE_G
 
     flags : ndarray of bool, shape (T,). Returns ``[(first, stop), ...]`` frame indices (stop
     exclusive), in time order."""
-    from imuloco.phases.contacts import clean_mask, runs
-
     gap = max(0, math.ceil(merge_gap_s * fps) - 1)  # unflagged runs shorter than merge_gap_s
     starts, stops, vals = runs(clean_mask(np.asarray(flags, dtype=bool), gap, 1))
     return [(int(a), int(b)) for a, b in zip(starts[vals], stops[vals])]
@@ -96,8 +97,6 @@ class Confidence:
         mean predicted error over its frames, flags over the listed segments (the report keeps
         the :data:`MAX_SEGMENTS` longest, so shorter ones beyond them are missing). A file
         that is not such a report raises :class:`imuloco.errors.FormatError` naming the field."""
-        from imuloco.errors import FormatError
-
         def fail(field: str, expected: str) -> FormatError:
             return FormatError(path, None, f"field {field}: expected {expected}")
 

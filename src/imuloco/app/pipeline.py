@@ -28,18 +28,43 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
+from scipy.stats import spearmanr
+from tqdm.auto import tqdm
 
 from imuloco.app.confidence import Confidence
+from imuloco.app.export import write_reconstruction
 from imuloco.app.render import render_outputs
 from imuloco.app.report import MotionInfo, ReconstructionReport, build_report
 from imuloco.app.summary import confidence_markdown, demo_markdown  # noqa: F401 (re-exported)
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
+from imuloco.core.retarget import Rig, retarget
+from imuloco.core.rigs import DEFAULT_RIG, check_rig_name
+from imuloco.data import MODELS_DIR
+from imuloco.errors import InputError, ModelFileError, UnknownNameError
+from imuloco.io.atomic import atomic_write, check_outputs
+from imuloco.io.bvh import check_joint_names
+from imuloco.io.database import load_sample
+from imuloco.io.motionfile import read_motion
+from imuloco.io.sensorlog import write_generic_csv
+from imuloco.measures.gait import Gait, Plausibility, height_scale, to_height, to_json
+from imuloco.measures.metrics import evaluate, rmse_per_frame
+from imuloco.measures.sensorgait import gait_report
+from imuloco.methods import get_method, load_model, method_class
+from imuloco.methods.fallback import FallbackReport, fallback_recording
+from imuloco.methods.postprocess import pin_detected_contacts, pin_feet
+from imuloco.ops.rotations import angle
+from imuloco.paths.follow import follow_recording
+from imuloco.phases import foot_contacts, gait_phases
+from imuloco.sensors.calibration import calibrate
+from imuloco.sensors.multi import read_sensors
 from imuloco.sensors.placement import PRESETS
+from imuloco.sensors.reallog import recording_name
+from imuloco.sensors.simulate import simulate
+from imuloco.viz.plots import plot_errors, plot_phases, plot_signals
 
 if TYPE_CHECKING:
     from imuloco.methods.base import Method
-from imuloco.errors import InputError, UnknownNameError
 
 log = logging.getLogger(__name__)
 
@@ -68,16 +93,12 @@ def require_extras(placement: str) -> None:
 
 def shipped_placements(method: str = DEFAULT_METHOD) -> list[str]:
     """The placements ``method`` has a pretrained model of in the package."""
-    from imuloco.data import MODELS_DIR
-
     return sorted(p.stem.removeprefix(f"{method}_") for p in MODELS_DIR.glob(f"{method}_*.npz"))
 
 
 def shipped_model(method: str, placement: str) -> Path | None:
     """Path of the pretrained model of ``method`` for ``placement`` shipped with the package
     (``<method>_<model>.npz``, ``model`` the placement's declaration's)."""
-    from imuloco.data import MODELS_DIR
-
     model = PRESETS[placement].model if placement in PRESETS else None
     path = None if model is None else MODELS_DIR / f"{method}_{model}.npz"
     return path if path is not None and path.is_file() else None
@@ -87,8 +108,6 @@ def shipped_combination(method: str, placements: Sequence[str], primary: str) ->
     """The shipped model of ``method`` that reads several of the recording's ``placements``,
     ``primary`` among them: ``<method>_<a>+<b>[+...].npz`` (its placements in its name), the
     one reading the most; None when none matches."""
-    from imuloco.data import MODELS_DIR
-
     found = []
     for path in MODELS_DIR.glob(f"{method}_*+*.npz"):
         names = path.stem.removeprefix(f"{method}_").split("+")
@@ -148,9 +167,6 @@ def choose_model(method: str | None = None, model: str | Path | None = None,
         shipped model reading several of them (:func:`shipped_combination`) is preferred to
         ``placement``'s own; a model file may read any of them.
     """
-    from imuloco.errors import ModelFileError
-    from imuloco.methods import get_method, load_model, method_class
-
     require_extras(placement)
     if model is not None:
         fitted = load_model(model)
@@ -186,7 +202,6 @@ def choose_model(method: str | None = None, model: str | Path | None = None,
                         placement, ", ".join(shipped_placements()), method)
     else:
         why = f"method {method!r} has no shipped model for {placement}, so it was fitted"
-    from imuloco.io.database import load_sample
 
     db = load_sample(progress=progress) if db is None else db
     keep = [i for i, lab in enumerate(db.labels) if lab["name"] not in set(exclude)]
@@ -208,9 +223,6 @@ def calibrated(rec: Recording) -> tuple[Recording, list[dict[str, Any]]]:
     """``rec`` with its leg sensors turned into their segments' anatomical frames
     (:func:`imuloco.sensors.calibration.calibrate`) and, per placement, what was found (the
     report's ``calibration``)."""
-    from imuloco.ops.rotations import angle
-    from imuloco.sensors.calibration import calibrate
-
     rec, mounts = calibrate(rec)
     return rec, [
         {"placement": p, "up_from": m.up_source, "still_s": round(m.still_s, 2),
@@ -245,9 +257,6 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
     :meth:`imuloco.methods.base.Method.reconstruct_full`) and ``fallback`` (what the fallback
     did, :class:`imuloco.methods.fallback.FallbackReport`).
     """
-    from imuloco.methods.fallback import FallbackReport, fallback_recording
-    from imuloco.methods.postprocess import pin_detected_contacts
-
     info: dict[str, Any] = {}
     rec = rec.select(method.placements_)
     if calibrate:
@@ -277,10 +286,6 @@ def load_rig(path: str | Path):
     """The user's rig (:class:`imuloco.core.retarget.Rig`) from a motion file (BVH, ASF/AMC):
     its joint names, offsets and the poses of its frames (one T-pose frame will do). A rig
     whose joints do not map every canonical body part is refused, naming the parts."""
-    from imuloco.core.retarget import Rig
-    from imuloco.io.bvh import check_joint_names
-    from imuloco.io.motionfile import read_motion
-
     motion = read_motion(path)
     check_joint_names(motion.skeleton.names, str(path))  # the BVH written on it keeps them
     return Rig.measure([motion], where=str(path))
@@ -292,10 +297,6 @@ def onto_rig(motion: Motion, rig, contacts: dict[str, np.ndarray] | None = None)
     root moved so that feet in contact in ``motion`` do not slide on the rig either
     (:func:`imuloco.methods.postprocess.pin_feet`): other proportions add no skating.
     ``contacts``: ``motion``'s :func:`imuloco.phases.foot_contacts` when already found."""
-    from imuloco.core.retarget import retarget
-    from imuloco.methods.postprocess import pin_feet
-    from imuloco.phases import foot_contacts
-
     c = foot_contacts(motion) if contacts is None else contacts
     return pin_feet(retarget(motion, rig), np.stack([c["left_foot"], c["right_foot"]], axis=1))
 
@@ -341,15 +342,6 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     (:func:`imuloco.measures.sensorgait.gait_report`) with per-stride rows, plausibility checks
     and the cadence of the raw signal (``report.to_json()`` for JSON).
     """
-    from tqdm.auto import tqdm
-
-    from imuloco.measures.gait import Plausibility, height_scale, to_height
-    from imuloco.measures.sensorgait import gait_report
-    from imuloco.paths.follow import follow_recording
-    from imuloco.phases import gait_phases
-    from imuloco.sensors.multi import read_sensors
-    from imuloco.sensors.reallog import recording_name
-
     require_extras(placement)  # before reading a long log
     rig = None if skeleton is None else load_rig(skeleton)  # and a bad rig file before its work
     steps = ["import", "model", "reconstruct", "gait"]
@@ -432,19 +424,6 @@ def demo(out_dir: str | Path, method: str | None = None, model: str | Path | Non
     -------
     The report dict (also in ``report.json``), with ``files`` listing what was written.
     """
-    from tqdm.auto import tqdm
-
-    from imuloco.app.export import write_reconstruction
-    from imuloco.core.rigs import DEFAULT_RIG, check_rig_name
-    from imuloco.io.atomic import atomic_write, check_outputs
-    from imuloco.io.database import load_sample
-    from imuloco.io.sensorlog import write_generic_csv
-    from imuloco.measures.gait import Gait, Plausibility, to_json
-    from imuloco.measures.metrics import evaluate
-    from imuloco.phases import gait_phases
-    from imuloco.sensors.simulate import simulate
-    from imuloco.viz.plots import plot_errors, plot_phases, plot_signals
-
     t0 = time.perf_counter()
     out = Path(out_dir)
     names = ["recording.csv", "reconstruction.bvh", "demo.mp4", "demo.gif", "demo.html",
@@ -527,11 +506,6 @@ def confidence_check(gt: Motion, rec: Motion, confidence: Confidence) -> dict[st
     percentiles (``p90_predicted_error_m``, ``p90_actual_error_m``), the ``spearman`` rank
     correlation of the two over frames, and the actual error on ``unreliable`` and
     ``reliable`` frames (metres); every value ``None`` for a method without confidence."""
-    from scipy.stats import spearmanr
-
-    from imuloco.measures.gait import to_json
-    from imuloco.measures.metrics import rmse_per_frame
-
     keys = ("mean_predicted_error_m", "mean_actual_error_m", "ratio", "p90_predicted_error_m",
             "p90_actual_error_m", "spearman", "actual_error_unreliable_m",
             "actual_error_reliable_m")

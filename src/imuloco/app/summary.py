@@ -306,7 +306,7 @@ def write_summary(report: dict[str, Any], md_path: str | Path, overwrite: bool =
     written, plots, note = [], {}, None
     try:
         from imuloco.viz import gaitplots  # the [viz] extra: matplotlib
-        from imuloco.viz import plots as motion_plots
+        from imuloco.viz import plots as motion_plots  # beside it: both or neither
     except ModuleNotFoundError as e:
         if e.name != "matplotlib":
             raise

@@ -146,7 +146,7 @@ def _typed(columns: list[str], cells: dict[str, dict[str, str | None]]
            ) -> tuple[tuple, dict[str, dict[str, Any]]]:
     """The columns' pyarrow fields, each int64, float64 or string (the first that every
     filled cell converts to), and the typed values per name."""
-    import pyarrow as pa
+    import pyarrow as pa  # the [dist] extra's
 
     fields, typed = [], {}
     for c in columns:

@@ -3,10 +3,11 @@
 ``imuloco bench --fuzz N`` runs :func:`run_fuzz`: for each reader (BVH, ASF/AMC, sensor-log
 tables, :func:`~imuloco.sensors.reallog.read_log`, model files, the real-data folders of
 :func:`~imuloco.io.realimu.read_trials`: :mod:`imuloco.lab.fuzz_real`, Xsens text exports
-read by ``read_log``: :mod:`imuloco.lab.fuzz_xsens`) it builds small
-valid files from the bundled sample (:func:`seed_files`), derives N inputs from them by random
-mutation (bytes, lines, cells) and by the structured attacks of issue 18 (a timestamp jumping by days, rows a
-nanosecond apart, cells of 1e308, ``Frame Time`` of 1000 s, 20,000 nested joints, ASF units of
+read by ``read_log``: :mod:`imuloco.lab.fuzz_xsens`; one row each in :data:`READER_TABLE`) it
+builds small valid files from the bundled sample (:func:`seed_files`), derives N inputs from
+them by random edits (bytes, lines, cells: :mod:`imuloco.lab.mutations`, the engine the
+readers' tests use too) and by the structured attacks of issue 18 (a timestamp jumping by days,
+rows a nanosecond apart, cells of 1e308, ``Frame Time`` of 1000 s, 20,000 nested joints, ASF units of
 5e-324, forged array shapes, decompression bombs, deep JSON headers, ...) and those of issue 42
 (:mod:`imuloco.lab.fuzz_structure`: structure-aware BVH and AMC, zip-member bombs, output
 targets; every input of these readers is such an attack), and reads each in a worker
@@ -48,7 +49,6 @@ import shutil
 import tempfile
 import time
 import warnings
-import zipfile
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -70,7 +70,7 @@ from imuloco.io.sensorlog import (
     read_sensor_logger,
     write_generic_csv,
 )
-from imuloco.lab.fuzz_exports import _zip, export_attack, export_garbage, export_seeds, read_export
+from imuloco.lab.fuzz_exports import export_attack, export_garbage, export_seeds, read_export
 from imuloco.lab.fuzz_live import live_attack, live_garbage, live_method, live_seeds, play
 from imuloco.lab.fuzz_real import read_real, real_attack, real_garbage, real_seeds
 from imuloco.lab.fuzz_structure import (
@@ -83,31 +83,14 @@ from imuloco.lab.fuzz_structure import (
     zip_member_attack,
 )
 from imuloco.lab.fuzz_xsens import xsens_attack, xsens_seeds
+from imuloco.lab.mutations import ATTACK_NUMBERS, Files, claim_size, mutate, npy, unzip, zip_files
 from imuloco.methods import get_method, load_model, method_class
 from imuloco.methods.modelfile import check_header, non_finite
 from imuloco.sensors.reallog import read_log
 from imuloco.sensors.simulate import simulate
 
-READERS = ("bvh", "asf", "sensorlog", "read_log", "model", "model_header", "real", "xsens",
-           "bvh-structure", "amc-structure", "zip-members", "outputs", "exports", "live")
-READER_TITLES = {"bvh": "BVH", "asf": "ASF/AMC", "sensorlog": "sensor-log tables",
-                 "read_log": "`read_log`", "model": "model files",
-                 "model_header": "model headers (JSON values)",
-                 "real": "real-data folders (`read_trials`)",
-                 "xsens": "Xsens exports (`read_log`)",
-                 "bvh-structure": "BVH, structure-aware", "amc-structure": "AMC, structure-aware",
-                 "zip-members": "zip members (`read_log`)",
-                 "outputs": "output targets (`check_outputs`, `OutputSet`)",
-                 "exports": "phone exports: units, zip folders, links (`read_log`)",
-                 "live": "live server messages and requests (loopback)"}
-# readers of issue 42's classes (lab/fuzz_structure.py): every input a structured attack,
-# read as the reader they stand for
-STRUCTURED = {"bvh-structure": "bvh", "amc-structure": "asf", "zip-members": "read_log",
-              "outputs": "outputs"}
 OUTCOMES = ("clean", "accepted", "wrong exception type", "hang", "garbage accepted")
 MEMORY_LIMIT = 4 << 30  # bytes of address space per worker
-
-Files = dict[str, bytes]  # file name -> content; the first file is the one read
 
 
 @dataclass(frozen=True)
@@ -136,7 +119,7 @@ def seed_files(work: Path) -> dict[str, list[Files]]:
     phyphox = _phyphox(rec).encode()
     total, gyro = _sensor_logger(rec)
     meta = b"version,device name,recording time,platform\n3,fuzz,2024-01-01_00-00-00,android\n"
-    sl_zip = _zip({"TotalAcceleration.csv": total, "Gyroscope.csv": gyro, "Metadata.csv": meta})
+    sl_zip = zip_files({"TotalAcceleration.csv": total, "Gyroscope.csv": gyro, "Metadata.csv": meta})
     models = []
     for name in ("mean", "ridge"):
         m = get_method(name).fit(db.subset([0, 1]), ["right_ankle"], "phone", 0)
@@ -216,73 +199,21 @@ def _asf_amc(bones: int = 3, frames: int = 6) -> tuple[str, str]:
 
 
 # ---------------------------------------------------------------------------------------------
-# mutations
-
-ATTACK_NUMBERS = ("1e308", "-1e308", "1e309", "nan", "inf", "-inf", "0", "-0", "1e-9", "1e-300",
-                  "5e-324", "1e6", "1e7", "-1", "99999999999999999999999", "", "x", "0x10",
-                  "1_000", "１２", "\x00", '"', "1,5", "1e", "--1", " ", "\t")
-
-
-def _mutate_bytes(data: bytes, rng: random.Random) -> tuple[str, bytes]:
-    b = bytearray(data)
-    op = rng.choice(("flip", "insert", "delete", "duplicate", "truncate", "zero"))
-    if not b:  # truncated to nothing by an earlier step: only inserting changes it
-        op = "insert"
-    i = rng.randrange(len(b)) if b else 0
-    n = rng.choice((1, 1, 2, 8, 64, 512))
-    if op == "flip":
-        for _ in range(n):
-            b[rng.randrange(len(b))] = rng.randrange(256)
-    elif op == "insert":
-        b[i:i] = bytes(rng.randrange(256) for _ in range(n))
-    elif op == "delete":
-        del b[i:i + n]
-    elif op == "duplicate":
-        b[i:i] = b[i:i + n * 8]
-    elif op == "truncate":
-        del b[i:]
-    else:
-        b[i:i + n] = bytes(min(n, len(b) - i))
-    return f"bytes:{op}", bytes(b)
-
-
-def _mutate_lines(data: bytes, rng: random.Random) -> tuple[str, bytes]:
-    lines = data.split(b"\n")
-    op = rng.choice(("delete", "duplicate", "swap", "repeat", "cell"))
-    i, j = rng.randrange(len(lines)), rng.randrange(len(lines))
-    if op == "delete":
-        del lines[i]
-    elif op == "duplicate":
-        lines.insert(i, lines[j])
-    elif op == "swap":
-        lines[i], lines[j] = lines[j], lines[i]
-    elif op == "repeat":
-        lines[i:i] = [lines[i]] * rng.choice((2, 100, 5000))
-    else:
-        for _ in range(rng.choice((1, 1, 3, 20))):
-            k = rng.randrange(len(lines))
-            cells = lines[k].replace(b"\t", b" ").replace(b",", b" ").split(b" ")
-            c = rng.randrange(len(cells))
-            cells[c] = rng.choice(ATTACK_NUMBERS).encode()
-            sep = b"," if b"," in lines[k] else b" "
-            lines[k] = sep.join(cells)
-    return f"lines:{op}", b"\n".join(lines)
-
+# structured attacks (the random edits are the engine's: imuloco.lab.mutations)
 
 def _table_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
     """Structured attacks on a sensor-log table (the first file, or the members of a zip)."""
     name, data = next(iter(files.items()))
     if name.endswith(".zip"):
-        with zipfile.ZipFile(io.BytesIO(data)) as z:
-            members = {i.filename: z.read(i) for i in z.infolist()}
+        members = unzip(data)
         target = rng.choice(sorted(members))
         kind, members[target] = _table_rows_attack(members[target], rng)
         op = rng.choice(("keep", "drop-metadata", "bomb-claim"))
         if op == "drop-metadata":
             members.pop("Metadata.csv", None)
-        out = _zip(members)
+        out = zip_files(members)
         if op == "bomb-claim":
-            out = _claim_size(out, target, 3 << 30)
+            out = claim_size(out, target, 3 << 30)
         return f"attack:{kind}+{op}", {name: out}
     kind, out = _table_rows_attack(data, rng)
     return f"attack:{kind}", {name: out}
@@ -336,19 +267,6 @@ def _table_rows_attack(data: bytes, rng: random.Random) -> tuple[str, bytes]:
     else:
         rows = rows * rng.choice((2, 5))
     return kind, ("\n".join([head, *rows]) + "\n").encode()
-
-
-def _claim_size(data: bytes, member: str, size: int) -> bytes:
-    """A zip whose central directory claims ``size`` uncompressed bytes for ``member``."""
-    b = bytearray(data)
-    sig, name = b"PK\x01\x02", member.encode()
-    at = b.find(sig)
-    while at >= 0:
-        n = int.from_bytes(b[at + 28:at + 30], "little")
-        if bytes(b[at + 46:at + 46 + n]) == name:
-            b[at + 24:at + 28] = min(size, 0xFFFFFFFE).to_bytes(4, "little")
-        at = b.find(sig, at + 46)
-    return bytes(b)
 
 
 def _bvh_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
@@ -411,8 +329,7 @@ def _asf_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
 
 def _model_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
     name, data = next(iter(files.items()))
-    with zipfile.ZipFile(io.BytesIO(data)) as z:
-        members = {i.filename: z.read(i) for i in z.infolist()}
+    members = unzip(data)
     header = json.loads(np.lib.format.read_array(io.BytesIO(members["__header__.npy"])).tobytes())
     kind = rng.choice(("fps", "placements", "params", "noise", "deep", "header-type", "shape",
                        "reshape", "bomb-claim", "nan-weights", "object", "drop"))
@@ -427,12 +344,12 @@ def _model_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
             header = v
         else:
             header[kind] = v
-        members["__header__.npy"] = _npy(np.frombuffer(json.dumps(header).encode(), np.uint8))
+        members["__header__.npy"] = npy(np.frombuffer(json.dumps(header).encode(), np.uint8))
     elif kind == "deep":
         depth = rng.choice((40, 1_000, 100_000))
         text = json.dumps(header).replace('"protocol": {',
                                           '"protocol": {"x": ' + "[" * depth + "]" * depth + ",")
-        members["__header__.npy"] = _npy(np.frombuffer(text.encode(), np.uint8))
+        members["__header__.npy"] = npy(np.frombuffer(text.encode(), np.uint8))
     elif kind == "shape":
         target = rng.choice([m for m in members if m != "__header__.npy"])
         buf = io.BytesIO()
@@ -453,12 +370,12 @@ def _model_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
             members[target] = buf.getvalue()
             arr = None
         if arr is not None:
-            members[target] = _npy(arr)
+            members[target] = npy(arr)
     elif kind == "drop":
         members.pop(rng.choice(sorted(members)))
-    out = _zip(members)
+    out = zip_files(members)
     if kind == "bomb-claim":
-        out = _claim_size(out, rng.choice(sorted(members)), rng.choice((3 << 30, 1 << 31)))
+        out = claim_size(out, rng.choice(sorted(members)), rng.choice((3 << 30, 1 << 31)))
     return f"attack:{kind}", {name: out}
 
 
@@ -472,8 +389,7 @@ def _header_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
     """One value anywhere in a model's JSON header (a parameter, a learned value, the
     protocol, a top-level field) replaced by one of :data:`HEADER_VALUES` or a deep nest."""
     name, data = next(iter(files.items()))
-    with zipfile.ZipFile(io.BytesIO(data)) as z:
-        members = {i.filename: z.read(i) for i in z.infolist()}
+    members = unzip(data)
     header = json.loads(np.lib.format.read_array(io.BytesIO(members["__header__.npy"])).tobytes())
     paths = [(k,) for k in header] + [(k, sub) for k in ("params", "values", "protocol")
                                       if isinstance(header.get(k), dict) for sub in header[k]]
@@ -492,122 +408,56 @@ def _header_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
     text = json.dumps(header)  # NaN and Infinity as Python's json writes them
     if value == "NEST":
         text = text.replace('"NEST"', "[" * depth + "]" * depth)
-    members["__header__.npy"] = _npy(np.frombuffer(text.encode(), np.uint8))
-    return f"header:{'.'.join(path)}={label}", {name: _zip(members)}
-
-
-def _npy(arr: np.ndarray) -> bytes:
-    buf = io.BytesIO()
-    np.lib.format.write_array(buf, arr, allow_pickle=False)
-    return buf.getvalue()
-
-
-ATTACKS = {"bvh": _bvh_attack, "asf": _asf_attack, "sensorlog": _table_attack,
-           "read_log": _table_attack, "model": _model_attack, "model_header": _header_attack,
-           "real": real_attack, "xsens": xsens_attack, "bvh-structure": bvh_structure_attack,
-           "amc-structure": amc_structure_attack, "zip-members": zip_member_attack,
-           "outputs": output_attack, "exports": export_attack, "live": live_attack}
-
-
-ONLY_ATTACKS = ("model_header",)  # structure-aware only: a flipped byte is the "model" class
-
-
-def cases(reader: str, seeds: list[Files], n: int, seed: int = 0) -> Iterator[Case]:
-    """``n`` inputs for ``reader``: a third structured attacks, the rest random mutations
-    (1-3 of bytes or lines) of a seed file."""
-    rng = random.Random(f"{reader}-{seed}")
-    for _ in range(n):
-        files = dict(rng.choice(seeds))
-        if reader in ONLY_ATTACKS or reader in STRUCTURED or rng.random() < 1 / 3:
-            mutation, files = ATTACKS[reader](files, rng)
-        else:
-            target = rng.choice(list(files))
-            steps = []
-            for _ in range(rng.choice((1, 1, 2, 3))):
-                op = _mutate_bytes if rng.random() < 0.5 else _mutate_lines
-                step, files[target] = op(files[target], rng)
-                steps.append(step)
-            mutation = "+".join(steps)
-        yield Case(reader, mutation, tuple(files.items()))
+    members["__header__.npy"] = npy(np.frombuffer(text.encode(), np.uint8))
+    return f"header:{'.'.join(path)}={label}", {name: zip_files(members)}
 
 
 # ---------------------------------------------------------------------------------------------
 # reading one input and judging the result (in the worker)
 
-def read_case(reader: str, paths: list[Path]) -> object:
-    """Read ``paths`` as ``reader`` does; returns what was read."""
-    reader = STRUCTURED.get(reader, reader)
-    if reader == "outputs":
-        return write_outputs(paths[0])
-    if reader == "bvh":
-        return read_bvh(paths[0])
-    if reader == "asf":
-        return read_asf_amc(paths[0], paths[1])
-    if reader == "sensorlog":
-        name = paths[0].name
-        if name == "TotalAcceleration.csv":
-            (paths[0].parent / "Gyroscope.csv").write_bytes(paths[0].read_bytes())
-            return read_sensor_logger(paths[0].parent, "android")
-        return (read_phyphox if name.startswith("phyphox") else read_generic_csv)(paths[0])
-    if reader in ("read_log", "xsens"):
-        return read_log(paths[0])
-    if reader == "real":
-        return read_real(paths)
-    if reader == "exports":
-        return read_export(paths)
-    if reader == "live":
-        return play(paths)
-    return load_model(paths[0])
+def _read_table(paths: list[Path]) -> list:
+    """A sensor-log table as its own reader reads it (by the seed's name)."""
+    name = paths[0].name
+    if name == "TotalAcceleration.csv":
+        (paths[0].parent / "Gyroscope.csv").write_bytes(paths[0].read_bytes())
+        return read_sensor_logger(paths[0].parent, "android")
+    return (read_phyphox if name.startswith("phyphox") else read_generic_csv)(paths[0])
 
 
-def garbage(reader: str, result: object) -> str | None:
-    """Why an accepted ``result`` is implausible, or ``None`` (see the module docstring)."""
-    reader = STRUCTURED.get(reader, reader)
-    if reader == "outputs":
-        return output_garbage(result)
-    if reader in ("bvh", "asf"):
-        m = result
-        if not (1.0 <= m.fps <= 1000.0):
-            return f"fps {m.fps}"
-        if m.num_frames < 1:
-            return "no frames"
-        for name in ("rotations", "root"):
-            if not np.isfinite(getattr(m, name)).all():
-                return f"non-finite {name}"
-        if not np.isfinite(m.skeleton.offsets).all():
-            return "non-finite offsets"
-        return None
-    if reader == "sensorlog":
-        for s in result:
-            if not (np.isfinite(s.times).all() and np.isfinite(s.values).all()):
-                return "non-finite stream"
-            if len(s.times) < 1:
-                return "empty stream"
-        return None
-    if reader in ("read_log", "xsens"):
-        rec, report = result
-        if not np.isfinite(rec.channels()).all() or not np.isfinite(rec.times).all():
-            return "non-finite recording"
-        if rec.num_samples < 2 or not rec.is_uniform():
-            return "not a uniform recording"
-        if abs(rec.times[-1] - report.duration) > 0.05 or report.duration > 48 * 3600:
-            return f"duration {report.duration} against {rec.times[-1]}"
-        return None
-    if reader == "real":
-        return real_garbage(result)
-    if reader == "exports":
-        return export_garbage(result)
-    if reader == "live":
-        return live_garbage(result)
-    model = result
-    if reader == "model_header":  # the forged value got past the header's checks
-        try:
-            model.check_params()
-        except ImulocoError as e:
-            return f"params: {e}"
-        at = non_finite(model.get_state()[1])
-        if at is not None:
-            return f"non-finite learned value {at}"
+def _motion_garbage(m) -> str | None:
+    if not (1.0 <= m.fps <= 1000.0):
+        return f"fps {m.fps}"
+    if m.num_frames < 1:
+        return "no frames"
+    for name in ("rotations", "root"):
+        if not np.isfinite(getattr(m, name)).all():
+            return f"non-finite {name}"
+    if not np.isfinite(m.skeleton.offsets).all():
+        return "non-finite offsets"
+    return None
+
+
+def _streams_garbage(streams) -> str | None:
+    for s in streams:
+        if not (np.isfinite(s.times).all() and np.isfinite(s.values).all()):
+            return "non-finite stream"
+        if len(s.times) < 1:
+            return "empty stream"
+    return None
+
+
+def _log_garbage(result) -> str | None:
+    rec, report = result
+    if not np.isfinite(rec.channels()).all() or not np.isfinite(rec.times).all():
+        return "non-finite recording"
+    if rec.num_samples < 2 or not rec.is_uniform():
+        return "not a uniform recording"
+    if abs(rec.times[-1] - report.duration) > 0.05 or report.duration > 48 * 3600:
+        return f"duration {report.duration} against {rec.times[-1]}"
+    return None
+
+
+def _model_garbage(model) -> str | None:
     try:
         check_header("model", {"format_version": 1, "method": model.name,
                                "params": model.get_params(), "values": {}, "protocol": {},
@@ -628,12 +478,91 @@ def garbage(reader: str, result: object) -> str | None:
     return None
 
 
+def _header_garbage(model) -> str | None:
+    """A forged header value that got past the header's checks, or :func:`_model_garbage`."""
+    try:
+        model.check_params()
+    except ImulocoError as e:
+        return f"params: {e}"
+    at = non_finite(model.get_state()[1])
+    if at is not None:
+        return f"non-finite learned value {at}"
+    return _model_garbage(model)
+
+
+@dataclass(frozen=True)
+class Reader:
+    """One row of the fuzzer's table: a reader (or an attack class read as one)."""
+
+    title: str  # its row in fuzz.md's table
+    read: Callable[[list[Path]], object]  # the case's files -> what was read
+    garbage: Callable[[object], str | None]  # why an accepted result is implausible, or None
+    attack: Callable[[Files, random.Random], tuple[str, Files]]  # one structured attack
+    edits: bool = True  # a third of its inputs attacks, the rest random edits; False: all attacks
+
+
+def _first(read: Callable) -> Callable[[list[Path]], object]:
+    return lambda paths: read(paths[0])
+
+
+_read_bvh, _read_log, _read_model = _first(read_bvh), _first(read_log), _first(load_model)
+
+
+def _read_asf(paths: list[Path]) -> object:
+    return read_asf_amc(paths[0], paths[1])
+
+
+# the readers in their order in fuzz.md; issue 42's classes (lab/fuzz_structure.py) are read as
+# the reader they stand for, every input an attack (model headers: a flipped byte is "model")
+READER_TABLE = {
+    "bvh": Reader("BVH", _read_bvh, _motion_garbage, _bvh_attack),
+    "asf": Reader("ASF/AMC", _read_asf, _motion_garbage, _asf_attack),
+    "sensorlog": Reader("sensor-log tables", _read_table, _streams_garbage, _table_attack),
+    "read_log": Reader("`read_log`", _read_log, _log_garbage, _table_attack),
+    "model": Reader("model files", _read_model, _model_garbage, _model_attack),
+    "model_header": Reader("model headers (JSON values)", _read_model, _header_garbage,
+                           _header_attack, edits=False),
+    "real": Reader("real-data folders (`read_trials`)", read_real, real_garbage, real_attack),
+    "xsens": Reader("Xsens exports (`read_log`)", _read_log, _log_garbage, xsens_attack),
+    "bvh-structure": Reader("BVH, structure-aware", _read_bvh, _motion_garbage,
+                            bvh_structure_attack, edits=False),
+    "amc-structure": Reader("AMC, structure-aware", _read_asf, _motion_garbage,
+                            amc_structure_attack, edits=False),
+    "zip-members": Reader("zip members (`read_log`)", _read_log, _log_garbage,
+                          zip_member_attack, edits=False),
+    "outputs": Reader("output targets (`check_outputs`, `OutputSet`)", _first(write_outputs),
+                      output_garbage, output_attack, edits=False),
+    "exports": Reader("phone exports: units, zip folders, links (`read_log`)", read_export,
+                      export_garbage, export_attack),
+    "live": Reader("live server messages and requests (loopback)", play, live_garbage,
+                   live_attack),
+}
+READERS = tuple(READER_TABLE)
+READER_TITLES = {name: r.title for name, r in READER_TABLE.items()}
+ATTACKS = {name: r.attack for name, r in READER_TABLE.items()}
+
+
+def cases(reader: str, seeds: list[Files], n: int, seed: int = 0) -> Iterator[Case]:
+    """``n`` inputs for ``reader``: a third structured attacks, the rest 1-3 random edits of
+    bytes or lines (:func:`imuloco.lab.mutations.mutate`) of a seed file."""
+    rng = random.Random(f"{reader}-{seed}")
+    row = READER_TABLE[reader]
+    for _ in range(n):
+        files = dict(rng.choice(seeds))
+        if not row.edits or rng.random() < 1 / 3:
+            mutation, files = row.attack(files, rng)
+        else:
+            target = rng.choice(list(files))
+            mutation, files[target] = mutate(files[target], rng, rng.choice((1, 1, 2, 3)))
+        yield Case(reader, mutation, tuple(files.items()))
+
+
 def judge(reader: str, paths: list[Path]) -> tuple[str, str]:
     """(outcome, detail) of reading ``paths`` (in the calling process, no time limit)."""
     logging.disable(logging.CRITICAL)
     warnings.simplefilter("ignore")
     try:
-        result = read_case(reader, paths)
+        result = READER_TABLE[reader].read(paths)
     except ImulocoError as e:
         named = any(p.name in str(e) for p in paths) or str(paths[0].parent) in str(e)
         return ("clean" if named else "wrong exception type"), f"{type(e).__name__}: {e}"[:200]
@@ -641,7 +570,7 @@ def judge(reader: str, paths: list[Path]) -> tuple[str, str]:
         return "wrong exception type", f"{type(e).__name__}: {e}"[:200]
     except RecursionError as e:
         return "wrong exception type", f"RecursionError: {e}"[:200]
-    why = garbage(reader, result)
+    why = READER_TABLE[reader].garbage(result)
     return ("accepted", "") if why is None else ("garbage accepted", why)
 
 

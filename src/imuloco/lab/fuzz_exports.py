@@ -21,16 +21,16 @@ off).
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import random
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
-Files = dict[str, bytes]
+from imuloco.errors import EXCERPT_CHARS, ImulocoError
+from imuloco.lab.mutations import Files, unzip, zip_files
+from imuloco.sensors.reallog import read_log
 
 SECRET = "root:x:0:0:root:/root:/bin/bash"  # another file's line no error may quote
 ACC_UNITS = {"m/s^2": 1.0, "m/s²": 1.0, "g": 1 / 9.80665}  # file value per m/s^2
@@ -43,7 +43,7 @@ META = b"version,device name,recording time,platform\n3,fuzz,2024-01-01_00-00-00
 def export_seeds(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray) -> list[Files]:
     """The three seeds of a walk: times (N,) s, acc (N, 3) m/s^2, gyro (N, 3) rad/s."""
     total, gyr = _sensor_logger(times, acc), _sensor_logger(times, gyro)
-    zipped = _zip({"Walk/TotalAcceleration.csv": total, "Walk/Gyroscope.csv": gyr,
+    zipped = zip_files({"Walk/TotalAcceleration.csv": total, "Walk/Gyroscope.csv": gyr,
                    "Walk/Metadata.csv": META})
     folder = {LINKS: b"{}", "export/TotalAcceleration.csv": total,
               "export/Gyroscope.csv": gyr, "export/Metadata.csv": META,
@@ -70,14 +70,6 @@ def _sensor_logger(times: np.ndarray, xyz: np.ndarray) -> bytes:
     return ("\n".join(rows) + "\n").encode()
 
 
-def _zip(files: Files) -> bytes:
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
-        for name, data in files.items():
-            z.writestr(name, data)
-    return buf.getvalue()
-
-
 def export_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
     """One structured attack (module docstring) on a seed, by the seed's kind."""
     name = next(iter(files))
@@ -102,14 +94,13 @@ def _units_attack(data: bytes, rng: random.Random) -> tuple[str, Files]:
 
 
 def _folders_attack(data: bytes, rng: random.Random) -> tuple[str, Files]:
-    with zipfile.ZipFile(io.BytesIO(data)) as z:
-        members = {i.filename.rsplit("/", 1)[-1]: z.read(i) for i in z.infolist()}
+    members = {k.rsplit("/", 1)[-1]: v for k, v in unzip(data).items()}
     places = ("", "a/", "b/", "Walk/", "a/meta/", "__MACOSX/", "a/b/")
     placed = {rng.choice(places) + n: d for n, d in members.items()}
     if rng.random() < 0.3:  # the same table twice, in two folders (two phones)
         placed[rng.choice(places[1:4]) + "Gyroscope.csv"] = members["Gyroscope.csv"]
     folders = sorted({k.rpartition("/")[0] or "." for k in placed})
-    return f"attack:folders-{'+'.join(folders)}", {"export.zip": _zip(placed)}
+    return f"attack:folders-{'+'.join(folders)}", {"export.zip": zip_files(placed)}
 
 
 def _links_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
@@ -126,9 +117,6 @@ def _links_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
 def read_export(paths: list[Path]) -> dict:
     """Read a case as ``reconstruct`` does: ``{"result": (recording, report) or None,
     "problem": why the reading was wrong or None}``; the library's refusals are raised."""
-    from imuloco.errors import EXCERPT_CHARS, ImulocoError
-    from imuloco.sensors.reallog import read_log
-
     first = paths[0]
     target, problem = first, None
     if first.name == LINKS:

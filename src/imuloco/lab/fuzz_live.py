@@ -31,7 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-Files = dict[str, bytes]
+from imuloco.errors import InputError
+from imuloco.io.database import load_sample
+from imuloco.lab.mutations import Files
+from imuloco.methods import get_method
+from imuloco.sensors.reallog import MAX_ABS_TIME, MAX_VALUE
 
 KINDS = ("deep", "huge-int", "huge-time", "huge-values", "rows", "flood", "reconnect",
          "headers")
@@ -104,9 +108,6 @@ def live_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
 @functools.cache
 def live_method():
     """The online method the server runs: ridge fitted on two sample clips (cached)."""
-    from imuloco.io.database import load_sample
-    from imuloco.methods import get_method
-
     return get_method("ridge").fit(load_sample().subset([0, 1]), ["right_ankle"], "phone", 0)
 
 
@@ -125,8 +126,6 @@ class _Log(logging.Handler):
 
 def play(paths: list[Path]) -> dict:
     """Send the case to a fresh server; what the server did (see :func:`live_garbage`)."""
-    from imuloco.errors import InputError
-
     handler = _Log()
     loggers = [logging.getLogger(n) for n in ("websockets", "imuloco", "asyncio")]
     logging.disable(logging.NOTSET)  # the fuzz worker silences logging: the log is the oracle
@@ -146,6 +145,7 @@ def play(paths: list[Path]) -> dict:
 
 
 async def _play(paths: list[Path]) -> dict:
+    # the [live] extra's (websockets): lab.fuzz imports this module for every reader
     from imuloco.app.live.server import LiveServer
 
     server = LiveServer(live_method(), calibrate_s=0)
@@ -195,7 +195,7 @@ async def _http(server, request: bytes, found: dict) -> None:
 
 
 async def _phones(server, paths: list[Path], found: dict) -> None:
-    from websockets.asyncio.client import connect
+    from websockets.asyncio.client import connect  # the [live] extra's
     from websockets.exceptions import ConnectionClosed
 
     connections: dict[str, list[bytes]] = {}
@@ -240,8 +240,6 @@ async def _answers(ws, found: dict) -> int | None:
 def _implausible(message: bytes) -> bool:
     """Whether a message's rows (if it has rows of 7 numbers) hold a sample beyond the log
     readers' bounds (:data:`~imuloco.sensors.reallog.MAX_ABS_TIME`, ``MAX_VALUE``)."""
-    from imuloco.sensors.reallog import MAX_ABS_TIME, MAX_VALUE
-
     try:
         rows = np.asarray(json.loads(message)["rows"], dtype=np.float64)
     except (ValueError, KeyError, TypeError, OverflowError, RecursionError):

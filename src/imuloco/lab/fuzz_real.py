@@ -24,8 +24,7 @@ import numpy as np
 from scipy.io import savemat
 
 from imuloco.io.realimu import detect_layout, read_trials
-
-Files = dict[str, bytes]
+from imuloco.lab.mutations import Files
 
 PYSHOE = "a_LLIO.mat"
 IPOL = "1-1"

@@ -20,7 +20,6 @@ inputs is bounded by the tests (tests/test_bvh.py, tests/test_asf_amc.py).
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import random
@@ -28,7 +27,8 @@ import stat
 import zipfile
 from pathlib import Path
 
-Files = dict[str, bytes]
+from imuloco.io.atomic import OutputSet, check_outputs
+from imuloco.lab.mutations import Files, unzip, zip_files
 
 
 # ---- BVH and AMC ----------------------------------------------------------------------------
@@ -126,8 +126,7 @@ def amc_structure_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
 # ---- zip members ----------------------------------------------------------------------------
 def zip_member_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
     name, data = next(iter(files.items()))
-    with zipfile.ZipFile(io.BytesIO(data)) as z:
-        members = {i.filename: z.read(i) for i in z.infolist()}
+    members = unzip(data)
     target = rng.choice(sorted(m for m in members if m != "Metadata.csv"))
     kind = rng.choice(("bzip2-newlines", "deflate-newlines", "stored-blank-body", "preamble",
                        "lzma-zeros", "header-only", "sub-folder", "empty"))
@@ -151,11 +150,7 @@ def zip_member_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
         members = {f"{'deep/' * rng.choice((1, 50))}{k}": v for k, v in members.items()}
     else:
         members[target] = b""
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", method) as z:
-        for member, content in members.items():
-            z.writestr(member, content)
-    return f"zip:{kind}", {name: buf.getvalue()}
+    return f"zip:{kind}", {name: zip_files(members, method)}
 
 
 # ---- output targets -------------------------------------------------------------------------
@@ -175,8 +170,6 @@ def output_attack(files: Files, rng: random.Random) -> tuple[str, Files]:
 def write_outputs(spec_path: Path) -> dict:
     """Make the target a spec file asks for beside it, write over it as the commands do
     (``check_outputs`` with ``--force``, then an ``OutputSet``), and say what became of it."""
-    from imuloco.io.atomic import OutputSet, check_outputs
-
     folder = spec_path.parent
     kind = json.loads(spec_path.read_text()).get("kind", "new")
     a = folder / "a.bvh"

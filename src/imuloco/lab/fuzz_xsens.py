@@ -19,7 +19,7 @@ import random
 
 import numpy as np
 
-Files = dict[str, bytes]
+from imuloco.lab.mutations import Files
 
 MT_PREAMBLE = ["// Start Time: Unknown", "// Update Rate: 100.0Hz",
                "// Filter Profile: human (46.1)", "// Firmware Version: 4.0.2"]

@@ -32,9 +32,12 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+from scipy.signal import butter, sosfiltfilt, welch
 
 from imuloco.core.motion import Motion
-from imuloco.phases import gait_phases
+from imuloco.measures.metrics import foot_skate
+from imuloco.ops.filters import resample_linear
+from imuloco.phases import foot_contacts, gait_phases
 from imuloco.phases.events import forward_difference, heading_angle
 from imuloco.phases.gait import GaitPhases
 
@@ -224,8 +227,6 @@ def _swing_rate(rec, sensor: int) -> np.ndarray:
     """The angular velocity (rad/s, T) of a leg-worn sensor about its principal axis (the
     leg's swing axis: the first right singular vector of the centred gyroscope samples), on a
     uniform grid at :data:`SIGNAL_RATE_HZ`; empty for a recording under two samples of it."""
-    from imuloco.ops.filters import resample_linear
-
     t = np.arange(rec.times[0], rec.times[-1], 1.0 / SIGNAL_RATE_HZ)
     if len(t) < 2:
         return np.zeros(0)
@@ -308,8 +309,6 @@ def _stride_range(angle: np.ndarray, rate: float, stride_f: float) -> float:
     (``stride_f`` Hz), after a zero-phase high-pass at 0.4 ``stride_f`` (2nd-order
     Butterworth): it removes a gyroscope bias's drift and slow changes of posture and keeps
     the stride's fundamental within 3 %. NaN under two strides."""
-    from scipy.signal import butter, sosfiltfilt
-
     n = round(rate / stride_f)
     if len(angle) < 2 * n or n < 2:
         return math.nan
@@ -328,8 +327,6 @@ def _stride_cadence(x: np.ndarray, rate: float, stride_hz: tuple[float, float],
     A harmonic sum ties with its own subharmonic (``P(f/2) + P(f)``) whenever the signal has
     no power at ``2 f``, and the tie goes to the lower frequency: use ``harmonics=(1, 2)`` only
     for signals with a strong second harmonic (a leg's gyroscope), ``(1,)`` otherwise."""
-    from scipy.signal import welch
-
     if len(x) < 2 * rate / stride_hz[0]:
         return math.nan  # less than two strides
     nperseg = min(len(x), int(16 * rate))
@@ -382,9 +379,6 @@ def plausibility(motion: Motion, contacts: dict[str, np.ndarray] | None = None
     ``contacts``: the motion's :func:`imuloco.phases.foot_contacts` when already found (a
     :class:`~imuloco.phases.gait.GaitPhases`' ``contacts``).
     """
-    from imuloco.measures.metrics import foot_skate
-    from imuloco.phases import foot_contacts
-
     pos = motion.positions()
     finite = bool(np.all(np.isfinite(pos)) and np.all(np.isfinite(motion.rotations)))
     knee = np.concatenate([knee_flexion(motion, s) for s in FEET])

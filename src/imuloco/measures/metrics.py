@@ -16,11 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
-from imuloco.core.bodymap import PART_GROUPS
+from imuloco.core.bodymap import LOWER_PARTS, PART_GROUPS, PARTS, UPPER_PARTS
 from imuloco.core.motion import Motion
 from imuloco.core.skeleton import Skeleton
+from imuloco.errors import InputError
+from imuloco.io.motionfile import read_motion
 from imuloco.ops.heading import heading_from_hips, to_heading_frame
 from imuloco.ops.rotations import about_y, geodesic, qinv, qmul, qrot
+from imuloco.phases import foot_contacts
 
 CM = 100.0
 WINDOW_S = 2.0  # root-trajectory windows (speed and path errors), seconds
@@ -205,8 +208,6 @@ def jitter(motion: Motion) -> float:
 def gt_contacts(gt: Motion) -> dict[str, np.ndarray]:
     """Heel and toe contacts (T,) of the ground truth, from :func:`imuloco.phases.foot_contacts`
     (height above the clip's floor and speed, Eom et al. 2014 sec. 6.2)."""
-    from imuloco.phases import foot_contacts
-
     return foot_contacts(gt)
 
 
@@ -370,9 +371,6 @@ def evaluate_files(ground_truth: str | Path, reconstructed: str | Path,
     The skeletons must have the same joint names, parents and offsets (within ``offset_tol``
     metres) and the same frame rate; the longer motion is cut to the shorter's length.
     """
-    from imuloco.errors import InputError
-    from imuloco.io.motionfile import read_motion
-
     gt, rec = read_motion(ground_truth), read_motion(reconstructed)
     for path, motion in ((ground_truth, gt), (reconstructed, rec)):
         if motion.num_frames < 2:  # its gait and velocities need two
@@ -410,8 +408,6 @@ def part_errors(gt: Motion, rec: Motion) -> tuple[np.ndarray, np.ndarray, np.nda
     another skeleton (see :func:`evaluate_parts` for the scaling and alignment), with the
     ground truth's and the aligned reconstruction's part positions (T, P, 3) and headings
     (T,)."""
-    from imuloco.core.bodymap import PARTS
-
     if gt.num_frames != rec.num_frames or abs(gt.fps - rec.fps) > 1e-6 * gt.fps:
         raise ValueError(f"motions {gt.name!r} and {rec.name!r} differ in length or frame "
                          f"rate: {gt.num_frames} frames at {gt.fps:g} fps vs "
@@ -457,8 +453,6 @@ def evaluate_parts_curves(gt: Motion, rec: Motion, retargeted: Motion | None = N
     """:func:`evaluate_parts`, with the per-frame rms part error (T,), metres, over the parts
     but the pelvis, against ``gt`` and against ``retargeted`` (None without it): the curves
     the metrics average, each pair's part errors computed once."""
-    from imuloco.core.bodymap import LOWER_PARTS, PARTS, UPPER_PARTS
-
     parts = list(PARTS)
     k = {p: i for i, p in enumerate(parts)}
     err, pg, pr, hg, hr = part_errors(gt, rec)

@@ -171,7 +171,7 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
         track = foot_track(times, acc, gyro)  # checks that gaitmap is installed
     except NoWalking as e:
         return not_measured(placement, FOOT_METHOD, str(e))
-    import pandas as pd
+    import pandas as pd  # the [gait] extra's (gaitmap, and pandas with it): when used
     from gaitmap.data_transform import ButterworthFilter
     from gaitmap.event_detection import HerzerEventDetection
     from gaitmap.utils.coordinate_conversion import (
@@ -307,6 +307,7 @@ def lower_back_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray,
         ipol-gait's straight bouts it stays 8.6 % (``docs/results/real/experiments.md``).
     """
     try:
+        # scikit-learn takes about 1 s to import: only when mobgap runs
         from sklearn.exceptions import InconsistentVersionWarning
 
         with warnings.catch_warnings():

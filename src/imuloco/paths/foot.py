@@ -20,9 +20,9 @@ from imuloco.errors import UnknownNameError
 from imuloco.paths.base import BodyPath, Footfall, strides_from_footfalls
 from imuloco.paths.geometry import (
     HALF_STEP_WIDTH_M,
-    beside,
     footfalls_at,
     initial_yaw,
+    pelvis_of_limb,
     rotate,
     smooth_over,
     still_path,
@@ -102,9 +102,11 @@ class FootZupt:
         else:
             xy, times, rest, rate = tracks[0]
             foot = placement.split("_")[0]
-            mean = smooth_over(xy, rate, stride_period(times[rest]) if len(rest) else 1.0)
-            heading = walking_heading(mean, rate)
-            root_walk = beside(mean, heading, foot) if len(rest) else mean
+            if len(rest):
+                root_walk, heading = pelvis_of_limb(xy, times, rest, rate, foot)
+            else:  # this foot stands while the other walks: its path, a second's average
+                root_walk = smooth_over(xy, rate, 1.0)
+                heading = walking_heading(root_walk, rate)
             pelvis = ("The pelvis is the foot's path averaged over one stride, half a step "
                       "width to the body's centre: its turns are smoothed over a stride.")
             ff_paths = [xy]

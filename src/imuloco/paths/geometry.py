@@ -95,6 +95,17 @@ def beside(xy: np.ndarray, heading: np.ndarray, foot: str) -> np.ndarray:
     return xy + side * HALF_STEP_WIDTH_M * left
 
 
+def pelvis_of_limb(xy: np.ndarray, times: np.ndarray, steps: np.ndarray, rate: float,
+                   foot: str) -> tuple[np.ndarray, np.ndarray]:
+    """The pelvis's floor path (T, 2) and heading (T,) rad from one limb's path ``xy``
+    (T, 2) at ``times`` (T,) s, ``rate`` Hz: the path averaged over one stride period (of its
+    ``steps``, the samples of its footfalls or mid-stances: the limb alternates ahead of and
+    behind the pelvis), moved half a step width towards the body's centre (:func:`beside`)."""
+    mean = smooth_over(xy, rate, stride_period(times[steps]))
+    heading = walking_heading(mean, rate)
+    return beside(mean, heading, foot), heading
+
+
 def footfalls_at(foot: str, times: np.ndarray, xy: np.ndarray, index: np.ndarray,
                  confidence: np.ndarray | float = 1.0) -> list[Footfall]:
     """One footfall of ``foot`` at each sample of ``index``, at ``xy`` (T, 2) there."""

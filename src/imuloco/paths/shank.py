@@ -38,14 +38,11 @@ from imuloco.ops.filters import gaussian_smooth, resample_uniform
 from imuloco.ops.rotations import qinv, qrot
 from imuloco.paths.base import BodyPath, strides_from_footfalls
 from imuloco.paths.geometry import (
-    beside,
     footfalls_at,
     initial_yaw,
+    pelvis_of_limb,
     rotate,
-    smooth_over,
     still_path,
-    stride_period,
-    walking_heading,
 )
 from imuloco.sensors.calibration import estimate_mounting
 from imuloco.sensors.placement import get_placement
@@ -149,9 +146,7 @@ class ShankPivot:
         ankle, _, drift = anchored_path(acc, gyro, RATE, mids, lever, still)
         xy = ankle[:, :2] - ankle[mids[0], :2]
         xy = rotate(xy, -initial_yaw(xy[mids]))
-        mean = smooth_over(xy, RATE, stride_period(times[mids]))
-        heading = walking_heading(mean, RATE)
-        root = beside(mean, heading, foot)
+        root, heading = pelvis_of_limb(xy, times, mids, RATE, foot)
         origin = root[0].copy()
         conf = np.exp(-np.concatenate([[0.0], drift]) / DRIFT_SCALE)
         conf = np.minimum(conf, np.concatenate([conf[1:], [1.0]]))  # a footfall ends two

@@ -68,6 +68,7 @@ from imuloco.core.recording import Recording
 from imuloco.errors import InputError
 from imuloco.ops.filters import gaussian_smooth, resample_linear
 from imuloco.ops.rotations import from_matrix, qinv, qmul, qrot
+from imuloco.sensors.foottrack import NoWalking, foot_track
 from imuloco.sensors.noise import G
 from imuloco.sensors.placement import PRESETS
 
@@ -211,8 +212,6 @@ def _leg_mounting(rec: Recording, k: int, min_still_s: float) -> Mounting:
 
 def _foot_mounting(rec: Recording, k: int, min_still_s: float = 1.0) -> Mounting:
     """Rotation from a shoe sensor's axes to the foot's anatomical frame (module docstring)."""
-    from imuloco.sensors.foottrack import NoWalking, foot_track
-
     name = rec.placements[k]
     try:
         track = foot_track(rec.times, rec.acc[:, k], rec.gyro[:, k])

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 from imuloco.viz.plots import _figure, _save
 
@@ -32,8 +33,6 @@ def _feet(strides: Sequence[dict]) -> list[str]:
 def plot_strides(strides: Sequence[dict], path: str | Path, overwrite: bool = False) -> Path:
     """Stride length (m) and cadence (steps/min, 120 / stride duration) of every stride
     against its start time, per foot, with a running median over 9 strides."""
-    from scipy.ndimage import median_filter
-
     fig = _figure(9, 4.8)
     top, bottom = fig.subplots(2, 1, sharex=True)
     for foot in _feet(strides):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import datetime
 import ipaddress
 import tempfile
+from io import StringIO
 from pathlib import Path
 
 import psutil
@@ -51,8 +52,6 @@ def shown_host(host: str) -> str:
 
 def qr_text(url: str) -> str:
     """``url`` as a QR code drawn with block characters, for a terminal (dark on light)."""
-    from io import StringIO
-
     out = StringIO()
     segno.make(url, error="l").terminal(out, compact=True, border=2)
     return out.getvalue()

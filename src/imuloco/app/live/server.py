@@ -66,8 +66,9 @@ from websockets.protocol import State
 
 from imuloco.app.live.session import MAX_GAP_S, LiveSession, TokenBucket, frames_to_json
 from imuloco.errors import FormatError, InputError
-from imuloco.sensors.reallog import MAX_ABS_TIME, MAX_VALUE
+from imuloco.sensors.reallog import MAX_ABS_TIME, MAX_VALUE, read_log
 from imuloco.viz.html import inline_stickfigure
+from imuloco.viz.skeleton import joint_sides
 
 log = logging.getLogger(__name__)
 
@@ -140,8 +141,6 @@ class LimitExceeded(Exception):
 def skeleton_message(method) -> dict:
     """What a viewer needs to draw the method's skeleton: ``parents``, ``sides``, the ``head``
     joint and the model's ``fps``, ``method`` and ``placements``."""
-    from imuloco.viz.skeleton import joint_sides
-
     sk = method.skeleton_
     try:
         head = sk.part("head")
@@ -589,8 +588,6 @@ class LiveServer:
                      speed: float = 1.0, loop: bool = False) -> None:
         """Stream a recorded log (any format :func:`imuloco.sensors.reallog.read_log` reads)
         at ``speed`` times real time, as a phone would."""
-        from imuloco.sensors.reallog import read_log
-
         rec, _ = read_log(path, placement=placement, fmt=fmt, rate=None)
         rec = rec.select(self.method.placements_)
         rows = np.concatenate([rec.times[:, None], rec.channels()], axis=1)

@@ -29,6 +29,7 @@ from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import about_y, qmul, qrot
 from imuloco.paths.live import RootFollower, StrideStream
 from imuloco.paths.registry import ESTIMATORS
+from imuloco.sensors.calibration import calibrate, mounting_of
 from imuloco.sensors.placement import get_placement
 
 log = logging.getLogger(__name__)
@@ -351,8 +352,6 @@ class LiveSession:
         self._join = self._recent[-1][0] if self._recent else None
 
     def _calibrate(self, final: bool = False) -> bool:
-        from imuloco.sensors.calibration import calibrate, mounting_of
-
         raw, s = self._raw[:self._n], self.num_sensors
         t = raw[:, 0]
         rec = Recording(t, raw[:, 1:1 + 3 * s].reshape(-1, s, 3),
