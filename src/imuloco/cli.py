@@ -386,6 +386,12 @@ def _folders(values: tuple[str, ...], hint: str = "--data") -> list[Path] | None
               help="Run the speed benchmark (imuloco.lab.speed) instead.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
+@click.option("--reconstruct", "reconstruct_row", is_flag=True,
+              help="With --speed: time `imuloco reconstruct --report` per shipped placement "
+                   "and length instead (one thread and the default; wall, CPU, real-time "
+                   "factor, peak memory); writes reconstruct_speed.md and .json.")
+@click.option("--lengths", default="60,600,3600", show_default=True,
+              help="With --speed --reconstruct: recording lengths in seconds, comma separated.")
 @click.option("--fuzz", type=click.IntRange(1), default=None, metavar="N",
               help="Instead: read N generated malformed inputs per reader (imuloco.lab."
                    "fuzz) and write fuzz.md and fuzz.json.")
@@ -413,8 +419,23 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
           test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
           fold_names: str | None, speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None,
           batch_walkers: int | None, load_dirs: tuple[str, ...], against: str | None,
-          real_dir: Path | None, baseline: bool, up: str, skip_frames: int) -> None:
+          real_dir: Path | None, baseline: bool, up: str, skip_frames: int,
+          reconstruct_row: bool = False, lengths: str = "60,600,3600") -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
+    if speed and reconstruct_row:
+        from imuloco.lab.speed import reconstruct_speed, reconstruct_table
+
+        try:
+            seconds = [float(v) for v in _csv(lengths)]
+        except ValueError:
+            seconds = []
+        if not seconds or not all(0 < v < float("inf") for v in seconds):
+            raise click.BadParameter(f"expected positive seconds, comma separated, got "
+                                     f"{lengths!r}", param_hint="--lengths")
+        click.echo(reconstruct_table(reconstruct_speed(seconds, against=against, out=out,
+                                                       progress=True)))
+        click.echo(f"wrote {out / 'reconstruct_speed.json'} and .md")
+        return
     if fuzz is not None:
         from imuloco.lab.fuzz import READERS, write_fuzz
 
