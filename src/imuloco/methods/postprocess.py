@@ -3,6 +3,7 @@ Laplacian smoothing, a centred Gaussian window over frames (offline and online).
 
 from __future__ import annotations
 
+import sys
 from importlib.util import find_spec
 
 import numpy as np
@@ -123,7 +124,7 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
         None: a flat foot keeps the pitch it lands with.
     engine : ``numba`` runs the frame loop compiled (:mod:`imuloco.methods.lockcompiled`),
         ``numpy`` as :meth:`FootLock.run` (the same to rounding); ``auto``: numba when
-        installed.
+        installed and the motion long enough to pay its loading (:func:`resolve_engine`).
     """
     if motion.num_frames < 2:
         return motion
@@ -132,7 +133,7 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
     heel, toe = np.asarray(heel, dtype=np.float64), np.asarray(toe, dtype=np.float64)
     legs = lock.legs(motion.rotations, motion.root)
     feet = legs[1][:, lock.sub_feet]
-    if resolve_engine(engine) == "numba":
+    if resolve_engine(engine, motion.num_frames) == "numba":
         from imuloco.methods.lockcompiled import lock_targets  # the optional numba extra
 
         targets, turns = lock_targets(
@@ -147,15 +148,22 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
 
 
 ENGINES = ("auto", "numba", "numpy")
+# ``auto`` compiles from this many frames on: loading numba and the cached kernel costs ~0.4 s
+# of CPU and ~100 MB of memory (LLVM) once a process, the numpy loop ~0.1 ms a frame (5 min
+# at 30 fps: ~1 s)
+NUMBA_FRAMES = 9000
 
 
-def resolve_engine(engine: str) -> str:
-    """``auto`` -> ``numba`` when numba is installed (the ``fast`` extra), else ``numpy``;
-    checks the name."""
+def resolve_engine(engine: str, frames: int = NUMBA_FRAMES) -> str:
+    """``auto`` -> ``numba`` when numba is installed (the ``fast`` extra) and either ``frames``
+    is at least :data:`NUMBA_FRAMES` or the kernel is already loaded in this process (a batch
+    worker pays its loading once), else ``numpy``; checks the name."""
     if engine not in ENGINES:
         raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     if engine == "auto":
-        return "numba" if find_spec("numba") is not None else "numpy"
+        loaded = "imuloco.methods.lockcompiled" in sys.modules
+        worth = loaded or frames >= NUMBA_FRAMES
+        return "numba" if worth and find_spec("numba") is not None else "numpy"
     return engine
 
 
