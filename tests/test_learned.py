@@ -432,6 +432,35 @@ def test_stacked_members_equal_their_modules():
                                    atol=1e-5)
 
 
+def test_a_long_sequence_runs_each_member_once_with_the_stacked_result():
+    """Past STACKED_FRAMES frames an ensemble in inference runs each member's own GRU over the
+    whole sequence (one call each): the stacked weights' outputs and state to float
+    precision."""
+    from imuloco.methods.learned.model import STACKED_FRAMES
+
+    torch.manual_seed(1)
+    net = Ensemble.of_size(3, 6, 34, hidden=16, layers=2).eval()
+    x, h = torch.randn(2, 3 * STACKED_FRAMES, 6), 0.5 * torch.randn(6, 2, 16)
+    with torch.no_grad():
+        feats, hn = net.encode(x, h)
+        stacked = net._weights().encode(x, h)
+    np.testing.assert_allclose(feats.numpy(), stacked[0].numpy(), atol=1e-5)
+    np.testing.assert_allclose(hn.numpy(), stacked[1].numpy(), atol=1e-5)
+
+
+def test_member_spread_in_pieces_is_the_spread_in_one(sample_db, monkeypatch):
+    from imuloco.methods.learned import ensemble as ens
+
+    sk = sample_db.clips[0].skeleton
+    rng = np.random.default_rng(0)
+    vectors = rng.normal(0, 1, (50, 4, 6 * sk.num_joints + 4))
+    monkeypatch.setattr(ens, "SPREAD_FRAMES", 7)
+    pieces = ens.member_spread(vectors, sk)
+    monkeypatch.setattr(ens, "SPREAD_FRAMES", 1000)
+    np.testing.assert_array_equal(pieces, ens.member_spread(vectors, sk))
+    assert pieces.shape == (50,) and (pieces > 0).all()
+
+
 def test_an_ensemble_file_round_trip_and_mirror(tiny_ensemble, sample_db, test_signals,
                                                 tmp_path):
     model, _other = tiny_ensemble
