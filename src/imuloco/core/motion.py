@@ -87,6 +87,10 @@ class Motion:
             cache[name] = (key, compute())
         return cache[name][1]
 
+    def __getstate__(self) -> dict:
+        """Pickled (a batch's workers, copies) without what :meth:`kept` holds."""
+        return {k: v for k, v in self.__dict__.items() if k != "_kept"}
+
     def _fk_key(self) -> tuple:
         """What the kept fk depends on: the arrays' identities and a digest of their bytes."""
         arrays = (self.rotations, self.root, self.skeleton.offsets, self.skeleton.parents)
