@@ -585,3 +585,22 @@ def test_a_model_keeps_the_pitch_of_a_flat_foot_it_learned(sample_db, tiny_model
         np.savez(path, **data)
         with pytest.raises(ModelFileError, match=r"old\.npz.*flat_pitch"):
             load_model(path)
+
+
+def test_novelty_in_pieces_is_the_novelty_in_one(monkeypatch):
+    """The novelty's distances go NOVELTY_FRAMES frames at a time: the same smoothed novelty
+    (the shipped ensemble's reference, features drawn around it) as in one product."""
+    from imuloco.app.pipeline import shipped_model
+    from imuloco.methods import load_model
+    from imuloco.methods.learned import confidence
+
+    model = load_model(shipped_model("learned", "right_ankle"))
+    rng = np.random.default_rng(0)
+    feats = (model.novelty_mean_ + rng.normal(0, 0.3, (5000, len(model.novelty_mean_))))
+    monkeypatch.setattr(confidence, "NOVELTY_FRAMES", 10**9)
+    one = model._novelty(feats)
+    monkeypatch.setattr(confidence, "NOVELTY_FRAMES", 2048)
+    np.testing.assert_allclose(model._novelty(feats.astype(np.float32)),
+                               model._novelty(feats.astype(np.float32).astype(np.float64)),
+                               rtol=0, atol=0)
+    np.testing.assert_allclose(model._novelty(feats), one, rtol=1e-12)

@@ -343,7 +343,7 @@ class Learned(ConfidenceMixin, MirrorMixin, Method):
         with torch.no_grad():
             feats, _ = self.net_.encode(self._inputs(signals)[None])
             p, logit, logvar, members = self._heads(feats)
-        novelty = self._novelty(feats[0].numpy().astype(np.float64))
+        novelty = self._novelty(feats[0].numpy())  # float64 a piece at a time
         return self._outputs(p[0, k:], logit[0, k:], logvar[0, k:], novelty[k:],
                              None if members is None else members[0, k:])
 
