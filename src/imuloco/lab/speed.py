@@ -469,7 +469,7 @@ def reconstruct_speed(lengths_s: Sequence[float] = RECONSTRUCT_LENGTHS,
         if against is not None:
             codes.append((against, checkout(against, tmp / "old")))
         try:
-            runs = [(p, s, t) for p in placements for s in lengths_s for t in threads]
+            runs = [(p, s, t) for s in lengths_s for p in placements for t in threads]
             for placement, seconds, thread in tqdm(runs, desc="reconstruct speed",
                                                    disable=not progress):
                 log = walk_log(placement, seconds, tmp / f"{placement}-{seconds:g}.csv")
@@ -486,18 +486,21 @@ def reconstruct_speed(lengths_s: Sequence[float] = RECONSTRUCT_LENGTHS,
                         r["max_diff_cm"] = bvh_difference(bvhs[0], bvh)
                     bvhs.append(bvh)
                     records.append(r)
+                    if out is not None:  # after every run: a stopped bench keeps its rows
+                        _write_reconstruct(records, Path(out))
                 log.unlink()
         finally:
             if against is not None:
                 remove_checkout(tmp / "old")
-    if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        with atomic_write(out / "reconstruct_speed.json", "w") as f:
-            f.write(json.dumps(records, indent=1) + "\n")
-        with atomic_write(out / "reconstruct_speed.md", "w") as f:
-            f.write(reconstruct_table(records) + "\n")
     return records
+
+
+def _write_reconstruct(records: list[dict[str, Any]], out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_write(out / "reconstruct_speed.json", "w") as f:
+        f.write(json.dumps(records, indent=1) + "\n")
+    with atomic_write(out / "reconstruct_speed.md", "w") as f:
+        f.write(reconstruct_table(records) + "\n")
 
 
 def reconstruct_table(records: list[dict[str, Any]]) -> str:
