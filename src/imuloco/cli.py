@@ -1101,13 +1101,17 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
                    "phone asks once to accept it); instead of --cert/--key.")
 @click.option("--allow-origin", "allow_origins", multiple=True, metavar="ORIGIN",
               help="Also accept browsers on this origin (https://host:port); repeatable.")
+@click.option("--vmc", "vmc", metavar="HOST[:PORT]", default=None,
+              help="Also send every pose over the VMC protocol (OSC/UDP; port 39539 by "
+                   "default) to VSeeFace, VMC4B (Blender), EVMC4U (Unity), ...")
 @height_option
 def live(host: str, port: int, model_path: Path | None, method_name: str | None,
          placement: str, calibrate_seconds: float, replay: Path | None, fmt: str, speed: float,
          loop: bool, certfile: str | None, keyfile: str | None, self_signed: bool,
-         allow_origins: tuple[str, ...], height: float | None) -> None:
+         allow_origins: tuple[str, ...], vmc: str | None, height: float | None) -> None:
     """Watch a walker live: a phone on the leg streams its sensors (open /phone on it), a
-    browser shows the reconstruction as it walks (open /live). Ctrl-C stops."""
+    browser shows the reconstruction as it walks (open /live); --vmc also sends it to a VMC
+    protocol receiver (Unity HumanBodyBones, T-pose rest). Ctrl-C stops."""
     import asyncio
     import tempfile
 
@@ -1116,17 +1120,20 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
     try:  # the [live] extra
         from imuloco.app.live import lan
         from imuloco.app.live.server import LiveServer, configure_logging, run, ssl_context
+        if vmc is not None:
+            from imuloco.app.live.vmc import parse_address
     except ModuleNotFoundError as e:
-        if e.name not in ("websockets", "segno", "psutil", "cryptography"):
+        if e.name not in ("websockets", "segno", "psutil", "cryptography", "pythonosc"):
             raise
         raise MissingExtraError("live mode", e.name, "live") from None
     from imuloco.app.pipeline import choose_model
 
     if self_signed and certfile:
         raise click.UsageError("--https makes its own certificate: drop --cert/--key")
+    vmc_to = None if vmc is None else parse_address(vmc)  # before the model loads
     choice = choose_model(method_name, model_path, placement, progress=True)
     server = LiveServer(choice.method, calibrate_seconds, choice.description,
-                        allow_origins=allow_origins, height_m=height)
+                        allow_origins=allow_origins, height_m=height, vmc=vmc_to)
     shown = lan.shown_host(host)
     with tempfile.TemporaryDirectory(prefix="imuloco-live-") as tmp:  # the session's key
         if self_signed:
@@ -1136,6 +1143,9 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
 
         def started(srv: LiveServer) -> None:
             click.echo(f"model: {choice}", err=True)
+            if srv.vmc is not None:
+                click.echo(f"vmc:    sending poses to {srv.vmc.host}:{srv.vmc.port} (OSC/UDP)",
+                           err=True)
             urls = srv.urls(shown)
             click.echo(f"viewer: {urls['live']}\nphone:  {urls['phone']}" +
                        ("" if host != "127.0.0.1" else "  (--host 0.0.0.0 for a phone on the "

@@ -24,6 +24,7 @@ from imuloco.core.rigs import (
     measure_rest,
     tpose_rest,
 )
+from imuloco.core.skeleton import Skeleton
 from imuloco.errors import InputError, UnknownNameError
 from imuloco.io.bvh import write_bvh
 from imuloco.io.database import load_sample
@@ -64,12 +65,20 @@ def _sample_rest() -> tuple[Rig, np.ndarray]:
     return rig, tpose_rest(rig)
 
 
+def sample_rest(skeleton: Skeleton) -> np.ndarray | None:
+    """The bundled sample's T-pose rest (J, 4) when ``skeleton`` is of its rig family
+    (:func:`imuloco.core.retarget.same_family`), else None: a rest known before any pose
+    (the live mode's)."""
+    rig, rest = _sample_rest()
+    return rest if same_family(skeleton, rig.skeleton) else None
+
+
 def rest_of(motion: Motion) -> np.ndarray:
     """The T-pose rest (J, 4) of ``motion``'s skeleton (:func:`imuloco.core.rigs.tpose_rest`):
-    the bundled sample's when the skeleton is of its rig family
-    (:func:`imuloco.core.retarget.same_family`), else measured on ``motion`` itself."""
-    rig, rest = _sample_rest()
-    return rest if same_family(motion.skeleton, rig.skeleton) else measure_rest(motion)
+    the bundled sample's when the skeleton is of its rig family (:func:`sample_rest`), else
+    measured on ``motion`` itself."""
+    rest = sample_rest(motion.skeleton)
+    return measure_rest(motion) if rest is None else rest
 
 
 def write_reconstruction(motion: Motion, path: str | Path, rig: str | None = DEFAULT_RIG,

@@ -259,12 +259,20 @@ class LiveServer:
         :meth:`start` binds an address off loopback).
     height_m : the wearer's body height in metres: poses in their proportions (``None``: the
         model skeleton's).
+    vmc : (host, port) of a VMC protocol receiver every frame is also sent to
+        (:mod:`imuloco.app.live.vmc`; ``None``: none).
     """
 
     def __init__(self, method, calibrate_s: float = 5.0, note: str = "", token: str | None = None,
                  allow_origins: Iterable[str] = (), limits: Limits = Limits(),
-                 require_token: bool | None = None, height_m: float | None = None) -> None:
+                 require_token: bool | None = None, height_m: float | None = None,
+                 vmc: tuple[str, int] | None = None) -> None:
         probe = LiveSession(method, calibrate_s, height_m=height_m)  # fails early: offline
+        self.vmc = None
+        if vmc is not None:  # python-osc (the [live] extra) is needed for --vmc only
+            from imuloco.app.live.vmc import VmcSender
+
+            self.vmc = VmcSender(probe.skeleton, method.fps_, *vmc)
         self.height_m = height_m
         self.method = method
         self.calibrate_s = calibrate_s
@@ -498,6 +506,8 @@ class LiveServer:
                     "type": "calibrated", "rotations": c.rotations.tolist(), "samples": c.samples,
                     "seconds": round(c.seconds, 3), "details": c.details})))
             out += [("pose", json.dumps(m, separators=(",", ":"))) for m in frames_to_json(got)]
+            if self.vmc is not None:
+                self.vmc.send(got)
             frames += len(got)
         if s.dropouts > dropouts:
             log.info("%d dropout(s) over %g s without samples: the model restarted, the walker "
@@ -628,6 +638,8 @@ class LiveServer:
             self.server.close()
             await self.server.wait_closed()
         self._worker.shutdown(wait=True)
+        if self.vmc is not None:
+            self.vmc.close()
 
 
 def ssl_context(certfile: str | Path, keyfile: str | Path | None = None) -> ssl_module.SSLContext:
