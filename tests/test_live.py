@@ -81,7 +81,7 @@ def test_kernel_resample_follows_a_smooth_signal_and_bridges_gaps():
 
 def test_session_calibrates_then_streams_the_offline_reconstruction(fitted, phone):
     times, acc, gyro = phone
-    s = LiveSession(fitted, calibrate_s=CALIB_S)
+    s = LiveSession(fitted, calibrate_s=CALIB_S, follow_path=False)  # the model's own root
     frames = []
     for i in range(len(times)):
         out = s.push(times[i], acc[i], gyro[i])
@@ -112,7 +112,8 @@ def test_session_streams_in_the_wearers_height(fitted, phone):
     from imuloco.measures.gait import stature, to_height
 
     times, acc, gyro = phone
-    server = LiveServer(fitted, calibrate_s=CALIB_S, height_m=1.55)  # not listening
+    server = LiveServer(fitted, calibrate_s=CALIB_S, height_m=1.55,
+                        follow_path=False)  # not listening; the model's own root
     server.start_session()
     s = server.session
     assert "1.55 m tall" in server._hello and stature(s.skeleton) == pytest.approx(1.55)
@@ -152,7 +153,7 @@ class _Late:
 
 def test_session_labels_a_late_streams_frames_by_the_frame_they_show(fitted, phone):
     times, acc, gyro = phone
-    s = LiveSession(_Late(fitted), calibrate_s=0)
+    s = LiveSession(_Late(fitted), calibrate_s=0, follow_path=False)  # the model's own root
     frames = [f for i in range(len(times)) for f in s.push(times[i], acc[i], gyro[i])]
     signals = offline_frames(times, acc, gyro, fitted.fps_)
     offline = fitted.reconstruct_signals(signals).positions()
@@ -181,7 +182,7 @@ async def _stream_through_server(fitted, phone, n_samples: int, timeout: float =
 
     times, acc, gyro = phone
     rows = np.concatenate([times[:n_samples, None], acc[:n_samples, 0], gyro[:n_samples, 0]], 1)
-    server = LiveServer(fitted, calibrate_s=CALIB_S)
+    server = LiveServer(fitted, calibrate_s=CALIB_S, follow_path=False)  # the model's root
     await server.start("127.0.0.1", 0)
     base = f"ws://127.0.0.1:{server.port}"
     poses, seen, calibration = [], [], None

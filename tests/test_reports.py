@@ -14,7 +14,7 @@ from imuloco.sensors.simulate import simulate
 
 # the report's keys as `imuloco reconstruct --report` and batch's NAME.json have written them
 REPORT_KEYS = ["recording", "calibration", "feet_pinned_by", "method", "model", "placement",
-               "motion", "height_m", "gait", "gait_source", "gait_note", "strides",
+               "sensors", "motion", "height_m", "gait", "gait_source", "gait_note", "strides",
                "signal_cadence_spm", "signal_swing_deg", "plausibility", "path", "confidence",
                "seconds"]
 PATH_KEYS = ["source", "note", "distance_m", "strides", "stride_length_m", "animation",

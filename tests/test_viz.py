@@ -14,6 +14,7 @@ pytest.importorskip("imageio_ffmpeg")
 from imuloco.core.motion import Motion
 from imuloco.viz.html import viewer_data, viewer_html, write_viewer
 from imuloco.viz.skeleton import (
+    LEGEND_PX,
     StickRenderer,
     camera_axes,
     frame_strip,
@@ -57,9 +58,9 @@ def test_renderer_draws_a_moving_figure(walk):
     r = StickRenderer([walk, walk], ["a", "b"], panel_size=(160, 192))
     a, b = r.frame(0), r.frame(20)
     assert a.shape == (192, 320, 3) and a.dtype == np.uint8
-    # both panels draw the same motion: the same halves but for anti-aliasing at sub-pixel
-    # offsets and the clock in the corner
-    assert np.mean(np.any(a[20:, :160] != a[20:, 160:], axis=-1)) < 0.02
+    # both panels draw the same motion: the same halves (below the titles and the clock,
+    # above the legend's row across both) but for anti-aliasing at sub-pixel offsets
+    assert np.mean(np.any(a[20:-LEGEND_PX, :160] != a[20:-LEGEND_PX, 160:], axis=-1)) < 0.02
     # the legs moved between the two frames
     assert np.count_nonzero(np.any(a != b, axis=-1)) > 100
     # the left side is drawn in blue, the right in red

@@ -157,7 +157,9 @@ def received(fitted, sample_db, tmp_path_factory):
     osc.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
     thread = threading.Thread(target=osc.serve_forever, daemon=True)
     thread.start()
-    server = LiveServer(fitted, calibrate_s=CALIB_S, vmc=("127.0.0.1", osc.server_address[1]))
+    # the model's own root (follow_path=False): compared with the offline reconstruction below
+    server = LiveServer(fitted, calibrate_s=CALIB_S, vmc=("127.0.0.1", osc.server_address[1]),
+                        follow_path=False)
     try:
         asyncio.run(asyncio.wait_for(server.replay(path, speed=25.0), 60))
         for _ in range(100):  # until the receiver has them all (or 2 s)

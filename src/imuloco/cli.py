@@ -5,22 +5,31 @@ Errors the user can cause are the library's (:mod:`imuloco.errors`); :class:`Com
 any of them into one ``Error: ...`` line. Options several commands share are declared once
 below. A command that writes one file takes ``-o FILE``, one that writes a folder ``--out DIR``.
 
-Importing this module imports click and the standard library only (``imuloco --help`` and
-``imuloco methods`` stay fast); each command imports what it needs.
+Importing this module and building any command's ``--help`` imports click, the standard
+library and the few light modules imported below, never numpy, scipy or the methods
+(``imuloco reconstruct --help`` took 1.9 s for its help texts' sake;
+``tests/test_cli_startup.py`` checks it). Each command imports the heavy modules it needs when
+it runs.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
+import sys
+import tempfile
 from collections.abc import Callable
+from importlib import import_module
 from pathlib import Path
 from typing import Any
 
 import click
 
-from imuloco.errors import ImulocoError
-from imuloco.io.atomic import FULL
+from imuloco.app.console import console
+from imuloco.core.bodymap import PARTS
+from imuloco.errors import ImulocoError, InputError, MissingExtraError, UnknownNameError
+from imuloco.io.atomic import FULL, atomic_write, check_output, check_outputs
 
 
 class Commands(click.Group):
@@ -30,8 +39,6 @@ class Commands(click.Group):
     writing FILE``)."""
 
     def invoke(self, ctx: click.Context) -> Any:
-        from imuloco.app.console import console  # the warning channel: on the CLI only
-
         with console():  # warnings on their own lines, each kind once
             try:
                 return super().invoke(ctx)
@@ -48,8 +55,6 @@ class Commands(click.Group):
 
 def _end_progress_bars() -> None:
     """Close the progress bars an error interrupted, so that the error starts a new line."""
-    import sys
-
     tqdm = sys.modules.get("tqdm.std")
     if tqdm is not None:  # a bar can only be open when tqdm was imported
         for bar in list(getattr(tqdm.tqdm, "_instances", ())):
@@ -71,33 +76,47 @@ def _options(*decorators: Callable) -> Callable:
     return apply
 
 
-class _LogFormat(click.Choice):
-    """``auto`` or one of :data:`imuloco.io.logformats.FORMATS`, read on first use (importing
-    sensorlog, hence numpy, at start-up would slow down ``imuloco --help``)."""
+# What --help shows of the library's names and limits while their modules are not loaded:
+# importing those modules for a help text loaded numpy and scipy (seconds, issue #43). The
+# library stays the one source: a value given is checked once the option's module is
+# imported, --help shows the module's own value once it is loaded, and
+# tests/test_cli_startup.py checks these copies against the library.
+_SHOWN: dict[tuple[str, str], Any] = {
+    ("imuloco.io.logformats", "FORMATS"): ("generic", "realworld", "phyphox", "sensorlogger",
+                                           "xsens"),
+    ("imuloco.core.rigs", "RIG_NAMES"): ("bvh-default", "mixamo", "unreal", "unity", "model"),
+    ("imuloco.measures.gait", "MIN_HEIGHT_M"): 0.5,
+    ("imuloco.measures.gait", "MAX_HEIGHT_M"): 2.6,
+    ("imuloco.sensors.reallog", "MIN_RATE"): 5.0,
+    ("imuloco.sensors.reallog", "MAX_RATE"): 10000.0,
+    ("imuloco.app.live.session", "MIN_CALIBRATE_S"): 0.0,
+    ("imuloco.app.live.session", "MAX_CALIBRATE_S"): 60.0,
+}
 
-    def __init__(self) -> None:
-        self.case_sensitive = True
 
-    @property
-    def choices(self) -> tuple[str, ...]:  # type: ignore[override]
-        from imuloco.io.logformats import FORMATS
-
-        return ("auto", *FORMATS)
+def _library(module: str, attr: str) -> Any:
+    """``module.attr`` when ``module`` is loaded, else its copy in :data:`_SHOWN`."""
+    loaded = sys.modules.get(module)
+    return _SHOWN[module, attr] if loaded is None else getattr(loaded, attr)
 
 
 class _LibraryChoice(click.Choice):
-    """One of a library ``module``'s names (the tuple constant ``attr``), read on first use as
-    :class:`_LogFormat` reads its choices."""
+    """``also`` or one of a library ``module``'s names (its tuple constant ``attr``), e.g. the
+    log formats of :data:`imuloco.io.logformats.FORMATS`; the module is imported to check a
+    value (see :data:`_SHOWN`)."""
 
-    def __init__(self, module: str, attr: str) -> None:
-        self.module, self.attr = module, attr
+    def __init__(self, module: str, attr: str, also: tuple[str, ...] = ()) -> None:
+        self.module, self.attr, self.also = module, attr, also
         self.case_sensitive = True
 
     @property
     def choices(self) -> tuple[str, ...]:  # type: ignore[override]
-        from importlib import import_module
+        return (*self.also, *_library(self.module, self.attr))
 
-        return tuple(getattr(import_module(self.module), self.attr))
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> Any:
+        import_module(self.module)  # the library's own names
+        return super().convert(value, param, ctx)
 
 
 class _Range(click.FloatRange):
@@ -106,8 +125,6 @@ class _Range(click.FloatRange):
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
                 ) -> Any:
-        import math
-
         number = super().convert(value, param, ctx)
         if not math.isfinite(number):
             self.fail(f"{value!r} is not a finite number", param, ctx)
@@ -116,8 +133,9 @@ class _Range(click.FloatRange):
 
 class _LibraryRange(_Range):
     """A finite number between two constants of a library ``module`` (``low`` and ``high``
-    name them), read on first use as :class:`_LogFormat` reads its choices: e.g. a sampling
-    rate ``read_log`` accepts (:data:`imuloco.sensors.reallog.MIN_RATE` to ``MAX_RATE``)."""
+    name them), e.g. a sampling rate ``read_log`` accepts
+    (:data:`imuloco.sensors.reallog.MIN_RATE` to ``MAX_RATE``); the module is imported to
+    check a value (see :data:`_SHOWN`)."""
 
     def __init__(self, module: str, low: str, high: str) -> None:
         self.module, self.low, self.high = module, low, high
@@ -125,15 +143,16 @@ class _LibraryRange(_Range):
 
     @property
     def min(self) -> float:  # type: ignore[override]
-        from importlib import import_module
-
-        return getattr(import_module(self.module), self.low)
+        return _library(self.module, self.low)
 
     @property
     def max(self) -> float:  # type: ignore[override]
-        from importlib import import_module
+        return _library(self.module, self.high)
 
-        return getattr(import_module(self.module), self.high)
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> Any:
+        import_module(self.module)  # the library's own limits
+        return super().convert(value, param, ctx)
 
 
 def _existing_file(**kw: Any) -> click.Path:
@@ -159,7 +178,7 @@ NOISES = ("clean", "phone", "imu")
 def _placements(ctx: click.Context, param: click.Parameter, value: str) -> str:
     """``--placement`` as given, once it names at least one preset (``,`` named none and
     failed in numpy), each known (an unknown one was found only after the data was read)."""
-    from imuloco.sensors.placement import get_placement
+    from imuloco.sensors.placement import get_placement  # heavy (numpy, scipy): on use
 
     if not _csv(value):
         raise click.BadParameter(f"expected placement preset(s), got {value!r}")
@@ -201,7 +220,8 @@ log_options = _options(
                  help="Where the phone was worn (placement preset): right_ankle or "
                       "left_ankle for a shin, right_foot or left_foot for a shoe IMU, "
                       "lower_back at L5 (these three need the [gait] extra)."),
-    click.option("--format", "fmt", default="auto", show_default=True, type=_LogFormat(),
+    click.option("--format", "fmt", default="auto", show_default=True,
+                 type=_LibraryChoice("imuloco.io.logformats", "FORMATS", also=("auto",)),
                  help="Sensor log format."),
 )
 platform_option = click.option(
@@ -231,10 +251,37 @@ columns_option = click.option(
          "the time unit are detected).")
 
 
+def _parse_sensors(ctx: click.Context, param: click.Parameter, values: tuple[str, ...]
+                   ) -> list[tuple[str, Path]]:
+    """``--sensor PLACEMENT=FILE`` (repeatable) as (placement, file) pairs, each file
+    existing, before any work (:func:`imuloco.sensors.multi.parse_sensor`)."""
+    if not values:
+        return []
+    from imuloco.sensors.multi import parse_sensor  # numpy, scipy: on use (--help stays fast)
+
+    out = []
+    for v in values:
+        try:
+            name, file = parse_sensor(v)
+        except ImulocoError as e:
+            raise click.BadParameter(str(e), param_hint="--sensor") from None
+        if not file.exists():
+            raise click.BadParameter(f"{file}: no such file or folder", param_hint="--sensor")
+        out.append((name, file))
+    return out
+
+
+sensor_option = click.option(
+    "--sensor", "sensors", multiple=True, metavar="PLACEMENT=FILE", callback=_parse_sensors,
+    help="A further sensor's log (repeatable), e.g. left_wrist=watch.csv: put on the "
+         "recording's clock by Unix timestamps, else by a stomp at the start (stand still, "
+         "stomp twice); the shipped model reading all the sensors is chosen.")
+
+
 def _parse_columns(value: str | None) -> dict[str, str] | None:
     """``--columns`` as a mapping (:func:`imuloco.io.sensorlog.parse_columns`), before any
     work."""
-    from imuloco.io.sensorlog import parse_columns
+    from imuloco.io.sensorlog import parse_columns  # heavy (numpy): on use
 
     return parse_columns(value) if value else None
 
@@ -271,8 +318,7 @@ def _units_option(f):
 @_reading_options
 def info(file: Path, as_json: bool, up: str, skip_frames: int) -> None:
     """Joints, frames, fps, duration and the body map found for a motion FILE."""
-    from imuloco.core.bodymap import PARTS
-    from imuloco.io.motionfile import read_motion
+    from imuloco.io.motionfile import read_motion  # heavy: on use, so that --help stays fast
 
     motion = read_motion(file, up=up, skip_frames=skip_frames)
     sk = motion.skeleton
@@ -299,6 +345,7 @@ def info(file: Path, as_json: bool, up: str, skip_frames: int) -> None:
 @_reading_options
 def phases(motion_file: Path, as_json: bool, reference: str, up: str, skip_frames: int) -> None:
     """Per-frame foot contacts and gait phases, and step events, of a MOTION file."""
+    # heavy: on use, so that --help stays fast
     from imuloco.io.motionfile import read_motion
     from imuloco.phases import gait_phases
 
@@ -323,8 +370,7 @@ def phases(motion_file: Path, as_json: bool, reference: str, up: str, skip_frame
 @cli.command()
 def methods() -> None:
     """List the reconstruction methods with one line each (without importing them)."""
-    from imuloco.methods.registry import describe, method_names
-
+    from imuloco.methods.registry import describe, method_names  # 50 ms (ast): on use
     found = [describe(name) for name in method_names()]
     width = max(len(m.name) for m in found)
     for m in found:
@@ -359,72 +405,128 @@ def _folders(values: tuple[str, ...], hint: str = "--data") -> list[Path] | None
     return folders or None
 
 
-@cli.command()
-@click.option("--method", "method_names", default=None,
-              help="Method name(s), comma separated (see `imuloco methods`); a variant as "
-                   "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm] [required "
-                   "but with --batch, which defaults to the shipped model].")
-@click.option("--split", "split_name",
-              type=click.Choice([*SPLITS, "heldout-contents", "cross-dataset",
-                                 "heldout-actions"]),
-              default="random-clips", show_default=True,
-              help="Protocol (imuloco.lab.protocols); cross-dataset takes --train/--test.")
+class _Bench(click.Group):
+    """``imuloco bench SUBCOMMAND``. The single command ``bench`` was keeps working: an
+    invocation that starts with an option other than ``--help`` (``bench --method M --out
+    DIR``, ``bench --speed ...``, ``--fuzz N``, ``--real DIR``, ``--batch N``, ``--load DIR``)
+    runs the hidden :data:`_OLD` command, which takes the old options and invokes the
+    subcommand they name; ``bench --help`` lists those options after the subcommands."""
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        if args and args[0].startswith("-") and args[0] not in ctx.help_option_names:
+            args = [_OLD, *args]
+        return super().parse_args(ctx, args)
+
+    def format_options(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        super().format_options(ctx, formatter)
+        old = self.commands[_OLD]
+        with formatter.section("Options of the single-command spelling"):
+            formatter.write_text("imuloco bench OPTIONS, as before the subcommands: the "
+                                 "protocol bench (run), or --speed, --fuzz N, --real DIR, "
+                                 "--batch N or --load DIR.")
+            formatter.write_paragraph()
+            formatter.write_dl([p.get_help_record(ctx) for p in old.params])
+
+
+_OLD = "single"  # the hidden command of the old spelling
+
+
+class _OldContext(click.Context):
+    @property
+    def command_path(self) -> str:
+        return self.parent.command_path if self.parent else super().command_path
+
+
+class _OldCommand(click.Command):
+    """The old spelling's command: its usage lines and errors say ``imuloco bench``, as
+    before, not the hidden command's name."""
+
+    context_class = _OldContext
+
+
+@cli.group(cls=_Bench)
+def bench() -> None:
+    """Measure the methods and the app: the protocol bench (run), speed, fuzzing, real
+    data, batch throughput, loading."""
+
+
+def _out_option(files: str) -> Callable:
+    return click.option("--out", type=_folder(), required=True, help=f"Folder for {files}.")
+
+
+_split_option = click.option(
+    "--split", "split_name", default="random-clips", show_default=True,
+    type=click.Choice([*SPLITS, "heldout-contents", "cross-dataset", "heldout-actions"]),
+    help="Protocol (imuloco.lab.protocols); cross-dataset takes --train/--test.")
+_protocol_options = _options(  # bench run's besides --method, --out
+    click.option("--train", "train_items", multiple=True,
+                 help="cross-dataset: training folder(s), repeatable or comma separated."),
+    click.option("--test", "test_items", multiple=True, help="cross-dataset: the test folder."),
+    click.option("--seeds", "n_seeds", type=click.IntRange(min=1), default=1, show_default=True,
+                 help="Train each method with N seeds (seed, seed+1, ...): mean and spread."),
+    click.option("--fold", "fold_names", default=None, metavar="CONTENT[,CONTENT]",
+                 help="heldout-contents, heldout-actions: run only these folds (left-out "
+                      "contents)."),
+)
+METHODS_HELP = ("Method name(s), comma separated (see `imuloco methods`); a variant as "
+                "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm]")
+
+
+@bench.command("run", short_help="The protocol bench: train methods, score their test clips.")
+@click.option("--method", "method_names", required=True, help=METHODS_HELP + ".")
+@_split_option
 @noise_option
 @placement_option
 @data_options
-@click.option("--train", "train_items", multiple=True,
-              help="cross-dataset: training folder(s), repeatable or comma separated.")
-@click.option("--test", "test_items", multiple=True, help="cross-dataset: the test folder.")
-@click.option("--out", type=_folder(), required=True,
-              help="Folder for results.json and results.md.")
-@click.option("--seeds", "n_seeds", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Train each method with N seeds (seed, seed+1, ...): mean and spread.")
-@click.option("--fold", "fold_names", default=None, metavar="CONTENT[,CONTENT]",
-              help="heldout-contents, heldout-actions: run only these folds (left-out "
-                   "contents).")
-@click.option("--speed", is_flag=True,
-              help="Run the speed benchmark (imuloco.lab.speed) instead.")
-@click.option("--db-frames", default=None,
-              help="With --speed: database sizes in frames, comma separated.")
-@click.option("--reconstruct", "reconstruct_row", is_flag=True,
-              help="With --speed: time `imuloco reconstruct --report` per shipped placement "
-                   "and length instead (one thread and the default; wall, CPU, real-time "
-                   "factor, peak memory); writes reconstruct_speed.md and .json.")
-@click.option("--lengths", default="60,600,3600", show_default=True,
-              help="With --speed --reconstruct: recording lengths in seconds, comma separated.")
-@click.option("--fuzz", type=click.IntRange(1), default=None, metavar="N",
-              help="Instead: read N generated malformed inputs per reader (imuloco.lab."
-                   "fuzz) and write fuzz.md and fuzz.json.")
-@click.option("--readers", default=None,
-              help="With --fuzz: readers, comma separated [default: all].")
-@click.option("--real", "real_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
-              default=None, help="Instead: the real-data gait protocol on this folder (real "
-                                 "IMUs with references, imuloco.lab.real).")
-@click.option("--baseline", is_flag=True,
-              help="With --real: also measure the gait of the motion the placement's shipped "
-                   "model reconstructs (the right-ankle one where it has none).")
-@click.option("--batch", "batch_walkers", type=click.IntRange(1), default=None, metavar="N",
-              help="Instead: the batch benchmark (imuloco.lab.batchbench) on N simulated "
-                   "walkers of 60 s; writes batch_bench.md and batch_bench.json.")
-@click.option("--load", "load_dirs", multiple=True, metavar="DIR",
-              help="Instead: time loading these motion folders (repeat or comma-separate): "
-                   "numpy parse, reader, cold and warm cache; writes load.json and load.md.")
-@click.option("--against", default=None, metavar="REV",
-              help="With --load: also time the BVH reader of this git commit and report the "
-                   "largest difference of its Motions from today's; with --speed: "
-                   "also each method's code at this commit, in the same run.")
+@_protocol_options
+@_out_option("results.json and results.md")
 @_reading_options
-def bench(method_names: str | None, split_name: str, noise: str, placement: str,
-          data_items: tuple[str, ...], train_items: tuple[str, ...],
-          test_items: tuple[str, ...], out: Path, limit: int | None, seed: int, n_seeds: int,
-          fold_names: str | None, speed: bool, db_frames: str | None, fuzz: int | None, readers: str | None,
-          batch_walkers: int | None, load_dirs: tuple[str, ...], against: str | None,
-          real_dir: Path | None, baseline: bool, up: str, skip_frames: int,
-          reconstruct_row: bool = False, lengths: str = "60,600,3600") -> None:
+def bench_run(method_names: str, split_name: str, noise: str, placement: str,
+              data_items: tuple[str, ...], limit: int | None, seed: int,
+              train_items: tuple[str, ...], test_items: tuple[str, ...], n_seeds: int,
+              fold_names: str | None, out: Path, up: str, skip_frames: int) -> None:
     """Train methods, reconstruct every test clip and write results.json and results.md."""
-    if speed and reconstruct_row:
-        from imuloco.lab.speed import reconstruct_speed, reconstruct_table
+    # heavy (numpy, the methods): on use, so that --help stays fast (as in each bench)
+    from imuloco.lab.bench import run_bench
+    from imuloco.lab.report import COLUMNS, table
 
+    records = run_bench(_csv(method_names), split_name, noise, _csv(placement),
+                        _folders(data_items), out, limit, seed, progress=True, seeds=n_seeds,
+                        train=_folders(train_items, "--train"),
+                        test=_folders(test_items, "--test"), up=up, skip_frames=skip_frames,
+                        only_folds=_csv(fold_names) or None)
+    click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
+    click.echo(f"wrote {out / 'results.json'} and {out / 'results.md'}")
+
+
+@bench.command("speed", short_help="Online reconstruction time against database size.")
+@click.option("--method", "method_names", default=None,
+              help=METHODS_HELP + " (required but with --reconstruct).")
+@click.option("--data", "data_items", multiple=True,
+              help="Folder of clips to time on (the first one given) [default: the bundled "
+                   "sample].")
+@click.option("--db-frames", default=None, help="Database sizes in frames, comma separated.")
+@click.option("--against", default=None, metavar="REV",
+              help="Also time each method's code at this git commit, in the same run.")
+@click.option("--reconstruct", "reconstruct_row", is_flag=True,
+              help="Instead: time `imuloco reconstruct --report` per shipped placement and "
+                   "length (one thread and the default; wall, CPU, real-time factor, peak "
+                   "memory; --against: the old code's too); writes reconstruct_speed.md/.json.")
+@click.option("--lengths", default="60,600,3600", show_default=True,
+              help="With --reconstruct: recording lengths in seconds, comma separated.")
+@_out_option("speed.json and speed.md")
+def bench_speed(method_names: str | None, data_items: tuple[str, ...], db_frames: str | None,
+                against: str | None, reconstruct_row: bool, lengths: str, out: Path) -> None:
+    """Time online reconstruction against database size (imuloco.lab.speed); write
+    speed.json and speed.md."""
+    from imuloco.lab.speed import (
+        reconstruct_speed,
+        reconstruct_table,
+        speed_benchmark,
+        speed_table,  # heavy: on use
+    )
+
+    if reconstruct_row:
         try:
             seconds = [float(v) for v in _csv(lengths)]
         except ValueError:
@@ -436,62 +538,165 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
                                                        progress=True)))
         click.echo(f"wrote {out / 'reconstruct_speed.json'} and .md")
         return
+    if not method_names:
+        raise click.UsageError("Missing option '--method' (or pass --reconstruct).")
+    data = _folders(data_items)
+    frames = _whole_numbers(db_frames, "--db-frames") or None
+    click.echo(speed_table(speed_benchmark(_csv(method_names), out, data[0] if data else None,
+                                           frames, against=against), data[0] if data else None))
+
+
+@bench.command("fuzz", short_help="Malformed inputs read by each reader.")
+@click.argument("inputs", metavar="N", type=click.IntRange(1))
+@click.option("--readers", default=None, help="Readers, comma separated [default: all].")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
+@_out_option("fuzz.md and fuzz.json")
+def bench_fuzz(inputs: int, readers: str | None, seed: int, out: Path) -> None:
+    """Read N generated malformed inputs per reader (imuloco.lab.fuzz) and write fuzz.md and
+    fuzz.json."""
+    from imuloco.lab.fuzz import READERS, write_fuzz  # heavy: on use
+
+    chosen = tuple(_csv(readers)) or READERS
+    unknown = sorted(set(chosen) - set(READERS))
+    if unknown:
+        raise click.BadParameter(f"unknown reader(s) {unknown}; expected {list(READERS)}",
+                                 param_hint="--readers")
+    click.echo(write_fuzz(inputs, out, chosen, seed=seed, progress=True))
+
+
+@bench.command("real", short_help="The gait protocol on real IMU recordings with references.")
+@click.argument("real_dir", metavar="DIR",
+                type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.option("--limit", type=click.IntRange(min=1), default=None,
+              help="Read at most N trials per data set (quick runs).")
+@click.option("--baseline", is_flag=True,
+              help="Also measure the gait of the motion the placement's shipped model "
+                   "reconstructs (the right-ankle one where it has none).")
+@_out_option("real.json, real.csv and README.md")
+def bench_real(real_dir: Path, limit: int | None, baseline: bool, out: Path) -> None:
+    """The real-data gait protocol on the data sets in DIR (real IMUs with references,
+    imuloco.lab.real)."""
+    # heavy: on use
+    from imuloco.app.pipeline import GAIT_EXTRA, require_extras
+    from imuloco.lab.real import run_real, summarize, table
+
+    for p in GAIT_EXTRA:  # feet and lower backs
+        require_extras(p)
+    rows = run_real(real_dir, out, limit, baseline, progress=True)
+    click.echo(table(summarize(rows)))
+    click.echo(f"wrote {out / 'real.json'}, real.csv and README.md")
+
+
+@bench.command("batch", short_help="`imuloco batch` throughput on N simulated walkers.")
+@click.argument("walkers", metavar="N", type=click.IntRange(1))
+@click.option("--method", "method_names", default=None,
+              help="Method whose model the walkers are reconstructed with [default: the "
+                   "shipped model].")
+@placement_option
+@_out_option("batch_bench.md and batch_bench.json")
+def bench_batch(walkers: int, method_names: str | None, placement: str, out: Path) -> None:
+    """The batch benchmark (imuloco.lab.batchbench) on N simulated walkers of 60 s."""
+    from imuloco.lab.batchbench import batch_benchmark, markdown  # heavy: on use
+
+    click.echo(markdown(batch_benchmark(walkers, out, method=method_names,
+                                        placement=placement)))
+    click.echo(f"wrote {out / 'batch_bench.json'} and {out / 'batch_bench.md'}")
+
+
+@bench.command("load", short_help="Loading time of motion folders.")
+@click.argument("load_dirs", metavar="DIR...", nargs=-1, required=True)
+@click.option("--against", default=None, metavar="REV",
+              help="Also time the BVH reader of this git commit and report the largest "
+                   "difference of its Motions from today's.")
+@_out_option("load.json and load.md")
+def bench_load(load_dirs: tuple[str, ...], against: str | None, out: Path) -> None:
+    """Time loading the motion folders DIR (repeat or comma-separate): numpy parse, reader,
+    cold and warm cache."""
+    from imuloco.lab.loadspeed import load_benchmark, table  # heavy: on use
+
+    folders = _folders(load_dirs, "DIR")
+    click.echo(table(load_benchmark(folders, out, against), against))
+    click.echo(f"wrote {out / 'load.json'} and {out / 'load.md'}")
+
+
+@bench.command("live", short_help="The live server under load, and after sensor dropouts.")
+@click.option("--viewers", type=click.IntRange(min=1), default=100, show_default=True,
+              help="Browser viewers connected at once.")
+@click.option("--seconds", type=_Range(0, min_open=True), default=20.0, show_default=True,
+              help="How long the phone streams.")
+@click.option("--no-abuse", is_flag=True,
+              help="The phone only streams (no oversized, flooding or extra clients).")
+@_out_option("load.json and dropout.json")
+def bench_live(viewers: int, seconds: float, no_abuse: bool, out: Path) -> None:
+    """Load-test the live server on 127.0.0.1 (a simulated phone and --viewers browsers, with
+    abusive messages) and measure the recovery after sensor dropouts (imuloco.lab.livebench;
+    needs the [live] extra; Linux)."""
+    try:  # heavy: on use; and the [live] extra
+        from imuloco.lab.livebench import live_benchmark, summaries
+    except ModuleNotFoundError as e:
+        if (e.name or "").split(".")[0] != "websockets":
+            raise
+        raise MissingExtraError("the live bench", e.name, "live") from None
+
+    click.echo(summaries(*live_benchmark(out, viewers, seconds, abuse=not no_abuse)))
+    click.echo(f"wrote {out / 'load.json'} and {out / 'dropout.json'}")
+
+
+@bench.command(_OLD, cls=_OldCommand, hidden=True)
+@click.option("--method", "method_names", default=None,
+              help=METHODS_HELP + " [required but with --batch, which defaults to the shipped "
+                                  "model].")
+@_split_option
+@noise_option
+@placement_option
+@data_options
+@_protocol_options
+@_out_option("results.json and results.md")
+@click.option("--speed", is_flag=True, help="Instead: bench speed.")
+@click.option("--db-frames", default=None,
+              help="With --speed: database sizes in frames, comma separated.")
+@click.option("--fuzz", type=click.IntRange(1), default=None, metavar="N",
+              help="Instead: bench fuzz N.")
+@click.option("--readers", default=None,
+              help="With --fuzz: readers, comma separated [default: all].")
+@click.option("--real", "real_dir", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=None, help="Instead: bench real DIR.")
+@click.option("--baseline", is_flag=True,
+              help="With --real: also measure the gait of the motion the placement's shipped "
+                   "model reconstructs (the right-ankle one where it has none).")
+@click.option("--batch", "batch_walkers", type=click.IntRange(1), default=None, metavar="N",
+              help="Instead: bench batch N.")
+@click.option("--load", "load_dirs", multiple=True, metavar="DIR",
+              help="Instead: bench load DIR (repeat or comma-separate).")
+@click.option("--against", default=None, metavar="REV",
+              help="With --load: also time the BVH reader of this git commit and report the "
+                   "largest difference of its Motions from today's; with --speed: also each "
+                   "method's code at this commit, in the same run.")
+@_reading_options
+@click.pass_context
+def bench_single(ctx: click.Context, method_names: str | None, speed: bool,
+                 fuzz: int | None, real_dir: Path | None, batch_walkers: int | None,
+                 load_dirs: tuple[str, ...], **options: Any) -> None:
+    """The single command bench was: the first of --fuzz, --real, --batch, --load and
+    --speed given names the subcommand, else it is bench run; the options that subcommand
+    also takes are passed on."""
+
+    def run(command: click.Command, **given: Any) -> None:
+        names = {p.name for p in command.params}
+        ctx.invoke(command, **{k: v for k, v in options.items() if k in names}, **given)
+
     if fuzz is not None:
-        from imuloco.lab.fuzz import READERS, write_fuzz
-
-        chosen = tuple(_csv(readers)) or READERS
-        unknown = sorted(set(chosen) - set(READERS))
-        if unknown:
-            raise click.BadParameter(f"unknown reader(s) {unknown}; expected {list(READERS)}",
-                                     param_hint="--readers")
-        click.echo(write_fuzz(fuzz, out, chosen, seed=seed, progress=True))
-        return
+        return run(bench_fuzz, inputs=fuzz)
     if real_dir is not None:
-        from imuloco.app.pipeline import GAIT_EXTRA, require_extras
-        from imuloco.lab.real import run_real, summarize, table
-
-        for p in GAIT_EXTRA:  # feet and lower backs
-            require_extras(p)
-        rows = run_real(real_dir, out, limit, baseline, progress=True)
-        click.echo(table(summarize(rows)))
-        click.echo(f"wrote {out / 'real.json'}, real.csv and README.md")
-        return
+        return run(bench_real, real_dir=real_dir)
     if batch_walkers is not None:
-        from imuloco.lab.batchbench import batch_benchmark, markdown
-
-        click.echo(markdown(batch_benchmark(batch_walkers, out, method=method_names,
-                                            placement=placement)))
-        click.echo(f"wrote {out / 'batch_bench.json'} and {out / 'batch_bench.md'}")
-        return
+        return run(bench_batch, walkers=batch_walkers, method_names=method_names)
     if load_dirs:
-        from imuloco.lab.loadspeed import load_benchmark, table
-
-        folders = _folders(load_dirs, "--load")
-        click.echo(table(load_benchmark(folders, out, against), against))
-        click.echo(f"wrote {out / 'load.json'} and {out / 'load.md'}")
-        return
+        return run(bench_load, load_dirs=tuple(map(str, _folders(load_dirs, "--load"))))
     if not method_names:
         raise click.UsageError("Missing option '--method' (or pass --fuzz N, --batch N, "
                                "--load DIR or --real DIR).")
-    names = _csv(method_names)
-    data = _folders(data_items)
-    if speed:
-        from imuloco.lab.speed import speed_benchmark, speed_table
-
-        frames = _whole_numbers(db_frames, "--db-frames") or None
-        click.echo(speed_table(speed_benchmark(names, out, data[0] if data else None, frames,
-                                               against=against), data[0] if data else None))
-        return
-    from imuloco.lab.bench import run_bench
-    from imuloco.lab.report import COLUMNS, table
-
-    records = run_bench(names, split_name, noise, _csv(placement), _folders(data_items), out,
-                        limit, seed, progress=True, seeds=n_seeds,
-                        train=_folders(train_items, "--train"),
-                        test=_folders(test_items, "--test"), up=up, skip_frames=skip_frames,
-                        only_folds=_csv(fold_names) or None)
-    click.echo(table([r for r in records if r["motion_type"] == "all"], COLUMNS))
-    click.echo(f"wrote {out / 'results.json'} and {out / 'results.md'}")
+    return run(bench_speed if speed else bench_run, method_names=method_names)
 
 
 @cli.command()
@@ -501,7 +706,7 @@ def bench(method_names: str | None, split_name: str, noise: str, placement: str,
 def evaluate(ground_truth: Path, reconstructed: Path, as_json: bool) -> None:
     """Print the metrics of a RECONSTRUCTED motion against its GROUND_TRUTH (same skeleton;
     the longer is cut to the shorter's length)."""
-    from imuloco.measures.metrics import evaluate_files
+    from imuloco.measures.metrics import evaluate_files  # heavy: on use
 
     values, note = evaluate_files(ground_truth, reconstructed)
     if note:
@@ -537,9 +742,7 @@ def train(method_name: str, data_items: tuple[str, ...], placement: str, noise: 
     Writes OUTPUT, and for methods that keep a training history (``learned``) its losses per
     epoch beside it as OUTPUT.history.json and, with matplotlib, OUTPUT.curves.png.
     """
-
-    from imuloco.errors import InputError, UnknownNameError
-    from imuloco.io.atomic import check_outputs
+    # heavy (numpy, the methods): on use, so that --help stays fast
     from imuloco.lab.bench import data_label, load_data
     from imuloco.lab.protocols import split
     from imuloco.methods import get_method, method_class
@@ -609,8 +812,7 @@ def ensemble(members: tuple[Path, ...], output: Path, mirrored_path: Path | None
 
     Members train independently, so they can run at once on several cores or machines.
     """
-    from imuloco.errors import ImulocoError
-    from imuloco.io.atomic import check_outputs
+    # heavy (the methods, torch): on use, so that --help stays fast
     from imuloco.lab.bench import load_data
     from imuloco.methods import load_model
     from imuloco.methods.learned.method import ensemble as combine
@@ -637,8 +839,8 @@ def ensemble(members: tuple[Path, ...], output: Path, mirrored_path: Path | None
 @force_option
 def export_onnx_command(model_path: Path | None, output: Path, force: bool) -> None:
     """Export a learned model to ONNX (per-frame network with its recurrent state)."""
+    # heavy (the methods): on use, so that --help stays fast
     from imuloco.app.pipeline import shipped_model
-    from imuloco.io.atomic import check_output
     from imuloco.methods import load_model
 
     if model_path is None:
@@ -651,7 +853,7 @@ def export_onnx_command(model_path: Path | None, output: Path, force: bool) -> N
     if model.name != "learned":
         raise click.UsageError(f"{model_path}: method {model.name!r} has no ONNX export; "
                                "only `learned` models do")
-    from imuloco.methods.learned.export import export_onnx
+    from imuloco.methods.learned.export import export_onnx  # torch ([deep]): learned only
 
     path = export_onnx(model, output, overwrite=True)  # checked above; written atomically
     click.echo(f"wrote {path} (from {model_path})")
@@ -682,9 +884,10 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
     other contents). Prints the per-content table before and after; --check applies the
     calibration of all RESULTS to other folders; --model/-o writes it into a model file.
     """
-    from imuloco.io.atomic import atomic_write, check_outputs
+    # heavy (numpy, the methods): on use, so that --help stays fast
     from imuloco.lab import confidence as conf
     from imuloco.lab.bench import slug
+    from imuloco.methods import load_model
     from imuloco.methods.base import calibrated_error
 
     if (model_path is None) != (output is None):
@@ -726,8 +929,6 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
         conf.plot(rows, {"uncalibrated": rows["error_m"], "calibrated (other contents)": crossed},
                   out_dir / "confidence.png")
     if model_path is not None:
-        from imuloco.methods import load_model
-
         model = load_model(model_path)
         model.set_calibration(calibration)
         model.save(output, overwrite=True)  # checked above
@@ -743,24 +944,60 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
               help="Sampling rate, Hz (as reconstruct reads logs).")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
               help="Seed of the noise draws.")
-@click.option("-o", "--output", required=True, type=_file(),
-              help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s).")
+@click.option("-o", "--output", required=True, type=click.Path(path_type=Path),
+              help="CSV file to write (generic format: time_s, acc m/s^2, gyro rad/s); a "
+                   "folder for --layout sensorlogger or files.")
+@click.option("--layout", type=click.Choice(["generic", "sensorlogger", "files"]),
+              default="generic", show_default=True,
+              help="generic: one CSV; sensorlogger: an iPhone's Sensor Logger export folder, "
+                   "with the watch's WristMotion.csv for left_wrist; files: one generic CSV "
+                   "per sensor, PLACEMENT.csv (for reconstruct --sensor).")
+@click.option("--stomp", is_flag=True,
+              help="Stand still 2 s and stomp twice before the motion (the start that aligns "
+                   "sensors' clocks; after the last sensor's clock started).")
+@click.option("--clock-offset", "clock_offsets", multiple=True, metavar="PLACEMENT=SECONDS",
+              help="--layout files: that sensor's clock runs this far behind (repeatable).")
 @force_option
 def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: int,
-             output: Path, force: bool) -> None:
-    """Simulate body-worn phone sensors on MOTION_FILE and write them as generic CSV."""
-    from imuloco.io.atomic import check_output
+             output: Path, layout: str, stomp: bool, clock_offsets: tuple[str, ...],
+             force: bool) -> None:
+    """Simulate body-worn phone sensors on MOTION_FILE and write them as generic CSV (or a
+    Sensor Logger export, or one file per sensor)."""
+    # heavy (numpy, scipy): on use, so that --help stays fast
     from imuloco.io.motionfile import read_motion
     from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.io.sensorwrite import write_sensor_files, write_sensor_logger
+    from imuloco.sensors import simulate as sim
     from imuloco.sensors.placement import get_placement
-    from imuloco.sensors.simulate import simulate as simulate_sensors
 
     places = _csv(placement)
     for p in places:
         get_placement(p)  # an unknown preset is refused before reading anything
-    check_output(output, force, inputs=[motion_file])
-    rec = simulate_sensors(read_motion(motion_file), places, rate=rate, noise=noise, seed=seed)
-    write_generic_csv(rec, output, overwrite=True)
+    offsets = {}
+    for item in clock_offsets:
+        name, _sep, value = item.partition("=")
+        try:
+            offsets[name.strip()] = float(value)
+        except ValueError:
+            raise click.BadParameter(f"{item!r}: expected PLACEMENT=SECONDS",
+                                     param_hint="--clock-offset") from None
+    if offsets and layout != "files":
+        raise click.UsageError("--clock-offset writes one file per sensor: add --layout files")
+    if layout == "generic":
+        check_output(output, force, inputs=[motion_file])
+    motion = read_motion(motion_file)
+    stomps: tuple[float, ...] = ()
+    if stomp:  # after the last device started: its clock runs the most behind
+        late = max([0.0, *offsets.values()])
+        motion = sim.still_start(motion, sim.STOMP_LEAD_S + late)
+        stomps = tuple(late + t for t in sim.STOMP_AT_S)
+    rec = sim.simulate(motion, places, rate=rate, noise=noise, seed=seed, stomps=stomps)
+    if layout == "sensorlogger":
+        write_sensor_logger(rec, output, overwrite=force)
+    elif layout == "files":
+        write_sensor_files(rec, output, offsets, overwrite=force)
+    else:
+        write_generic_csv(rec, output, overwrite=True)
     click.echo(f"wrote {output}: {rec.num_samples} samples, {len(places)} sensor(s) "
                f"({', '.join(places)}), {rec.times[-1] - rec.times[0]:.2f} s, noise {noise}")
 
@@ -790,6 +1027,7 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @calibrate_option
 @platform_option
 @columns_option
+@sensor_option
 @click.option("--piece-seconds", type=_Range(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html/--skeleton).")
@@ -801,26 +1039,29 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                 video_seconds: float | None, html_path: Path | None,
                 report_path: Path | None, summary_path: Path | None, skeleton: Path | None,
                 rig: str | None, no_calibrate: bool, platform: str | None,
-                columns: dict[str, str] | None, piece_seconds: float | None,
-                height: float | None, force: bool, units: str) -> None:
+                columns: dict[str, str] | None, sensors: list[tuple[str, Path]],
+                piece_seconds: float | None, height: float | None, force: bool,
+                units: str) -> None:
     """Reconstruct full-body motion from a phone RECORDING and write it as BVH or glTF.
 
     RECORDING is a sensor log (CSV; see imuloco.io.sensorlog), a Sensor Logger folder, or an
     accelerometer file and a gyroscope file, in either order (a RealWorld acc_*.csv finds its
     gyroscope_*.csv).
     """
+    # heavy (the app, the methods, torch): on use, so that --help stays fast
+    from imuloco.app.chunked import reconstruct_to_bvh
     from imuloco.app.export import check_motion_output, check_report_output
     from imuloco.app.outputs import Outputs, write_outputs
     from imuloco.app.pipeline import reconstruct_file
     from imuloco.app.summary import summary_paths, write_summary
-    from imuloco.io.atomic import check_outputs
 
     if video is not None and video.suffix.lower() not in (".mp4", ".gif"):  # before any work
         raise click.BadParameter(f"{video}: expected a .mp4 or .gif file", param_hint="--video")
     if summary_path is None and report_path is not None and report_path.suffix == ".json":
         summary_path = report_path.with_suffix(".md")  # (another suffix is refused below)
     summaries = [] if summary_path is None else list(summary_paths(summary_path).values())
-    inputs = [*recording, *([model_path] if model_path else []), *([skeleton] if skeleton else [])]
+    inputs = [*recording, *(f for _, f in sensors), *([model_path] if model_path else []),
+              *([skeleton] if skeleton else [])]
     check_outputs([output, video, html_path, report_path, *summaries], force, inputs=inputs)
     check_motion_output(output, "-o/--output")
     if report_path is not None:
@@ -829,11 +1070,11 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                       _preset(rig, skeleton))
     source = recording[0] if len(recording) == 1 else list(recording)
     if piece_seconds is not None:
+        if sensors:
+            raise click.UsageError("--piece-seconds reads one log: drop --sensor")
         if video or html_path or skeleton or output.suffix.lower() != ".bvh":
             raise click.UsageError("--piece-seconds writes a BVH on a --rig preset only: "
                                    "drop --video/--html/--skeleton, write a .bvh")
-        from imuloco.app.chunked import reconstruct_to_bvh
-
         pieces = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
                                     not no_calibrate, platform=platform, overwrite=True,
                                     piece_s=piece_seconds, progress=True, unit=units,
@@ -850,7 +1091,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     motion, report = reconstruct_file(source, model=model_path, method=method_name,
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
                                       progress=True, platform=platform, skeleton=skeleton,
-                                      height=height, columns=columns)
+                                      height=height, columns=columns, sensors=sensors)
     click.echo(f"model: {report.model}", err=True)
     written = write_outputs(outputs, report, motion, progress=True)
     if summary_path:
@@ -876,7 +1117,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
 def _preset(rig: str | None, skeleton: Path | None) -> str | None:
     """The rig preset to write with: ``rig``, by default ``bvh-default``; None with
     ``--skeleton`` (the motion is retargeted onto the user's rig), which excludes ``--rig``."""
-    from imuloco.core.rigs import DEFAULT_RIG
+    from imuloco.core.rigs import DEFAULT_RIG  # heavy (numpy, scipy): on use
 
     if rig is not None and skeleton is not None:
         raise click.UsageError("--rig and --skeleton are exclusive: --skeleton retargets onto "
@@ -920,7 +1161,7 @@ def demo(out_dir: Path, model_path: Path | None, method_name: str | None,
          skeleton: Path | None, rig: str | None, force: bool, units: str) -> None:
     """Simulate a phone on the right ankle of a bundled walk, reconstruct it and write the
     BVH, a side-by-side video (MP4, GIF), the HTML viewer, plots and a report."""
-    from imuloco.app.pipeline import demo as run_demo
+    from imuloco.app.pipeline import demo as run_demo  # heavy: on use
 
     report = run_demo(out_dir, method=method_name, model=model_path, overwrite=force,
                       progress=True, unit=units, skeleton=skeleton,
@@ -953,28 +1194,38 @@ RENDER_TYPES = (".mp4", ".gif", ".html", ".png")
               help="Folder for MOTION.mp4, MOTION.gif and MOTION.html (video, GIF and viewer).")
 @click.option("-o", "--output", "outputs", multiple=True, type=_file(),
               help="File(s) to write: .mp4, .gif, .html or .png (a strip of frames).")
+@click.option("--start", type=_Range(min=0), default=None, metavar="SECONDS",
+              help="Videos and frame strip from this time on [default: the start].")
+@click.option("--end", type=_Range(min=0), default=None, metavar="SECONDS",
+              help="Videos and frame strip up to this time [default: the end].")
 @click.option("--seconds", type=_Range(0, min_open=True), default=None,
-              help="Only the first seconds (videos).")
+              help="At most this many seconds from --start (videos, frame strip).")
+@click.option("--gif/--no-gif", default=True, show_default=True,
+              help="With --out: MOTION.gif too, a preview of at most 30 s (an MP4 has no "
+                   "cap; a longer window's GIF is cut, with a message).")
 @click.option("--report", "report_file", type=_existing_file(), default=None,
               help="MOTION's reconstruction report (reconstruct --report, batch's NAME.json): "
-                   "the viewer shows its predicted error per second and unreliable segments.")
+                   "the videos and viewer show its predicted error and unreliable segments.")
 @force_option
 def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
-           outputs: tuple[Path, ...], seconds: float | None, report_file: Path | None,
-           force: bool) -> None:
+           outputs: tuple[Path, ...], start: float | None, end: float | None,
+           seconds: float | None, gif: bool, report_file: Path | None, force: bool) -> None:
     """Render a MOTION file (BVH, ...) as stick-figure video, HTML viewer or frame strip:
-    into a folder (--out DIR) and/or to named files (-o FILE, repeatable)."""
+    into a folder (--out DIR) and/or to named files (-o FILE, repeatable). Videos are
+    streamed to the encoder frame by frame (memory does not grow with the recording);
+    --start/--end render a window of a long one."""
+    # heavy (numpy, matplotlib, the app): on use, so that --help stays fast
     import numpy as np
 
-    from imuloco.app.pipeline import render_outputs
-    from imuloco.io.atomic import check_outputs
+    from imuloco.app.confidence import Confidence
+    from imuloco.app.render import render_outputs
     from imuloco.io.motionfile import read_motion
-    from imuloco.viz.skeleton import frame_strip
+    from imuloco.viz.skeleton import frame_strip, frame_window
 
     if out_dir is None and not outputs:
         raise click.UsageError("give --out DIR or -o FILE")
     outputs = (*outputs, *(out_dir / f"{motion_file.stem}{ext}" for ext in RENDER_TYPES[:3]
-                           if out_dir is not None))
+                           if out_dir is not None and (gif or ext != ".gif")))
     bad = [str(p) for p in outputs if p.suffix.lower() not in RENDER_TYPES]
     if bad:
         raise click.BadParameter(f"unsupported output type(s) {bad}: use .mp4, .gif, .html "
@@ -985,21 +1236,20 @@ def render(motion_file: Path, gt_file: Path | None, out_dir: Path | None,
     motions, titles = [motion], [motion.name or motion_file.stem]
     confidence = [None]
     if report_file is not None:
-        from imuloco.app.confidence import Confidence
-
         confidence = [Confidence.from_report(report_file, motion.num_frames, motion.fps)]
     if gt_file is not None:
         motions, titles = [read_motion(gt_file), motion], ["ground truth", titles[0]]
         confidence = [None, *confidence]
+    first, stop = frame_window(motions[0], start, end, seconds)  # refused before any work
     videos = [p for p in outputs if p.suffix.lower() in (".mp4", ".gif")]
     html = next((p for p in outputs if p.suffix.lower() == ".html"), None)
     written = render_outputs(motions, titles, videos, html, overwrite=True, progress=True,
-                             max_seconds=seconds, confidence=confidence)
+                             max_seconds=seconds, confidence=confidence, start=start,
+                             end=end)
     for p in outputs:
         if p.suffix.lower() == ".png":
-            span = motion.duration if seconds is None else min(seconds, motion.duration)
-            written.append(frame_strip(motions, np.linspace(0, span, 8), p, titles,
-                                       overwrite=True))
+            times = np.linspace(first, stop - 1, 8) / motions[0].fps
+            written.append(frame_strip(motions, times, p, titles, overwrite=True))
     click.echo("wrote " + ", ".join(str(p) for p in written))
 
 
@@ -1049,7 +1299,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
     A recording's NAME is its file name without extension (acc_X for a RealWorld pair, the
     folder's or zip's name for a Sensor Logger or phyphox export), with its folder's name
     prepended where names repeat (also in case alone) or where it is 'summary'."""
-    from imuloco.app.batch import TIMEOUT_S, find_recordings, run_batch
+    from imuloco.app.batch import TIMEOUT_S, find_recordings, run_batch  # heavy: on use
 
     paths = find_recordings(recordings, patterns, out_dir=out_dir)
     if not paths:
@@ -1112,10 +1362,7 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
     """Watch a walker live: a phone on the leg streams its sensors (open /phone on it), a
     browser shows the reconstruction as it walks (open /live); --vmc also sends it to a VMC
     protocol receiver (Unity HumanBodyBones, T-pose rest). Ctrl-C stops."""
-    import asyncio
-    import tempfile
-
-    from imuloco.errors import MissingExtraError
+    import asyncio  # on use, so that --help stays fast (as below)
 
     try:  # the [live] extra
         from imuloco.app.live import lan
@@ -1126,7 +1373,7 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
         if e.name not in ("websockets", "segno", "psutil", "cryptography", "pythonosc"):
             raise
         raise MissingExtraError("live mode", e.name, "live") from None
-    from imuloco.app.pipeline import choose_model
+    from imuloco.app.pipeline import choose_model  # heavy: on use
 
     if self_signed and certfile:
         raise click.UsageError("--https makes its own certificate: drop --cert/--key")

@@ -166,6 +166,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         calibrated,
         choose_model,
         feet_pinned_by,
+        ignored_sensors,
         require_extras,
     )
     from imuloco.io.bvh import write_bvh_pieces
@@ -185,11 +186,15 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     require_extras(placement)  # before reading a long log
     rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform,
                                columns=columns)
+    available = [placement, *(p for p in rec.placements if p != placement)]
     if method is None or isinstance(method, str):
-        choice = choose_model(method, model, placement, progress=progress)
+        choice = choose_model(method, model, placement, progress=progress, available=available)
     else:
         choice = ModelChoice(method, "given", f"given fitted method {method.name!r}")
     fitted = choice.method
+    ignored = ignored_sensors(rec.placements, fitted)  # named, as in one piece
+    for source in log_report.sensors:
+        source.used = source.placement not in ignored
     calibration = None
     raw = rec  # a foot or lower-back sensor's gait reads its own signal, as in one piece
     if calibrate:

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from imuloco.app.export import write_reconstruction
-from imuloco.app.pipeline import render_outputs
+from imuloco.app.render import render_outputs
 from imuloco.app.report import ReconstructionReport
 from imuloco.core.motion import Motion
 from imuloco.core.rigs import DEFAULT_RIG

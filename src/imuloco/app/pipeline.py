@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from imuloco.app.confidence import Confidence
+from imuloco.app.render import render_outputs
 from imuloco.app.report import MotionInfo, ReconstructionReport, build_report
 from imuloco.app.summary import confidence_markdown, demo_markdown  # noqa: F401 (re-exported)
 from imuloco.core.motion import Motion
@@ -82,6 +83,33 @@ def shipped_model(method: str, placement: str) -> Path | None:
     return path if path is not None and path.is_file() else None
 
 
+def shipped_combination(method: str, placements: Sequence[str], primary: str) -> Path | None:
+    """The shipped model of ``method`` that reads several of the recording's ``placements``,
+    ``primary`` among them: ``<method>_<a>+<b>[+...].npz`` (its placements in its name), the
+    one reading the most; None when none matches."""
+    from imuloco.data import MODELS_DIR
+
+    found = []
+    for path in MODELS_DIR.glob(f"{method}_*+*.npz"):
+        names = path.stem.removeprefix(f"{method}_").split("+")
+        if primary in names and set(names) <= set(placements):
+            found.append((len(names), path.name, path))
+    return max(found)[2] if found else None
+
+
+def ignored_sensors(placements: Sequence[str], method) -> list[str]:
+    """The recording's sensors (``placements``) the fitted ``method`` does not read; a warning
+    names them (a second sensor is never dropped silently)."""
+    ignored = [p for p in placements if p not in method.placements_]
+    if ignored:
+        log.warning("the model reads %s only: the recording's %s sensor(s) %s are ignored (no "
+                    "shipped model reads %s; train one with imuloco train --placement %s)",
+                    "+".join(method.placements_), len(ignored), ", ".join(ignored),
+                    "+".join([*method.placements_, *ignored]),
+                    ",".join([*method.placements_, *ignored]))
+    return ignored
+
+
 @dataclass(frozen=True)
 class ModelChoice:
     """The fitted method that will reconstruct and where it came from.
@@ -104,7 +132,8 @@ class ModelChoice:
 
 def choose_model(method: str | None = None, model: str | Path | None = None,
                  placement: str = "right_ankle", exclude: Sequence[str] = (),
-                 progress: bool = False, db=None) -> ModelChoice:
+                 progress: bool = False, db=None,
+                 available: Sequence[str] | None = None) -> ModelChoice:
     """The fitted method that will reconstruct, with its source (see the module docstring).
 
     Parameters
@@ -115,6 +144,9 @@ def choose_model(method: str | None = None, model: str | Path | None = None,
     exclude : clip names left out when a method is fitted on the bundled sample (the demo
         leaves its own clip out).
     db : the bundled sample when already loaded.
+    available : every sensor the recording has (``placement`` first; ``None``: only it). A
+        shipped model reading several of them (:func:`shipped_combination`) is preferred to
+        ``placement``'s own; a model file may read any of them.
     """
     from imuloco.errors import ModelFileError
     from imuloco.methods import get_method, load_model, method_class
@@ -122,13 +154,17 @@ def choose_model(method: str | None = None, model: str | Path | None = None,
     require_extras(placement)
     if model is not None:
         fitted = load_model(model)
-        if placement not in fitted.placements_:
+        have = [placement] if available is None else list(available)
+        if placement not in fitted.placements_ or not set(fitted.placements_) <= set(have):
             raise InputError(f"{model}: the model was trained for {fitted.placements_}, not "
-                             f"{placement!r} (--placement {fitted.placements_[0]} reads it)")
+                             f"{'+'.join(have)!r} (--placement {fitted.placements_[0]} reads "
+                             "it, with --sensor for its other sensors)")
         return ModelChoice(fitted, "file", f"model file {model} (method {fitted.name!r})",
                            Path(model))
     name = DEFAULT_METHOD if method is None else method
-    path = shipped_model(name, placement)
+    several = None if not available or len(available) < 2 else shipped_combination(
+        name, available, placement)
+    path = several or shipped_model(name, placement)
     if path is not None:
         try:
             return ModelChoice(load_model(path), "shipped",
@@ -259,7 +295,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
                      fmt: str = "auto", calibrate: bool = True, pin: bool | None = None,
                      progress: bool = False, fitted: Method | ModelChoice | None = None,
                      platform: str | None = None, skeleton: str | Path | None = None,
-                     height: float | None = None, columns: dict[str, str] | None = None
+                     height: float | None = None, columns: dict[str, str] | None = None,
+                     sensors: Sequence[tuple[str, str | Path]] = ()
                      ) -> tuple[Motion, ReconstructionReport]:
     """Import a phone's sensor log and reconstruct the wearer's motion.
 
@@ -281,6 +318,10 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         is scaled to it (:func:`imuloco.measures.gait.to_height`) before gait is measured.
     columns : a CSV's own names of the generic log's columns (``{"time": "timestamp", ...}``,
         :func:`imuloco.io.sensorlog.parse_columns`).
+    sensors : further sensors, ``(placement, file)`` each, put on the log's clock
+        (:func:`imuloco.sensors.multi.read_sensors`). With several sensors the shipped model
+        reading them is chosen (:func:`choose_model`'s ``available``); a sensor no model reads
+        is named in a warning and in the report's ``sensors`` (``used``: false).
 
     Returns
     -------
@@ -296,7 +337,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     from imuloco.measures.sensorgait import gait_report
     from imuloco.paths.follow import follow_recording
     from imuloco.phases import gait_phases
-    from imuloco.sensors.reallog import read_log, recording_name
+    from imuloco.sensors.multi import read_sensors
+    from imuloco.sensors.reallog import recording_name
 
     require_extras(placement)  # before reading a long log
     rig = None if skeleton is None else load_rig(skeleton)  # and a bad rig file before its work
@@ -304,17 +346,24 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar = tqdm(total=len(steps), desc="reconstruct", unit="step", disable=not progress)
     t0 = time.perf_counter()
     bar.set_postfix_str("reading the log")
-    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform,
-                               columns=columns)
+    rec, log_report = read_sensors(recording_path, sensors, placement=placement, fmt=fmt,
+                                   platform=platform, columns=columns)
+    if placement not in rec.placements:  # a file that names its sensors: its first leads
+        placement = rec.placements[0]
+        require_extras(placement)
+    available = [placement, *(p for p in rec.placements if p != placement)]
     bar.update()
     bar.set_postfix_str("model")
     if fitted is None:
-        choice = choose_model(method, model, placement, progress=progress)
+        choice = choose_model(method, model, placement, progress=progress, available=available)
     elif isinstance(fitted, ModelChoice):
         choice = fitted
     else:
         choice = ModelChoice(fitted, "given", f"given fitted method {fitted.name!r}")
     fitted = choice.method
+    ignored = ignored_sensors(rec.placements, fitted)
+    for source in log_report.sensors:
+        source.used = source.placement not in ignored
     bar.update()
     bar.set_postfix_str(f"{fitted.name} on {rec.times[-1]:.0f} s")
     motion, info = reconstruct_recording(rec, fitted, calibrate, pin)
@@ -345,43 +394,6 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar.update()
     bar.close()
     return motion, report
-
-
-def render_outputs(motions: Sequence[Motion], titles: Sequence[str], video: Sequence[Path] = (),
-                   html: Path | None = None, overwrite: bool = False, progress: bool = False,
-                   max_seconds: float | None = None,
-                   confidence: Sequence[Confidence | None] | None = None) -> list[Path]:
-    """Write the stick-figure video(s) (``.mp4``/``.gif``, frames drawn once; one video is
-    streamed to its encoder, as a long recording's frames do not fit in memory) and the HTML
-    viewer of ``motions`` side by side; ``confidence`` (per motion, or None) is shown in the
-    viewer (predicted error per frame, unreliable frames marked)."""
-    from imuloco.io.atomic import check_outputs
-    from imuloco.viz.html import write_viewer
-    from imuloco.viz.skeleton import StickRenderer, write_video
-
-    check_outputs([*video, html], overwrite)
-    out = []
-    if video:
-        renderer = StickRenderer(motions, titles)
-        stop = None if max_seconds is None else int(max_seconds * renderer.fps) + 1
-        # GIFs at about 15 fps (browsers slow faster GIFs down), MP4 at the motion's rate
-        steps = [max(1, round(renderer.fps / 15)) if p.suffix.lower() == ".gif" else 1
-                 for p in video]
-        if len(video) == 1:
-            frames = renderer.iter_frames(steps[0], stop=stop, progress=progress)
-            out.append(write_video(frames, video[0], renderer.fps / steps[0], overwrite))
-        else:
-            frames = renderer.frames(stop=stop, progress=progress)
-            for path, step in zip(video, steps):
-                out.append(write_video(frames[::step], path, renderer.fps / step, overwrite))
-    if html is not None:
-        conf = list(confidence) if confidence is not None else [None] * len(motions)
-        out.append(write_viewer(motions, html, titles, title=" vs ".join(titles),
-                                overwrite=overwrite,
-                                error_m=[None if c is None else c.error_m for c in conf],
-                                unreliable=[None if c is None else c.unreliable
-                                            for c in conf]))
-    return out
 
 
 def demo(out_dir: str | Path, method: str | None = None, model: str | Path | None = None,

@@ -63,7 +63,8 @@ class Pieces:
 class ReconstructionReport:
     """What a reconstruction found, as typed fields; :meth:`to_json` gives the JSON report.
 
-    recording : the import (:class:`imuloco.sensors.reallog.LogReport`).
+    recording : the import (:class:`imuloco.sensors.reallog.LogReport`); its ``sensors``
+        (file, clock offset and rule, whether the model read it) are the JSON's ``sensors``.
     calibration : per placement, the rotation found (``None``: not calibrated).
     feet_pinned_by : ``"method"``, ``"pipeline"`` or ``"none"``.
     model : where the model came from (:class:`imuloco.app.pipeline.ModelChoice`).
@@ -130,6 +131,7 @@ class ReconstructionReport:
             out["calibration"] = self.calibration
         out.update(feet_pinned_by=self.feet_pinned_by, method=self.method,
                    model=self.model.description, placement=self.placement,
+                   sensors=[s.to_json() for s in self.recording.sensors],
                    motion=self.motion.to_json())
         if self.pieces is not None:
             out["pieces"] = self.pieces.to_json()

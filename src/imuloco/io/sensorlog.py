@@ -770,10 +770,43 @@ def read_sensor_logger(folder: str | Path, platform: str | None = None) -> list[
             raise FormatError(folder, None, "expected TotalAcceleration.csv, or Accelerometer.csv "
                                             "(without gravity) together with Gravity.csv")
         gyro = _sensorlogger_file(ex, "Gyroscope.csv", "gyro", "rad/s")
+        watch = read_wrist_motion(ex) if ex.has(WATCH_FILE) else []
     if found[0] == "ios":
         acc.values = -acc.values
     acc.platform = f"{found[0]} ({found[1]})"
-    return [acc, gyro]
+    return [acc, gyro, *watch]
+
+
+WATCH_FILE = "WristMotion.csv"  # an Apple Watch recorded beside the phone, same export
+WATCH_PLACEMENT = "left_wrist"  # where the watch is read (a watch is usually worn on the left)
+_WATCH_COLUMNS = ["time", "accelerationX", "accelerationY", "accelerationZ",
+                  "gravityX", "gravityY", "gravityZ",
+                  "rotationRateX", "rotationRateY", "rotationRateZ"]
+
+
+def read_wrist_motion(ex: Export) -> list[Stream]:
+    """The Apple Watch's ``WristMotion.csv`` of a Sensor Logger export, as the streams of a
+    sensor at :data:`WATCH_PLACEMENT` (``docs/results/multi/README.md``).
+
+    Its columns (awesome-sensor-logger UNITS.md): ``time`` (Unix ns, the phone's clock),
+    ``accelerationX..Z`` (Core Motion's user acceleration, gravity removed) and
+    ``gravityX..Z``, both in g, or in m/s^2 when "Standardise Units & Frames" is on,
+    ``rotationRateX..Z`` in rad/s (and quaternion, pitch, roll, yaw, not read). Specific force
+    is their sum; with the setting off it has the iOS sign (the opposite of Android's and
+    imuloco's) and is negated. Which of the two the file holds is read from its gravity's
+    median magnitude (1 in g, 9.81 in m/s^2): the unit and the sign come with the one setting,
+    so the watch needs no Metadata.csv.
+    """
+    header, data, lines = ex.table(WATCH_FILE)
+    path = ex.label(WATCH_FILE)
+    idx = _columns(path, header, _WATCH_COLUMNS)
+    t = data[:, idx[0]] * 1e-9
+    user, gravity, rate = data[:, idx[1:4]], data[:, idx[4:7]], data[:, idx[7:10]]
+    in_g = float(np.median(np.linalg.norm(gravity, axis=1))) < math.sqrt(9.80665)
+    acc = -(user + gravity) * 9.80665 if in_g else user + gravity
+    return [Stream(path, "acc", t, acc, "m/s^2", WATCH_PLACEMENT, lines,
+                   "ios (WristMotion.csv in g)" if in_g else "standardised (WristMotion.csv)"),
+            Stream(path, "gyro", t, rate, "rad/s", WATCH_PLACEMENT, lines)]
 
 
 def sensorlogger_members(folder: str | Path) -> set[str]:

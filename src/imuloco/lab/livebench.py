@@ -1,4 +1,4 @@
-"""Measurements of the live mode (``imuloco bench --live``): recovery after a sensor dropout,
+"""Measurements of the live mode (``imuloco bench live``): recovery after a sensor dropout,
 and a loopback load test of the server under an abusive client.
 
 Dropout recovery. One recording is streamed through :class:`LiveSession` twice: whole, and
@@ -20,6 +20,7 @@ import logging
 import multiprocessing
 import os
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -27,6 +28,7 @@ from imuloco.app.live.server import LiveServer
 from imuloco.app.live.session import Frame, LiveSession
 from imuloco.app.pipeline import choose_method
 from imuloco.core.motion import Motion
+from imuloco.io.atomic import atomic_write
 from imuloco.io.database import load_sample
 from imuloco.measures.metrics import heading_of, joint_errors
 from imuloco.sensors.simulate import simulate
@@ -335,3 +337,53 @@ def load_test(viewers: int = 100, seconds: float = 20.0, abuse: bool = True,
                   socket_send_warnings=sum("socket.send()" in x for x in lines),
                   skipped_poses_open_viewers=report.get("skipped_poses_open_viewers"))
     return result
+
+
+DROPOUT_CLIPS = ("dataset-2_walk_normal_001", "dataset-2_walk_exhausted_001",
+                 "dataset-2_walk-turn-right_exhausted_001")
+
+
+def dropouts(threshold_cm: float = 1.0) -> dict:
+    """:func:`dropout_recovery` of the default model after 1 s dropouts 4.5, 5 and 5.5 s into
+    three bundled walks (:data:`DROPOUT_CLIPS`, a simulated right-ankle phone): the mean and
+    largest recovery time and offsets, and each run's ``details``."""
+    method, note = choose_method()
+    clips = [c for c in load_sample().clips if c.name in DROPOUT_CLIPS]
+    runs = []
+    for clip in clips:
+        rec = simulate(clip, ["right_ankle"], 100.0, "phone", 11)
+        for start in (4.5, 5.0, 5.5):
+            if rec.times[-1] < start + 1.0 + 2.1:
+                continue
+            r = dropout_recovery(method, rec.times, rec.acc, rec.gyro, start, 1.0, threshold_cm)
+            runs.append({"clip": clip.name, **r.to_json()})
+    rec_s = np.array([r["recovery_s"] for r in runs])
+    return {"model": note, "threshold_cm": threshold_cm, "runs": len(runs),
+            "recovery_s": {"mean": float(rec_s.mean()), "max": float(rec_s.max())},
+            "root_offset_m": {"mean": float(np.mean([r["root_offset_m"] for r in runs])),
+                              "max": float(np.max([r["root_offset_m"] for r in runs]))},
+            "heading_offset_deg": {"mean_abs": float(np.mean(
+                [abs(r["heading_offset_deg"]) for r in runs]))},
+            "details": runs}
+
+
+def live_benchmark(out: str | Path, viewers: int = 100, seconds: float = 20.0,
+                   abuse: bool = True) -> tuple[dict, dict]:
+    """:func:`load_test` then :func:`dropouts`; writes ``load.json`` and ``dropout.json`` into
+    ``out`` and returns both records."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    load = load_test(viewers, seconds, abuse=abuse)
+    with atomic_write(out / "load.json", "w") as f:
+        f.write(json.dumps(load, indent=1))
+    drop = dropouts()
+    with atomic_write(out / "dropout.json", "w") as f:
+        f.write(json.dumps(drop, indent=1))
+    return load, drop
+
+
+def summaries(load: dict, drop: dict) -> str:
+    """The two records' figures as printed: JSON without the server's log, the dropped
+    viewers' list and each dropout run."""
+    return "\n".join(json.dumps({k: v for k, v in record.items() if k not in skip}, indent=1)
+                     for record, skip in ((load, ("server_log", "dropped")), (drop, ("details",))))

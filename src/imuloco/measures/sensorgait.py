@@ -1,9 +1,11 @@
 """Gait measured from one sensor's raw signal, by the method that suits where it is worn.
 
-- Foot (``right_foot``, ``left_foot``; on the shoe over the instep): the swings, the stances'
-  rest moments and the foot's zero-velocity-update path of :func:`imuloco.sensors.foottrack.
-  foot_track` (gaitmap's ``RtsKalman``). A stride's length is the horizontal distance between
-  the foot's rest positions (Rampp et al. 2015). Initial and terminal contacts come from
+- Foot (``right_foot``, ``left_foot``; on the shoe over the instep): the swings and the
+  stances' rest moments of :func:`imuloco.sensors.foottrack.foot_track`, and the foot's
+  zero-velocity-update path of :func:`imuloco.sensors.foottrack.anchored_track`, the one the
+  ``foot-zupt`` path estimator gives the animation (so the report's strides are the
+  animation's). A stride's length is the horizontal distance between the foot's rest
+  positions (Rampp et al. 2015). Initial and terminal contacts come from
   gaitmap's ``HerzerEventDetection`` (Rampp's gyroscope events refined with the forward
   acceleration; its IC search on the gyroscope low-passed at 6 Hz, and reaching the stance
   after the contact, where a running foot lands) on strides segmented at the swings' starts.
@@ -43,7 +45,7 @@ from imuloco.ops.filters import resample_uniform
 from imuloco.phases import gait_phases
 from imuloco.phases.gait import GaitPhases
 from imuloco.sensors.calibration import body_axes
-from imuloco.sensors.foottrack import NoWalking, foot_track
+from imuloco.sensors.foottrack import NoWalking, anchored_track, foot_track
 from imuloco.sensors.placement import PRESETS
 
 LOWER_BACK = "lower_back"
@@ -149,8 +151,9 @@ def not_measured(placement: str, method: str, reason: str) -> SensorGait:
     return SensorGait(placement, method, measured=False, reason=reason)
 
 
-FOOT_METHOD = ("gaitmap RtsKalman ZUPT trajectory (one ZUPT per stance at least), strides "
-               "from swing to swing, HerzerEventDetection contacts")
+FOOT_METHOD = ("zero-velocity strapdown trajectory between the stances' rests (the foot-zupt "
+               "path the animation follows), strides from swing to swing, "
+               "HerzerEventDetection contacts")
 
 
 def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = "right",
@@ -176,7 +179,8 @@ def foot_gait(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray, foot: str = 
         convert_right_foot_to_fbf,
     )
 
-    starts, rest, pos, t, fsf = track.starts, track.rest, track.path, track.times, track.level
+    starts, rest, t, fsf = track.starts, track.rest, track.times, track.level
+    pos = anchored_track(track)[0]  # the path the animation follows (foot-zupt's)
     fbf = (convert_right_foot_to_fbf if foot == "right" else convert_left_foot_to_fbf)(fsf)
     # segmented strides from the start of one swing (heel off, just before toe off) to the
     # next; the last swing's is one typical stride long (its contact counts too)

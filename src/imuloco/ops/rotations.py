@@ -9,13 +9,23 @@ The products (:func:`qmul`, :func:`qrot`) are written out in numpy because scipy
 
 from __future__ import annotations
 
+import functools
 import inspect
 import warnings
+from types import ModuleType
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def _transform() -> ModuleType:
+    """:mod:`scipy.spatial.transform` (``Rotation``, ``Slerp``), imported on first use:
+    importing it takes 0.7 CPU s, and reading a motion file (``imuloco info FILE``) needs none
+    of it."""
+    from scipy.spatial import transform  # start-up time (issue #43): see the docstring
+
+    return transform
 
 
 def _apply(fn, x: np.ndarray, tail: int) -> np.ndarray:
@@ -149,24 +159,25 @@ def to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
     def fn(x: np.ndarray) -> np.ndarray:
         with warnings.catch_warnings():  # gimbal lock: scipy warns and picks a valid solution
             warnings.simplefilter("ignore", UserWarning)
-            return Rotation.from_quat(x).as_euler(order.upper(), degrees=degrees)
+            return _transform().Rotation.from_quat(x).as_euler(order.upper(), degrees=degrees)
     return _apply(fn, q, 1)
 
 
 def to_matrix(q: np.ndarray) -> np.ndarray:
     """q : (..., 4) -> rotation matrices (..., 3, 3)."""
-    return _apply(lambda x: Rotation.from_quat(x).as_matrix(), q, 1)
+    return _apply(lambda x: _transform().Rotation.from_quat(x).as_matrix(), q, 1)
 
 
-def _takes_assume_valid() -> bool:
-    """Whether this SciPy's ``Rotation.from_matrix`` can skip its orthogonalization (1.17+)."""
+@functools.cache
+def _skip_orthogonalization() -> dict[str, bool]:
+    """``Rotation.from_matrix``'s keyword that skips its orthogonalization where this SciPy
+    has it (1.17+), else none."""
     try:
-        return "assume_valid" in inspect.signature(Rotation.from_matrix).parameters
+        signature = inspect.signature(_transform().Rotation.from_matrix)
+        takes = "assume_valid" in signature.parameters
     except (TypeError, ValueError):  # a compiled method without a signature: older SciPy
-        return False
-
-
-_SKIP_ORTHOGONALIZATION = {"assume_valid": True} if _takes_assume_valid() else {}
+        takes = False
+    return {"assume_valid": True} if takes else {}
 
 
 def from_matrix(m: np.ndarray, orthonormal: bool = False) -> np.ndarray:
@@ -175,18 +186,18 @@ def from_matrix(m: np.ndarray, orthonormal: bool = False) -> np.ndarray:
     ``orthonormal``: the matrices are rotations already (orthonormal, determinant 1), so SciPy
     may skip the SVD that finds the nearest rotation (where SciPy offers it: 1.17+): half
     the time of :func:`from_6d` on a pose's 23 joints (0.30 -> 0.15 ms, idle machine)."""
-    kw = _SKIP_ORTHOGONALIZATION if orthonormal else {}
-    return _apply(lambda x: Rotation.from_matrix(x, **kw).as_quat(), m, 2)
+    kw = _skip_orthogonalization() if orthonormal else {}
+    return _apply(lambda x: _transform().Rotation.from_matrix(x, **kw).as_quat(), m, 2)
 
 
 def to_rotvec(q: np.ndarray) -> np.ndarray:
     """q : (..., 4) -> axis-angle vectors (..., 3), radians."""
-    return _apply(lambda x: Rotation.from_quat(x).as_rotvec(), q, 1)
+    return _apply(lambda x: _transform().Rotation.from_quat(x).as_rotvec(), q, 1)
 
 
 def from_rotvec(r: np.ndarray) -> np.ndarray:
     """Axis-angle vectors (..., 3), radians -> q (..., 4)."""
-    return _apply(lambda x: Rotation.from_rotvec(x).as_quat(), r, 1)
+    return _apply(lambda x: _transform().Rotation.from_rotvec(x).as_quat(), r, 1)
 
 
 def to_6d(q: np.ndarray) -> np.ndarray:
@@ -225,6 +236,7 @@ def slerp(q: np.ndarray, times: np.ndarray, new_times: np.ndarray) -> np.ndarray
     q = np.asarray(q, dtype=np.float64)
     t, rest = q.shape[0], q.shape[1:-1]
     flat = q.reshape(t, -1, 4)
-    out = np.stack([Slerp(times, Rotation.from_quat(flat[:, k]))(new_times).as_quat()
+    rotation, slerp_ = _transform().Rotation, _transform().Slerp
+    out = np.stack([slerp_(times, rotation.from_quat(flat[:, k]))(new_times).as_quat()
                     for k in range(flat.shape[1])], axis=1)
     return out.reshape((len(new_times),) + rest + (4,))

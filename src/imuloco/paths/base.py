@@ -103,6 +103,10 @@ class BodyPath:
 
 
 class PathEstimator(Protocol):
+    """``name``; ``reads_all_sensors`` (optional, default False): the estimator reads every
+    sensor of its kind in the recording itself (foot-zupt's two feet), so the registry does
+    not fuse its paths (:func:`imuloco.paths.registry.fuse_paths`)."""
+
     name: str
 
     def estimate(self, rec: Recording, placement: str, height_m: float | None = None

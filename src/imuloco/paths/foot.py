@@ -2,7 +2,7 @@
 
 The foot's swings, rests and level frame are :func:`imuloco.sensors.foottrack.foot_track`'s
 (gaitmap); its path is a strapdown integration between its rests with zero-velocity updates
-(:func:`imuloco.paths.strapdown.anchored_path`, lever arm 0), or foot_track's own path
+(:func:`imuloco.sensors.foottrack.anchored_track`, lever arm 0), or foot_track's own path
 (gaitmap's ``RtsKalman``, ``trajectory="rts"``); a footfall is each stance's stillest moment
 (``FootTrack.rest``), where the foot rests on the floor, and a stride the foot's move from one
 to the next (the lengths :func:`imuloco.measures.sensorgait.foot_gait` reports). The pelvis
@@ -14,7 +14,6 @@ ahead of and behind the pelvis), moved half a step width to the body's centre.
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d
 
 from imuloco.core.recording import Recording
 from imuloco.errors import UnknownNameError
@@ -30,8 +29,7 @@ from imuloco.paths.geometry import (
     stride_period,
     walking_heading,
 )
-from imuloco.paths.strapdown import anchored_path
-from imuloco.sensors.foottrack import SWING_DPS, ZUPT_GYRO_DPS, NoWalking, foot_track
+from imuloco.sensors.foottrack import NoWalking, anchored_track, foot_track
 
 FEET = ("right_foot", "left_foot")
 NOTE = ("foot-zupt: distance, stride lengths and footfalls from the foot's zero-velocity "
@@ -49,17 +47,10 @@ def _foot_xy(rec: Recording, placement: str, trajectory: str
         track = foot_track(rec.times, rec.acc[:, k], rec.gyro[:, k])
     except NoWalking:
         return np.zeros((len(rec.times), 2)), rec.times, np.zeros(0, int), rec.rate
-    lev = track.level.to_numpy()
-    gyro = np.radians(lev[:, 3:])
-    energy = maximum_filter1d(np.linalg.norm(gyro, axis=1), max(1, round(0.05 * track.rate)))
-    # a footfall is a stance's rest still enough for a stance (not the end of a cut swing)
-    rest = track.rest[energy[track.rest] < np.radians(SWING_DPS)]
+    path, rest = anchored_track(track)
     if len(rest) < 2:
         return np.zeros((len(track.times), 2)), track.times, np.zeros(0, int), track.rate
-    if trajectory == "anchored":
-        path, _, _ = anchored_path(lev[:, :3], gyro, track.rate, rest, np.zeros(3),
-                                   energy < np.radians(ZUPT_GYRO_DPS))
-    else:
+    if trajectory == "rts":
         path = track.path
     xy = path[:, :2] - path[rest[0], :2]
     xy = rotate(xy, -initial_yaw(xy[rest]))
@@ -70,10 +61,11 @@ class FootZupt:
     """:class:`imuloco.paths.base.PathEstimator` of a foot sensor (module docstring)."""
 
     name = "foot-zupt"
+    reads_all_sensors = True  # both feet's tracks, when the recording has both (docstring)
     TRAJECTORIES = ("rts", "anchored")
 
     def __init__(self, trajectory: str = "anchored") -> None:
-        # "anchored": the strapdown of :mod:`imuloco.paths.strapdown` between foot_track's
+        # "anchored": the strapdown of :func:`imuloco.sensors.foottrack.anchored_track` between foot_track's
         # rests, in its level frame; "rts": foot_track's own path (gaitmap's RtsKalman). On
         # virtual feet (the sample's walks, phone noise) anchored's distance is off by 1.7-2.8 %
         # where rts's is off by 9-18 % (its orientation goes astray on some simulated feet:

@@ -7,7 +7,7 @@ speed and slope estimation using shank-mounted inertial measurement units"; Sci 
 shank-based IMU with an inverted pendulum model). Between two mid-stances the sensor's
 orientation is the gyroscope integrated, its tilt reset by gravity at each mid-stance, and its
 velocity the gravity-free acceleration integrated from ``omega x r`` at one mid-stance to
-``omega x r`` at the next (:func:`imuloco.paths.strapdown.anchored_path`); the ankle is the
+``omega x r`` at the next (:func:`imuloco.sensors.strapdown.anchored_path`); the ankle is the
 sensor's position minus ``R r``, and a stride is the ankle's displacement between successive
 mid-stances.
 
@@ -47,9 +47,9 @@ from imuloco.paths.geometry import (
     stride_period,
     walking_heading,
 )
-from imuloco.paths.strapdown import anchored_path
 from imuloco.sensors.calibration import estimate_mounting
 from imuloco.sensors.placement import get_placement
+from imuloco.sensors.strapdown import anchored_path
 
 SHANKS = ("right_ankle", "left_ankle")
 SHANK_RATIO = 0.246  # shank (knee to ankle joint) over body height (Winter 2009, Fig. 4.1)

@@ -53,6 +53,34 @@ _GYRO_DEG_MAGNITUDE = 35.0  # rad/s: 2000 deg/s is 34.9 rad/s, the largest phone
 
 
 @dataclass
+class SensorSource:
+    """Where one sensor of a recording came from and how its clock was put on the
+    recording's (the report's ``sensors``).
+
+    placement : the sensor's placement; file : the file (or export member) it was read from.
+    offset_s : seconds added to the file's clock to put it on the first sensor's.
+    aligned_by : ``"timestamps"`` (one clock: a file's columns, an export's files, or Unix
+        times of devices synchronised to it) or ``"xcorr"`` (a stomp or clap at the start,
+        :func:`imuloco.sensors.multi.align_by_xcorr`).
+    correlation : the normalised cross-correlation at the offset found (``"xcorr"`` only).
+    used : whether the model read this sensor (set by the pipeline; ``None``: not yet known).
+    """
+
+    placement: str
+    file: str
+    offset_s: float = 0.0
+    aligned_by: str = "timestamps"
+    correlation: float | None = None
+    used: bool | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {"placement": self.placement, "file": self.file,
+                "offset_s": round(self.offset_s, 4), "aligned_by": self.aligned_by,
+                "correlation": None if self.correlation is None else round(self.correlation, 3),
+                "used": self.used}
+
+
+@dataclass
 class LogReport:
     """What importing a log found and did.
 
@@ -72,6 +100,7 @@ class LogReport:
     time_unit : the unit the timestamps turned out to have (``"ms"`` in a ``time_s`` column
         that holds milliseconds, see :func:`_time_scale`).
     platform : Sensor Logger: the platform applied and how it was found.
+    sensors : per sensor, its file and clock alignment (:class:`SensorSource`).
     """
 
     format: str
@@ -89,6 +118,7 @@ class LogReport:
     gaps: list[Gap] = field(default_factory=list)
     time_unit: str = "s"
     platform: str | None = None
+    sensors: list[SensorSource] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         """The ``recording`` part of a reconstruction's report (keys are a contract)."""
@@ -203,6 +233,11 @@ def _sensors(streams: list[Stream], placement: str) -> dict[str, dict[str, Strea
     """Streams grouped per sensor (the placement the file names, or ``placement``), each with
     an accelerometer and a gyroscope."""
     sensors: dict[str, dict[str, Stream]] = {}
+    named = {s.placement for s in streams} - {None}
+    if placement in named and any(s.placement is None for s in streams):
+        raise FormatError(streams[0].path, None, f"the log's own sensor is read at {placement!r}"
+                          f", where the export's other sensor ({named_file(streams, placement)})"
+                          " is too: give the phone's placement with --placement")
     for s in streams:
         sensors.setdefault(s.placement or placement, {})[s.quantity] = s
     for name, pair in sensors.items():
@@ -211,6 +246,37 @@ def _sensors(streams: list[Stream], placement: str) -> dict[str, dict[str, Strea
                 raise FormatError(streams[0].path, None, f"sensor {name!r}: no "
                                   f"{'accelerometer' if q == 'acc' else 'gyroscope'} signal found")
     return sensors
+
+
+def named_file(streams: list[Stream], placement: str) -> str:
+    """The file of the stream at ``placement`` (for messages)."""
+    return next(str(s.path) for s in streams if s.placement == placement)
+
+
+MIN_OVERLAP = 0.8  # share of the shortest sensor's span the sensors must record together
+
+
+def check_overlap(spans: dict[str, tuple[float, float]], files: dict[str, str]) -> None:
+    """Refuse sensors (placement -> (start, stop) seconds on one clock) that record together
+    less than :data:`MIN_OVERLAP` of the shortest one's span: a reconstruction from several
+    sensors reads them all at every frame, so the rest would be lost or guessed."""
+    if len(spans) < 2:
+        return
+    start = max(a for a, _ in spans.values())
+    stop = min(b for _, b in spans.values())
+    shortest = min(spans, key=lambda n: spans[n][1] - spans[n][0])
+    length = spans[shortest][1] - spans[shortest][0]
+    together = max(stop - start, 0.0)
+    if together < MIN_OVERLAP * length:
+        late = max(spans, key=lambda n: spans[n][0])
+        early = min(spans, key=lambda n: spans[n][1])
+        raise FormatError(files[shortest], None, f"the sensors record together {together:.3g} s, "
+                          f"{100 * together / max(length, 1e-9):.0f} % of the shortest one's "
+                          f"{length:.3g} s ({shortest}); expected at least "
+                          f"{100 * MIN_OVERLAP:.0f} %: {late} ({files[late]}) starts at "
+                          f"{spans[late][0] - min(a for a, _ in spans.values()):.3g} s, "
+                          f"{early} ({files[early]}) stops at "
+                          f"{spans[early][1] - min(a for a, _ in spans.values()):.3g} s")
 
 
 def _check_values(s: Stream) -> None:
@@ -425,6 +491,11 @@ def _import(path: str | Path | Sequence[str | Path], opts: LogOptions
     report.platform = next((s.platform for s in streams if s.platform), None)
     sensors = _sensors(streams, opts.placement)
     cleaned = _clean(sensors, report)
+    spans = {n: (max(t[0] for t, _ in pair.values()), min(t[-1] for t, _ in pair.values()))
+             for n, pair in cleaned.items()}
+    files = {n: str(sensors[n]["acc"].path) for n in cleaned}
+    check_overlap(spans, files)
+    report.sensors = [SensorSource(n, files[n]) for n in cleaned]
     # step 4: the common time interval and reference timestamps (first sensor's accelerometer)
     t0 = max(t[0] for pair in cleaned.values() for t, _ in pair.values())
     t1 = min(t[-1] for pair in cleaned.values() for t, _ in pair.values())

@@ -103,6 +103,7 @@ def simulate(
     noise: str | NoiseModel = "clean",
     seed: int = 0,
     strap: Strap | None = None,
+    stomps: Sequence[float] = (),
 ) -> Recording:
     """Simulate body-worn sensors during ``motion``.
 
@@ -114,6 +115,8 @@ def simulate(
     seed : seeds every random draw, so the same arguments give the same recording.
     strap : every sensor sits on this soft-tissue strap (:mod:`imuloco.sensors.strap`);
         None: rigidly on its segment.
+    stomps : seconds at which the wearer stomps (:func:`add_stomps`), the rule that aligns
+        the clocks of sensors recorded apart (:mod:`imuloco.sensors.multi`).
 
     Returns
     -------
@@ -138,4 +141,57 @@ def simulate(
         gyros.append(gyro)
         oris.append(ori)
     names = [get_placement(p).name for p in placements]
-    return Recording(times, np.stack(accs, 1), np.stack(gyros, 1), names, np.stack(oris, 1))
+    rec = Recording(times, np.stack(accs, 1), np.stack(gyros, 1), names, np.stack(oris, 1))
+    return add_stomps(rec, stomps) if len(stomps) else rec
+
+
+EASE_S = 1.0  # seconds over which a still start speeds up into the motion
+
+
+def still_start(motion: Motion, seconds: float) -> Motion:
+    """``motion`` after ``seconds`` of standing in its first pose (the lead-in before
+    :func:`add_stomps`' stomps: stand still, stomp, then move), then :data:`EASE_S` seconds
+    in which it speeds up from rest (its first ``EASE_S / 2`` seconds played at a speed
+    rising linearly from 0 to 1: no jump of velocity)."""
+    n = round(seconds * motion.fps)
+    u = np.arange(round(EASE_S * motion.fps)) / motion.fps  # output seconds of the ease
+    src = u * u / (2 * EASE_S) * motion.fps  # source frame: speed rises from 0 to 1
+    i = np.minimum(src.astype(int), motion.num_frames - 2)
+    w = (src - i)[:, None]
+    rot = (1 - w[..., None]) * motion.rotations[i] + w[..., None] * motion.rotations[i + 1]
+    rot /= np.linalg.norm(rot, axis=-1, keepdims=True)  # steps of a frame: nlerp is enough
+    root = (1 - w) * motion.root[i] + w * motion.root[i + 1]
+    rest = round(EASE_S / 2 * motion.fps)
+    return Motion(motion.skeleton,
+                  np.concatenate([np.repeat(motion.rotations[:1], n, 0), rot,
+                                  motion.rotations[rest:]]),
+                  np.concatenate([np.repeat(motion.root[:1], n, 0), root, motion.root[rest:]]),
+                  motion.fps, motion.name)
+
+
+STOMP_LEAD_S = 2.0  # seconds of standing before the motion, with stomps at STOMP_AT_S
+STOMP_AT_S = (0.5, 1.2)
+STOMP_S = 0.06  # the jolt: one half sine this long (a heel strike's is 20-50 ms)
+STOMP_G = {"leg": 3.0, "other": 1.5}  # its peak, g: strongest on the legs, damped above the hip
+
+
+def add_stomps(rec: Recording, at: Sequence[float]) -> Recording:
+    """``rec`` with the jolt of a stomp at each time of ``at`` (seconds) added to every
+    sensor's specific force: a vertical (world) half sine of :data:`STOMP_S`, peaking at
+    :data:`STOMP_G` (legs and feet, else the rest of the body),
+    reaching every sensor at once. A model of the event, not of a body stomping (the motion
+    is not changed): enough to test the clock alignment that looks for it. Needs the true
+    orientation (``rec.orientation``)."""
+    if rec.orientation is None:
+        raise InputError("adding stomps needs the sensors' orientation (simulate gives it)")
+    dt = rec.times[:, None] - np.asarray(at, dtype=np.float64)[None, :]  # (T, K)
+    ring = np.where((dt >= 0) & (dt <= STOMP_S), np.sin(np.pi * dt / STOMP_S), 0.0).sum(axis=1)
+    acc = rec.acc.copy()
+    for k, name in enumerate(rec.placements):
+        seg = get_placement(name).segment
+        peak = STOMP_G["leg" if any(w in seg for w in ("knee", "ankle", "hip", "toe"))
+                       else "other"] * G
+        up = np.zeros((len(ring), 3))
+        up[:, 1] = peak * ring
+        acc[:, k] += qrot(qinv(rec.orientation[:, k]), up)
+    return Recording(rec.times, acc, rec.gyro, list(rec.placements), rec.orientation)

@@ -259,6 +259,8 @@ class LiveServer:
         :meth:`start` binds an address off loopback).
     height_m : the wearer's body height in metres: poses in their proportions (``None``: the
         model skeleton's).
+    follow_path : the walker's root follows the path the sensor measures (see
+        :class:`LiveSession`; its estimate on a thread of its own); False: the model's root.
     vmc : (host, port) of a VMC protocol receiver every frame is also sent to
         (:mod:`imuloco.app.live.vmc`; ``None``: none).
     """
@@ -266,14 +268,16 @@ class LiveServer:
     def __init__(self, method, calibrate_s: float = 5.0, note: str = "", token: str | None = None,
                  allow_origins: Iterable[str] = (), limits: Limits = Limits(),
                  require_token: bool | None = None, height_m: float | None = None,
-                 vmc: tuple[str, int] | None = None) -> None:
-        probe = LiveSession(method, calibrate_s, height_m=height_m)  # fails early: offline
+                 follow_path: bool = True, vmc: tuple[str, int] | None = None) -> None:
+        probe = LiveSession(method, calibrate_s, height_m=height_m,
+                            follow_path=False)  # fails early: offline
         self.vmc = None
         if vmc is not None:  # python-osc (the [live] extra) is needed for --vmc only
             from imuloco.app.live.vmc import VmcSender
 
             self.vmc = VmcSender(probe.skeleton, method.fps_, *vmc)
         self.height_m = height_m
+        self.follow_path = follow_path
         self.method = method
         self.calibrate_s = calibrate_s
         self.note = note
@@ -572,8 +576,11 @@ class LiveServer:
 
     def start_session(self, calibration=None) -> None:
         """A fresh session (frames from 0); ``calibration`` reuses a phone's mounting."""
+        if self.session is not None:
+            self.session.close()
         self.session = LiveSession(self.method, self.calibrate_s, calibration=calibration,
-                                   height_m=self.height_m)
+                                   height_m=self.height_m, follow_path=self.follow_path,
+                                   path_background=True)
         self._last_status_t = -np.inf
         self.publish({"type": "reset"})
         self.set_status(self.session.describe())
@@ -638,6 +645,8 @@ class LiveServer:
             self.server.close()
             await self.server.wait_closed()
         self._worker.shutdown(wait=True)
+        if self.session is not None:
+            self.session.close()
         if self.vmc is not None:
             self.vmc.close()
 

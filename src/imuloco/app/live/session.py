@@ -23,10 +23,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imuloco.core.recording import Recording
-from imuloco.errors import InputError
+from imuloco.errors import InputError, MissingExtraError
 from imuloco.measures.gait import height_scale
 from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import about_y, qmul, qrot
+from imuloco.paths.live import RootFollower, StrideStream
+from imuloco.paths.registry import ESTIMATORS
+from imuloco.sensors.placement import get_placement
 
 log = logging.getLogger(__name__)
 
@@ -203,6 +206,12 @@ class LiveSession:
     height_m : the wearer's body height in metres: the skeleton and the root path are scaled
         to it as :func:`imuloco.measures.gait.to_height` scales a reconstruction (``None``: the
         model skeleton's proportions).
+    follow_path : the root follows the path the first placement with a path estimator
+        measures (:mod:`imuloco.paths.live`: strides confirmed as their end footfall is
+        detected, the root between them carried on at the last stride's gain and corrected
+        smoothly); False: the model's own root. No frame waits for it: the delay is the same.
+    path_background : the path's estimate runs on a thread of its own (the server), not
+        inline in :meth:`push` (deterministic: tests and benches).
 
     Bounded state: samples beyond ``MAX_RATE_HZ`` per second of their own timestamps (after a
     burst of ``RATE_BURST``) are dropped and counted in :attr:`dropped`, so the calibration
@@ -212,7 +221,8 @@ class LiveSession:
 
     def __init__(self, method, calibrate_s: float = 5.0, sigma_s: float | None = None,
                  radius_s: float | None = None, calibration: Calibration | None = None,
-                 max_gap_s: float = MAX_GAP_S, height_m: float | None = None) -> None:
+                 max_gap_s: float = MAX_GAP_S, height_m: float | None = None,
+                 follow_path: bool = True, path_background: bool = False) -> None:
         if not (getattr(method, "supports_online", False)
                 and getattr(method, "can_stream", lambda: True)()):
             raise InputError(f"method {method.name!r} has no online mode as configured; live "
@@ -246,6 +256,13 @@ class LiveSession:
         self._recent: deque[tuple[float, np.ndarray, float]] = deque(
             maxlen=int(np.ceil(method.fps_)) + 1)  # (time, root, yaw) of the last second
         self._join: float | None = None  # time of the last frame before a dropout
+        self.path_placement = _path_placement(self.placements) if follow_path else None
+        self.strides: StrideStream | None = None  # the path's strides, causally
+        self.follower: RootFollower | None = None  # the root on them
+        if self.path_placement is not None:
+            self.strides = StrideStream(self.path_placement, height_m,
+                                        background=path_background)
+            self.follower = RootFollower(float(method.fps_))
 
     @property
     def num_sensors(self) -> int:
@@ -259,6 +276,11 @@ class LiveSession:
     def buffered(self) -> int:
         """Raw samples held (calibration buffer and resampler): bounded, see the class."""
         return self._n + len(self.resampler.buf)
+
+    def close(self) -> None:
+        """Stop the path's estimate thread, if any (the session is done)."""
+        if self.strides is not None:
+            self.strides.close()
 
     def calibration_progress(self) -> tuple[float, float] | None:
         """While calibrating, (seconds of samples held, seconds it wants); else None."""
@@ -321,12 +343,14 @@ class LiveSession:
             self._n, self._next_try = 0, self.calibrate_s
             return
         self.stream = self.method.stream()
+        if self.strides is not None:
+            self.strides.reset()
+            self.follower.restart()
         self.resampler.skip_to(t)
         self._first_k = self.resampler.next
         self._join = self._recent[-1][0] if self._recent else None
 
     def _calibrate(self, final: bool = False) -> bool:
-        from imuloco.errors import MissingExtraError
         from imuloco.sensors.calibration import calibrate, mounting_of
 
         raw, s = self._raw[:self._n], self.num_sensors
@@ -362,6 +386,11 @@ class LiveSession:
         row = np.concatenate([acc, gyro], axis=-1).reshape(-1)  # (6S,) as Recording.channels
         sk = self.skeleton
         out = []
+        if self.strides is not None:
+            j = self.placements.index(self.path_placement)
+            self.strides.push(t, acc[j], gyro[j])
+            for stride in self.strides.poll():
+                self.follower.add(stride)
         d = self.stream.delay_frames  # a model with look-ahead returns frame k - d
         for k, tk, x in self.resampler.push(t, row):
             rot, root = self.stream.step(x)
@@ -373,6 +402,8 @@ class LiveSession:
                 self._continue_walker(tf, rot, root)
             rot, root = rot.copy(), qrot(self._turn, root) + self._shift
             rot[0] = qmul(self._turn, rot[0])
+            if self.follower is not None:
+                root[[0, 2]] = self.follower.step(tf, root[[0, 2]])
             self._recent.append((tf, root, float(_yaw(rot[0]))))
             pos = fk(rot, root, sk.offsets, sk.parents)[1]
             out.append(Frame(k - d, tf, t, rot, root, pos,  # a duck-typed stream may lack them
@@ -394,7 +425,23 @@ class LiveSession:
             target = target + (roots[-1] - roots[0]) / (times[-1] - times[0]) * (t - t0)
         self._turn = about_y(np.asarray(yaw - _yaw(rot[0])))
         self._shift = target - qrot(self._turn, root)
+        if self.follower is not None:  # the follower's offset is added after the shift
+            self._shift[[0, 2]] -= self.follower.offset
         self._shift[1] = 0.0  # the model's own root height
+
+
+def _path_placement(placements: list[str]) -> str | None:
+    """The first of ``placements`` with a path estimator whose extra is installed (a missing
+    one is logged: the root is then the model's)."""
+    for p in placements:
+        if p in ESTIMATORS:
+            try:
+                get_placement(p).require_extra()
+            except MissingExtraError as e:
+                log.warning("the live root does not follow %s's path: %s", p, e)
+                continue
+            return p
+    return None
 
 
 def _yaw(q: np.ndarray) -> float:
