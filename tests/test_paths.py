@@ -154,7 +154,7 @@ def test_gyro_integration_is_the_product_of_its_steps():
     """The prefix product equals the rotations composed one step after another (scipy)."""
     from scipy.spatial.transform import Rotation
 
-    from imuloco.paths.strapdown import integrate_gyro
+    from imuloco.sensors.strapdown import integrate_gyro
 
     rng = np.random.default_rng(3)
     gyro = rng.normal(0, 3.0, (1001, 3))
