@@ -432,6 +432,35 @@ def test_stacked_members_equal_their_modules():
                                    atol=1e-5)
 
 
+def test_a_long_sequence_runs_each_member_once_with_the_stacked_result():
+    """Past STACKED_FRAMES frames an ensemble in inference runs each member's own GRU over the
+    whole sequence (one call each): the stacked weights' outputs and state to float
+    precision."""
+    from imuloco.methods.learned.model import STACKED_FRAMES
+
+    torch.manual_seed(1)
+    net = Ensemble.of_size(3, 6, 34, hidden=16, layers=2).eval()
+    x, h = torch.randn(2, 3 * STACKED_FRAMES, 6), 0.5 * torch.randn(6, 2, 16)
+    with torch.no_grad():
+        feats, hn = net.encode(x, h)
+        stacked = net._weights().encode(x, h)
+    np.testing.assert_allclose(feats.numpy(), stacked[0].numpy(), atol=1e-5)
+    np.testing.assert_allclose(hn.numpy(), stacked[1].numpy(), atol=1e-5)
+
+
+def test_member_spread_in_pieces_is_the_spread_in_one(sample_db, monkeypatch):
+    from imuloco.methods.learned import ensemble as ens
+
+    sk = sample_db.clips[0].skeleton
+    rng = np.random.default_rng(0)
+    vectors = rng.normal(0, 1, (50, 4, 6 * sk.num_joints + 4))
+    monkeypatch.setattr(ens, "SPREAD_FRAMES", 7)
+    pieces = ens.member_spread(vectors, sk)
+    monkeypatch.setattr(ens, "SPREAD_FRAMES", 1000)
+    np.testing.assert_array_equal(pieces, ens.member_spread(vectors, sk))
+    assert pieces.shape == (50,) and (pieces > 0).all()
+
+
 def test_an_ensemble_file_round_trip_and_mirror(tiny_ensemble, sample_db, test_signals,
                                                 tmp_path):
     model, _other = tiny_ensemble
@@ -556,3 +585,22 @@ def test_a_model_keeps_the_pitch_of_a_flat_foot_it_learned(sample_db, tiny_model
         np.savez(path, **data)
         with pytest.raises(ModelFileError, match=r"old\.npz.*flat_pitch"):
             load_model(path)
+
+
+def test_novelty_in_pieces_is_the_novelty_in_one(monkeypatch):
+    """The novelty's distances go NOVELTY_FRAMES frames at a time: the same smoothed novelty
+    (the shipped ensemble's reference, features drawn around it) as in one product."""
+    from imuloco.app.pipeline import shipped_model
+    from imuloco.methods import load_model
+    from imuloco.methods.learned import confidence
+
+    model = load_model(shipped_model("learned", "right_ankle"))
+    rng = np.random.default_rng(0)
+    feats = (model.novelty_mean_ + rng.normal(0, 0.3, (5000, len(model.novelty_mean_))))
+    monkeypatch.setattr(confidence, "NOVELTY_FRAMES", 10**9)
+    one = model._novelty(feats)
+    monkeypatch.setattr(confidence, "NOVELTY_FRAMES", 2048)
+    np.testing.assert_allclose(model._novelty(feats.astype(np.float32)),
+                               model._novelty(feats.astype(np.float32).astype(np.float64)),
+                               rtol=0, atol=0)
+    np.testing.assert_allclose(model._novelty(feats), one, rtol=1e-12)

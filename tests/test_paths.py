@@ -148,3 +148,19 @@ def test_times_count_from_the_recordings_start(sample_db):
 
     with pytest.raises(UnknownNameError, match="no sensor at"):
         estimate_path(rec, "left_ankle")
+
+
+def test_gyro_integration_is_the_product_of_its_steps():
+    """The prefix product equals the rotations composed one step after another (scipy)."""
+    from scipy.spatial.transform import Rotation
+
+    from imuloco.sensors.strapdown import integrate_gyro
+
+    rng = np.random.default_rng(3)
+    gyro = rng.normal(0, 3.0, (1001, 3))
+    cur, want = Rotation.identity(), [Rotation.identity().as_quat()]
+    for step in Rotation.from_rotvec(gyro[:-1] / 100.0):
+        cur = cur * step
+        want.append(cur.as_quat())
+    got = integrate_gyro(gyro, 100.0)
+    assert (got * Rotation.from_quat(want).inv()).magnitude().max() < 1e-12

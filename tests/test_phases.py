@@ -287,3 +287,27 @@ def test_shared_clips(shared_dir):
             else:
                 assert 80 <= g.cadence_spm <= 150, f.name
                 assert g.flight.mean() < 0.02, f.name
+
+
+def test_positions_and_contacts_are_kept_until_the_motion_changes(sample_db):
+    """A motion's fk and foot contacts are computed once and shared (read-only); changing its
+    arrays, in place or by assignment, gets them computed again."""
+    import pickle
+
+    from imuloco.phases import foot_contacts
+
+    m = sample_db.where(content="walk").clips[0].copy()
+    pos, contacts = m.positions(), foot_contacts(m)
+    assert m.positions() is pos and not pos.flags.writeable
+    assert all(a is b for a, b in zip(foot_contacts(m).values(), contacts.values()))
+    assert foot_contacts(m, speed_tol=0.5)["left_foot"] is not contacts["left_foot"]
+    m.root[:, 1] += 0.5  # in place: the digest sees it
+    moved = m.positions()
+    assert moved is not pos
+    np.testing.assert_allclose(moved[..., 1], pos[..., 1] + 0.5, atol=1e-12)
+    again = foot_contacts(m)  # found again (the same: the floor rose with the feet)
+    assert again["left_foot"] is not contacts["left_foot"]
+    np.testing.assert_array_equal(again["left_foot"], contacts["left_foot"])
+    m.rotations = m.rotations[::-1].copy()  # assigned
+    assert not np.allclose(m.positions(), moved)
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(m)).positions(), m.positions())

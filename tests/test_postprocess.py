@@ -314,3 +314,47 @@ def test_the_quaternion_of_a_rotation_vector():
     r = np.random.default_rng(3).normal(size=(50, 3))
     r[0] = 0.0
     np.testing.assert_allclose(_quaternion(r), from_rotvec(r), atol=1e-12)
+
+
+def _lock_by_loop(motion: Motion, heel: np.ndarray, toe: np.ndarray, **kw) -> np.ndarray:
+    """The reference: the foot lock run frame after frame (lock_feet's loop before it was
+    compiled), its legs bent once at the end."""
+    from imuloco.methods.postprocess import FootLock
+
+    lock = FootLock(motion.skeleton, motion.fps, **kw)
+    legs = lock.legs(motion.rotations, motion.root)
+    targets, turns = [], []
+    for f, h, o in zip(legs[1][:, lock.sub_feet], heel, toe):
+        targets.append(lock.targets(f, h, o))
+        turns.append(lock.turn.copy())
+    return lock.bend(motion.rotations, motion.root, np.array(targets), legs, np.array(turns))
+
+
+@pytest.mark.parametrize("engine", ["numba", "numpy"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_lock_feet_equals_the_frame_loop_on_random_motions(sample_db, engine, seed):
+    """Random joint rotations, a wandering root and random contacts (flat feet, lone heels and
+    toes, lifts, slides past the hold's bound): the compiled and the numpy lock give the
+    frame loop's legs to rounding, with and without a flat pitch."""
+    if engine == "numba":
+        pytest.importorskip("numba")
+    from imuloco.methods.postprocess import lock_feet
+    from imuloco.ops.rotations import from_rotvec
+
+    rng = np.random.default_rng(seed)
+    sk = sample_db.clips[0].skeleton
+    n = 400
+    rot = from_rotvec(np.cumsum(rng.normal(0, 0.05, (n, sk.num_joints, 3)), axis=0) * 0.3)
+    root = np.cumsum(rng.normal(0, 0.02, (n, 3)), axis=0) + [0.0, 0.9, 0.0]
+    motion = Motion(sk, rot, root, 30.0)
+    # runs of contact: states held for a few frames, probabilities around the threshold
+    states = np.repeat(rng.random((n // 8 + 1, 4)), 8, axis=0)[:n]
+    probs = np.clip(states + rng.normal(0, 0.1, states.shape), 0, 1)
+    for kw in ({"smoothing": 0.7}, {"smoothing": 1.0, "flat_pitch": -0.1},
+               {"smoothing": 0.5, "hold_flat": False, "release_s": 0.05}):
+        want = _lock_by_loop(motion, probs[:, :2], probs[:, 2:], **kw)
+        got = lock_feet(motion, probs[:, :2], probs[:, 2:], engine=engine, **kw)
+        assert np.abs(want - motion.rotations).max() > 0.05  # legs were bent
+        np.testing.assert_allclose(got.rotations, want, atol=1e-9)
+    with pytest.raises(ValueError, match="engine"):
+        lock_feet(motion, probs[:, :2], probs[:, 2:], engine="fortran")

@@ -91,3 +91,33 @@ def test_against_a_commit_fits_that_commits_code(tmp_path):
                               against="HEAD")
     assert [r["method"] for r in records] == ["mousas2017[beam=100000]", "mousas2017@HEAD"]
     assert records[0]["test_mpjpe_cm"] == pytest.approx(records[1]["test_mpjpe_cm"], abs=1e-3)
+
+
+def test_a_walk_log_lasts_what_was_asked(tmp_path):
+    """The reconstruct row's simulated walks: clips end to end, times rising, the length
+    asked for (to a sample), at 100 Hz."""
+    from imuloco.lab.speed import walk_log
+    from imuloco.sensors.reallog import read_log
+
+    log = walk_log("right_ankle", 25.0, tmp_path / "walk.csv")
+    rec, _ = read_log(log, placement="right_ankle")
+    assert rec.times[-1] - rec.times[0] == pytest.approx(25.0, abs=0.02)
+    assert len(rec.times) == pytest.approx(2500, abs=3)
+
+
+def test_reconstruct_table_and_bvh_difference(spinning_motion, tmp_path):
+    from imuloco.io.bvh import write_bvh
+    from imuloco.lab.speed import bvh_difference, reconstruct_table
+
+    a = write_bvh(spinning_motion, tmp_path / "a.bvh")
+    moved = spinning_motion.copy()
+    moved.root = moved.root + [0.0, 0.0, 0.25]
+    b = write_bvh(moved, tmp_path / "b.bvh")
+    assert bvh_difference(a, a) == 0.0
+    assert bvh_difference(a, b) == pytest.approx(25.0, abs=1e-3)  # cm
+    row = {"placement": "right_ankle", "length_s": 60.0, "threads": "1", "code": "today",
+           "wall_s": 2.0, "cpu_s": 1.5, "realtime": 30.0, "realtime_cpu": 40.0,
+           "peak_rss_mb": 300.0, "load_avg": 1.0}
+    text = reconstruct_table([row, {**row, "code": "abc", "max_diff_cm": 0.01}])
+    assert "| right_ankle | 60 | 1 | today | 2.0 | 1.5 | 30 | 40 | 300 | - | 1.0 |" in text
+    assert "| 0.01 |" in text

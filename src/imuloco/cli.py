@@ -500,20 +500,46 @@ def bench_run(method_names: str, split_name: str, noise: str, placement: str,
 
 
 @bench.command("speed", short_help="Online reconstruction time against database size.")
-@click.option("--method", "method_names", required=True, help=METHODS_HELP + ".")
+@click.option("--method", "method_names", default=None,
+              help=METHODS_HELP + " (required but with --reconstruct).")
 @click.option("--data", "data_items", multiple=True,
               help="Folder of clips to time on (the first one given) [default: the bundled "
                    "sample].")
 @click.option("--db-frames", default=None, help="Database sizes in frames, comma separated.")
 @click.option("--against", default=None, metavar="REV",
               help="Also time each method's code at this git commit, in the same run.")
+@click.option("--reconstruct", "reconstruct_row", is_flag=True,
+              help="Instead: time `imuloco reconstruct --report` per shipped placement and "
+                   "length (one thread and the default; wall, CPU, real-time factor, peak "
+                   "memory; --against: the old code's too); writes reconstruct_speed.md/.json.")
+@click.option("--lengths", default="60,600,3600", show_default=True,
+              help="With --reconstruct: recording lengths in seconds, comma separated.")
 @_out_option("speed.json and speed.md")
-def bench_speed(method_names: str, data_items: tuple[str, ...], db_frames: str | None,
-                against: str | None, out: Path) -> None:
+def bench_speed(method_names: str | None, data_items: tuple[str, ...], db_frames: str | None,
+                against: str | None, reconstruct_row: bool, lengths: str, out: Path) -> None:
     """Time online reconstruction against database size (imuloco.lab.speed); write
     speed.json and speed.md."""
-    from imuloco.lab.speed import speed_benchmark, speed_table  # heavy: on use
+    from imuloco.lab.speed import (
+        reconstruct_speed,
+        reconstruct_table,
+        speed_benchmark,
+        speed_table,  # heavy: on use
+    )
 
+    if reconstruct_row:
+        try:
+            seconds = [float(v) for v in _csv(lengths)]
+        except ValueError:
+            seconds = []
+        if not seconds or not all(0 < v < float("inf") for v in seconds):
+            raise click.BadParameter(f"expected positive seconds, comma separated, got "
+                                     f"{lengths!r}", param_hint="--lengths")
+        click.echo(reconstruct_table(reconstruct_speed(seconds, against=against, out=out,
+                                                       progress=True)))
+        click.echo(f"wrote {out / 'reconstruct_speed.json'} and .md")
+        return
+    if not method_names:
+        raise click.UsageError("Missing option '--method' (or pass --reconstruct).")
     data = _folders(data_items)
     frames = _whole_numbers(db_frames, "--db-frames") or None
     click.echo(speed_table(speed_benchmark(_csv(method_names), out, data[0] if data else None,

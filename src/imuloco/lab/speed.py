@@ -40,6 +40,8 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -49,6 +51,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from imuloco.core.motion import MotionDatabase
+from imuloco.errors import InputError
 from imuloco.io.atomic import atomic_write
 from imuloco.lab.bench import load_data
 from imuloco.lab.loadspeed import module_at
@@ -348,4 +351,167 @@ def speed_table(records: list[dict[str, Any]], data: Path | None = None) -> str:
             f"| {f(r.get('load_avg'), '.1f')} "
             f"| {f(r.get('fit_s'), '.1f')} "
             f"| {'yes (' + str(r['distinct_frames']) + ' distinct)' if r.get('repeated') else 'no'} |")
+    return "\n".join(lines)
+
+
+# ---- the reconstruct row: `imuloco reconstruct --report` timed as a user runs it ----------
+
+RECONSTRUCT_LENGTHS = (60.0, 600.0, 3600.0)  # seconds: 1 min, 10 min, 1 h
+SHIPPED_PLACEMENTS = ("right_ankle", "right_foot", "lower_back")  # one shipped model each
+THREADS = ("1", "default")
+
+
+def walk_log(placement: str, seconds: float, path: str | Path, seed: int = 0) -> Path:
+    """A phone log of a ``seconds`` long walk of the sensor at ``placement`` (generic CSV,
+    100 Hz): the bundled sample's walk clips simulated with phone noise and played end to
+    end, repeated until long enough (each repetition's times continue the last)."""
+    from imuloco.core.recording import Recording
+    from imuloco.io.database import load_sample
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.sensors.simulate import simulate
+
+    recs = [simulate(c, [placement], 100.0, "phone", seed + i)
+            for i, c in enumerate(load_sample().where(content="walk").clips)]
+    times, acc, gyro, t0, k = [], [], [], 0.0, 0
+    while t0 < seconds:
+        r = recs[k % len(recs)]
+        keep = r.times - r.times[0] <= seconds - t0
+        times.append(r.times[keep] - r.times[0] + t0)
+        acc.append(r.acc[keep])
+        gyro.append(r.gyro[keep])
+        t0 = times[-1][-1] + 0.01
+        k += 1
+    rec = Recording(np.concatenate(times), np.concatenate(acc), np.concatenate(gyro),
+                    [placement])
+    return write_generic_csv(rec, path, overwrite=True)
+
+
+def run_reconstruct(log: Path, placement: str, out: Path, src: Path, threads: str
+                    ) -> dict[str, Any]:
+    """``imuloco reconstruct LOG --placement P -o OUT --report OUT.json`` in a subprocess on
+    the package in ``src`` (its PYTHONPATH): wall and CPU seconds (user + system, the
+    child's own rusage) and its peak resident memory (MB). ``threads`` ``"1"``: one
+    OpenMP/MKL thread (torch's and BLAS's), else their defaults."""
+    env = {**os.environ, "PYTHONPATH": str(src)}
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        env.pop(var, None)
+        if threads == "1":
+            env[var] = "1"
+    cmd = [sys.executable, "-c", "from imuloco.cli import main; main()", "reconstruct",
+           str(log), "--placement", placement, "-o", str(out), "--report",
+           str(out.with_suffix(".json")), "--force"]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+    err = proc.stderr.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode != 0:
+        raise RuntimeError(f"imuloco reconstruct failed on {log} ({src}):\n{err[-2000:]}")
+    return {"wall_s": round(wall, 2), "cpu_s": round(usage.ru_utime + usage.ru_stime, 2),
+            "peak_rss_mb": round(usage.ru_maxrss / 1024, 1)}  # ru_maxrss: kB on Linux
+
+
+def bvh_difference(a: Path, b: Path) -> float:
+    """Largest absolute difference of two BVHs' world joint positions (cm)."""
+    from imuloco.io.bvh import read_bvh
+
+    pa, pb = read_bvh(a).positions(), read_bvh(b).positions()
+    if pa.shape != pb.shape:
+        return float("inf")
+    return float(np.abs(pa - pb).max() * 100.0)
+
+
+def checkout(rev: str, folder: Path) -> Path:
+    """The repository at git commit ``rev`` as a worktree in ``folder`` (``git worktree
+    add --detach``); returns its ``src`` folder. :func:`remove_checkout` removes it."""
+    root = Path(__file__).resolve().parents[3]
+    try:
+        subprocess.run(["git", "-C", str(root), "worktree", "add", "--detach", str(folder),
+                        rev], check=True, capture_output=True, text=True)
+    except (OSError, subprocess.CalledProcessError) as e:
+        why = getattr(e, "stderr", None) or str(e)
+        raise InputError(f"--against {rev}: cannot check it out from {root} ({why.strip()})"
+                         ) from None
+    return folder / "src"
+
+
+def remove_checkout(folder: Path) -> None:
+    root = Path(__file__).resolve().parents[3]
+    subprocess.run(["git", "-C", str(root), "worktree", "remove", "--force", str(folder)],
+                   check=False, capture_output=True)
+
+
+def reconstruct_speed(lengths_s: Sequence[float] = RECONSTRUCT_LENGTHS,
+                      placements: Sequence[str] = SHIPPED_PLACEMENTS,
+                      threads: Sequence[str] = THREADS, against: str | None = None,
+                      out: str | Path | None = None, progress: bool = False
+                      ) -> list[dict[str, Any]]:
+    """``imuloco reconstruct ... --report`` timed per placement, length and thread setting
+    (see :func:`run_reconstruct`), on simulated walks (:func:`walk_log`) with the placement's
+    shipped model. ``against``: the same runs on the code of that git commit (a temporary
+    worktree, its own PYTHONPATH) right after today's, and ``max_diff_cm``, the largest
+    difference of its BVH's joint positions from today's. Each record: ``placement``,
+    ``length_s``, ``threads``, ``code`` (``today`` or the commit), ``wall_s``, ``cpu_s``,
+    ``realtime`` (length over wall), ``realtime_cpu`` (length over CPU), ``peak_rss_mb``,
+    ``load_avg`` (1 min, before the run). Written to ``out/reconstruct_speed.json`` and
+    ``.md`` when ``out`` is given."""
+    import tempfile
+
+    from tqdm.auto import tqdm
+
+    src = Path(__file__).resolve().parents[2]
+    records: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory(prefix="imuloco-speed-") as tmp:
+        tmp = Path(tmp)
+        codes = [("today", src)]
+        if against is not None:
+            codes.append((against, checkout(against, tmp / "old")))
+        try:
+            runs = [(p, s, t) for s in lengths_s for p in placements for t in threads]
+            for placement, seconds, thread in tqdm(runs, desc="reconstruct speed",
+                                                   disable=not progress):
+                log = walk_log(placement, seconds, tmp / f"{placement}-{seconds:g}.csv")
+                bvhs = []
+                for code, path in codes:
+                    bvh = tmp / f"{placement}-{seconds:g}-{thread}-{len(bvhs)}.bvh"
+                    load = os.getloadavg()[0]
+                    r = run_reconstruct(log, placement, bvh, path, thread)
+                    r.update(placement=placement, length_s=seconds, threads=thread, code=code,
+                             realtime=round(seconds / r["wall_s"], 1),
+                             realtime_cpu=round(seconds / r["cpu_s"], 1),
+                             load_avg=round(load, 1))
+                    if bvhs:
+                        r["max_diff_cm"] = bvh_difference(bvhs[0], bvh)
+                    bvhs.append(bvh)
+                    records.append(r)
+                    if out is not None:  # after every run: a stopped bench keeps its rows
+                        _write_reconstruct(records, Path(out))
+                log.unlink()
+        finally:
+            if against is not None:
+                remove_checkout(tmp / "old")
+    return records
+
+
+def _write_reconstruct(records: list[dict[str, Any]], out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_write(out / "reconstruct_speed.json", "w") as f:
+        f.write(json.dumps(records, indent=1) + "\n")
+    with atomic_write(out / "reconstruct_speed.md", "w") as f:
+        f.write(reconstruct_table(records) + "\n")
+
+
+def reconstruct_table(records: list[dict[str, Any]]) -> str:
+    """A markdown table of :func:`reconstruct_speed`'s records."""
+    lines = [("| placement | length s | threads | code | wall s | CPU s | x real time (wall) "
+              "| x real time (CPU) | peak RSS MB | max diff cm | load |"),
+             "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in records:
+        diff = r.get("max_diff_cm")
+        lines.append(f"| {r['placement']} | {r['length_s']:g} | {r['threads']} | {r['code']} "
+                     f"| {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['realtime']:.0f} "
+                     f"| {r['realtime_cpu']:.0f} | {r['peak_rss_mb']:.0f} "
+                     f"| {'-' if diff is None else format(diff, '.2g')} | {r['load_avg']:.1f} |")
     return "\n".join(lines)

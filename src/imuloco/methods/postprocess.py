@@ -3,6 +3,9 @@ Laplacian smoothing, a centred Gaussian window over frames (offline and online).
 
 from __future__ import annotations
 
+import sys
+from importlib.util import find_spec
+
 import numpy as np
 from scipy.signal import lfilter
 from scipy.signal.windows import gaussian
@@ -84,7 +87,7 @@ LEGS = (("left_hip", "left_knee", "left_ankle", "left_toe"),
 
 def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: float = 1.0,
               release_s: float = 0.1, threshold: float = 0.5, hold_flat: bool = True,
-              flat_pitch: float | None = None) -> Motion:
+              flat_pitch: float | None = None, engine: str = "auto") -> Motion:
     """Keep each planted foot where it landed on the floor by bending its leg (two-bone IK,
     :func:`imuloco.ops.ik.two_bone`), after :func:`pin_feet` has moved the root.
 
@@ -119,6 +122,9 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
     flat_pitch : radians, the pitch of a foot flat on the floor
         (:func:`imuloco.phases.contacts.flat_foot_pitch`);
         None: a flat foot keeps the pitch it lands with.
+    engine : ``numba`` runs the frame loop compiled (:mod:`imuloco.methods.lockcompiled`),
+        ``numpy`` as :meth:`FootLock.run` (the same to rounding); ``auto``: numba when
+        installed and the motion long enough to pay its loading (:func:`resolve_engine`).
     """
     if motion.num_frames < 2:
         return motion
@@ -127,13 +133,38 @@ def lock_feet(motion: Motion, heel: np.ndarray, toe: np.ndarray, smoothing: floa
     heel, toe = np.asarray(heel, dtype=np.float64), np.asarray(toe, dtype=np.float64)
     legs = lock.legs(motion.rotations, motion.root)
     feet = legs[1][:, lock.sub_feet]
-    targets, turns = np.empty((motion.num_frames, len(LEGS), 3)), np.empty((motion.num_frames,
-                                                                           len(LEGS), 4))
-    for t, (f, h, o) in enumerate(zip(feet, heel, toe)):
-        targets[t] = lock.targets(f, h, o)
-        turns[t] = lock.turn
+    if resolve_engine(engine, motion.num_frames) == "numba":
+        from imuloco.methods.lockcompiled import lock_targets  # the optional numba extra
+
+        targets, turns = lock_targets(
+            np.ascontiguousarray(feet), np.ascontiguousarray(heel), np.ascontiguousarray(toe),
+            float(threshold), bool(hold_flat), float(smoothing), lock.decay,
+            np.asarray(lock.slip_m, dtype=np.float64),
+            np.nan if flat_pitch is None else float(flat_pitch), float(MAX_HOLD_FEET))
+    else:
+        targets, turns = lock.run(feet, heel, toe)
     rot = lock.bend(motion.rotations, motion.root, targets, legs, turns)
     return Motion(motion.skeleton, rot, motion.root, motion.fps, motion.name)
+
+
+ENGINES = ("auto", "numba", "numpy")
+# ``auto`` compiles from this many frames on: loading numba and the cached kernel costs ~0.4 s
+# of CPU and ~100 MB of memory (LLVM) once a process, the numpy loop ~0.1 ms a frame (5 min
+# at 30 fps: ~1 s)
+NUMBA_FRAMES = 9000
+
+
+def resolve_engine(engine: str, frames: int = NUMBA_FRAMES) -> str:
+    """``auto`` -> ``numba`` when numba is installed (the ``fast`` extra) and either ``frames``
+    is at least :data:`NUMBA_FRAMES` or the kernel is already loaded in this process (a batch
+    worker pays its loading once), else ``numpy``; checks the name."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+    if engine == "auto":
+        loaded = "imuloco.methods.lockcompiled" in sys.modules
+        worth = loaded or frames >= NUMBA_FRAMES
+        return "numba" if worth and find_spec("numba") is not None else "numpy"
+    return engine
 
 
 def _rest_distance(skeleton: Skeleton, top: int, joint: int) -> float:
@@ -287,6 +318,17 @@ class FootLock:
             self.applied[side] += self.smoothing * (self.offset[side] - self.applied[side])
             out[side] = ankle + self.applied[side]
         return out
+
+    def run(self, feet: np.ndarray, heel: np.ndarray, toe: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`targets` and :attr:`turn` for frames one after the other: feet (T, 4, 3),
+        heel and toe (T, 2) -> targets (T, 2, 3), turns (T, 2, 4)."""
+        targets = np.empty((len(feet), len(LEGS), 3))
+        turns = np.empty((len(feet), len(LEGS), 4))
+        for t, (f, h, o) in enumerate(zip(feet, heel, toe)):
+            targets[t] = self.targets(f, h, o)
+            turns[t] = self.turn
+        return targets, turns
 
     def moved(self, feet: np.ndarray, targets: np.ndarray, turns: np.ndarray | None = None
               ) -> np.ndarray:

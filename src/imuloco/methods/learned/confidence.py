@@ -55,6 +55,9 @@ class Prediction:
         return out if self.spread is None else {**out, "spread_m": self.spread}
 
 
+NOVELTY_FRAMES = 2048  # frames a piece of the novelty's distances
+
+
 class ConfidenceMixin:
     """The confidence part of :class:`~imuloco.methods.learned.method.Learned`."""
 
@@ -94,20 +97,29 @@ class ConfidenceMixin:
         novelty was measured); ``state``: the last value of a stream's previous frames."""
         if self.novelty_mean_ is None:
             return np.full(len(feats), np.nan)
-        p = self.novelty_precision_
-        p = p if p.ndim == 3 else p[None]  # an ensemble's: one block per member
-        d = (feats - self.novelty_mean_).reshape(len(feats), len(p), -1).transpose(1, 0, 2)
-        # one product per member block (K, T, W) @ (K, W, W): a stream's step is a (1, W) row
-        # per block, which numpy's BLAS runs on one thread (over the side-by-side features, a
-        # (1, K W) @ (K W, K W) product took its threads and made a step 6 ms slower on a busy
-        # 2-core machine); np.einsum's own loops took 7 times as long a step, 17 offline
-        d2 = ((d @ p) * d).sum((0, 2)) / (d.shape[0] * d.shape[2])
+        # frame by frame alike: a long recording's frames NOVELTY_FRAMES at a time, in float64
+        # (a 640 s walk's 4 x 192 features in one go held ~0.5 GB of float64 products)
+        d2 = np.concatenate([self._distance(feats[i:i + NOVELTY_FRAMES])
+                             for i in range(0, len(feats), NOVELTY_FRAMES)])
         a = self.novelty_alpha_
         prev = d2[0] if state is None else state * self.novelty_scale_
         if len(d2) == 1:  # a stream's step: the recursion below, without lfilter's overhead
             return np.array([(a * d2[0] + (1 - a) * prev) / self.novelty_scale_])
         zi = np.array([(1 - a) * prev])
         return lfilter([a], [1, -(1 - a)], d2, zi=zi)[0] / self.novelty_scale_
+
+    def _distance(self, feats: np.ndarray) -> np.ndarray:
+        """The squared Mahalanobis distance (T,) of features (T, W) to the training features,
+        over the feature count."""
+        p = self.novelty_precision_
+        p = p if p.ndim == 3 else p[None]  # an ensemble's: one block per member
+        feats = np.asarray(feats, dtype=np.float64)
+        d = (feats - self.novelty_mean_).reshape(len(feats), len(p), -1).transpose(1, 0, 2)
+        # one product per member block (K, T, W) @ (K, W, W): a stream's step is a (1, W) row
+        # per block, which numpy's BLAS runs on one thread (over the side-by-side features, a
+        # (1, K W) @ (K W, K W) product took its threads and made a step 6 ms slower on a busy
+        # 2-core machine); np.einsum's own loops took 7 times as long a step, 17 offline
+        return ((d @ p) * d).sum((0, 2)) / (d.shape[0] * d.shape[2])
 
     def set_calibration(self, calibration: dict[str, Any]) -> None:
         self.check_fitted()

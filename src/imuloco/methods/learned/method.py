@@ -13,16 +13,16 @@ the offline result frame for frame.
 A model for the other leg (:meth:`Learned.mirrored`) reuses the weights: the other leg's
 signals are mapped onto this leg's sensor axes and the predicted pose is mirrored back.
 
-Several models of one recipe trained from other seeds read as one (:func:`ensemble`, or
-``members`` > 1): their outputs are averaged (:class:`.model.Ensemble`), and how much they
-disagree on a frame is one more score for its predicted error (``spread_m``).
+Several models of one recipe trained from other seeds read as one (:func:`.ensemble.ensemble`,
+or ``members`` > 1): their outputs are averaged (:class:`.model.Ensemble`), and how much they
+disagree on a frame is one more score for its predicted error (``spread_m``,
+:func:`.ensemble.member_spread`).
 """
 
 from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -31,7 +31,6 @@ import torch
 
 from imuloco.core.mirror import mirror_pairs
 from imuloco.core.motion import Motion
-from imuloco.core.skeleton import Skeleton
 from imuloco.errors import InputError
 from imuloco.methods import pose
 from imuloco.methods.base import Method, Reconstruction
@@ -43,6 +42,7 @@ from imuloco.methods.learned.confidence import (  # noqa: F401  (their names her
     ConfidenceMixin,
     Prediction,
 )
+from imuloco.methods.learned.ensemble import ensemble, member_spread
 from imuloco.methods.learned.mirroring import (  # noqa: F401
     CONTACT_SWAP,
     HEADING_REFLECTION,
@@ -62,8 +62,6 @@ from imuloco.methods.postprocess import (
     window_average,
 )
 from imuloco.methods.training import VALIDATION_SHARE, Example, TrainingSet, held_out
-from imuloco.ops.kinematics import fk_matrices
-from imuloco.ops.rotations import matrices_from_6d
 from imuloco.phases.contacts import flat_foot_pitch
 
 
@@ -345,7 +343,7 @@ class Learned(ConfidenceMixin, MirrorMixin, Method):
         with torch.no_grad():
             feats, _ = self.net_.encode(self._inputs(signals)[None])
             p, logit, logvar, members = self._heads(feats)
-        novelty = self._novelty(feats[0].numpy().astype(np.float64))
+        novelty = self._novelty(feats[0].numpy())  # float64 a piece at a time
         return self._outputs(p[0, k:], logit[0, k:], logvar[0, k:], novelty[k:],
                              None if members is None else members[0, k:])
 
@@ -448,100 +446,6 @@ class Learned(ConfidenceMixin, MirrorMixin, Method):
         self.net_.load_state_dict({k[4:]: torch.as_tensor(arrays[k]) for k in arrays
                                    if k.startswith("net.")})
         self.net_.eval()
-
-
-# what members of one ensemble must share: they read the same signals and write the same poses
-_SHARED = ("placements_", "noise_", "fps_", "channels_", "lag", "bidirectional", "hidden",
-           "layers", "output_mirror_")
-
-
-def ensemble(models: Sequence[Learned]) -> Learned:
-    """One model that averages ``models`` (:class:`.model.Ensemble`): the same placements,
-    noise, rate, skeleton, look-ahead, network shape and leg, trained from other seeds.
-
-    The result keeps the first model's standardization and hyperparameters (``members`` set,
-    ``seed`` the first's), each member's protocol and history, the members' mean novelty
-    (:func:`_mean_novelty`) and no calibration (``imuloco calibrate``). Raises InputError
-    naming the member and what differs.
-    """
-    models = list(models)
-    if len(models) < 2:
-        raise InputError(f"an ensemble needs at least 2 learned models, got {len(models)}")
-    first = models[0]
-    for i, m in enumerate(models):
-        if not isinstance(m, Learned) or isinstance(getattr(m, "net_", None), Ensemble):
-            raise InputError(f"ensemble member {i}: expected a learned model of one network, "
-                             f"got {type(m).__name__}"
-                             + (" (an ensemble)" if isinstance(m, Learned) else ""))
-        m.check_fitted()
-        diff = [k for k in _SHARED if getattr(m, k) != getattr(first, k)]
-        if m.skeleton_.names != first.skeleton_.names or not _same(m.skeleton_.offsets,
-                                                                   first.skeleton_.offsets):
-            diff.append("skeleton_")
-        diff += [k for k in ("input_map_", "frames_")
-                 if not _same(getattr(m, k), getattr(first, k))]
-        if diff:
-            raise InputError(f"ensemble member {i} differs from member 0 in "
-                             + ", ".join(f"{k} ({getattr(m, k)!r} vs {getattr(first, k)!r})"
-                                         if k not in ("skeleton_", "input_map_", "frames_")
-                                         else k for k in diff))
-    new = Learned(**{**first.get_params(), "members": len(models)})
-    new.set_setup(first.skeleton_, first.fps_, first.placements_, first.noise_)
-    new.x_mean_, new.x_std_, new.y_mean_, new.y_std_ = (first.x_mean_, first.x_std_,
-                                                        first.y_mean_, first.y_std_)
-    new.input_map_, new.frames_ = first.input_map_, first.frames_
-    new.output_mirror_ = first.output_mirror_
-    # member k standardized its own augmented draws: maps to and from the first's folded in
-    new.net_ = Ensemble([Ensemble.restandardized(
-        m.net_, first.x_std_ / m.x_std_, (first.x_mean_ - m.x_mean_) / m.x_std_,
-        m.y_std_ / first.y_std_, (m.y_mean_ - first.y_mean_) / first.y_std_) for m in models]
-    ).eval()
-    new.history_ = [{"member": k, **row} for k, m in enumerate(models) for row in m.history_]
-    new.calibration_ = None
-    new.flat_pitch_ = first.flat_pitch_  # the members learned from the same motions
-    _mean_novelty(new, models)
-    protocols = [{**getattr(m, "protocol_", {}), "model_seed": int(m.seed)} for m in models]
-    new.protocol_ = {**protocols[0], "members": protocols,
-                     "train_seconds": round(sum(p.get("train_seconds", 0.0)
-                                                for p in protocols), 1)}
-    return new
-
-
-def member_spread(vectors: np.ndarray, skeleton: Skeleton) -> np.ndarray:
-    """How much an ensemble's members disagree on a frame, metres: ``vectors`` (..., K, D)
-    the members' pose vectors (K >= 2) -> (...) the rms over joints (but the root) of the
-    standard deviation over the members (K - 1 in the denominator, so that any K estimates
-    the same) of their root-relative joint positions in the heading frame (the forward
-    kinematics of their local rotations). Where members trained from other seeds part ways,
-    none of them knows the motion (Lakshminarayanan et al. 2017)."""
-    j = skeleton.num_joints
-    rot = matrices_from_6d(vectors[..., : 6 * j].reshape(*vectors.shape[:-1], j, 6))
-    pos = fk_matrices(rot, np.zeros(rot.shape[:-3] + (3,)), skeleton.offsets,
-                      skeleton.parents)[1][..., 1:, :]
-    dev = np.square(pos - pos.mean(axis=-3, keepdims=True)).sum(axis=(-1, -3))
-    return np.sqrt(dev.mean(axis=-1) / (vectors.shape[-2] - 1))
-
-
-def _same(a: np.ndarray, b: np.ndarray) -> bool:
-    return np.shape(a) == np.shape(b) and bool(np.allclose(a, b))
-
-
-def _mean_novelty(model: Learned, members: Sequence[Learned]) -> None:
-    """An ensemble's novelty: its members' mean novelty, each against its own reference
-    (fitted in training on its augmented draws), as one distance on the features side by side
-    (the precision one (W, W) block per member); flagged above the members' mean threshold,
-    which flags no more than each member's 1 % of held-out training frames on average. None
-    when a member has no reference."""
-    if any(m.novelty_mean_ is None for m in members):
-        model.novelty_mean_ = None
-        return
-    model.novelty_mean_ = np.concatenate([m.novelty_mean_ for m in members])
-    # Learned._novelty divides the distance by the feature count: K W here, W per member
-    model.novelty_precision_ = np.stack([m.novelty_precision_ / m.novelty_scale_
-                                         for m in members])
-    model.novelty_scale_ = 1.0
-    model.novelty_alpha_ = float(members[0].novelty_alpha_)
-    model.novelty_threshold_ = float(np.mean([m.novelty_threshold_ for m in members]))
 
 
 def _hold_last(s: np.ndarray, n: int) -> np.ndarray:

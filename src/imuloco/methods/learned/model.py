@@ -27,6 +27,8 @@ import torch
 from torch import nn
 
 CONTACT_PARTS = ("left_ankle", "right_ankle", "left_toe", "right_toe")
+# an Ensemble runs its stacked weights on at most this many frames, its members' GRUs on more
+STACKED_FRAMES = 32
 
 
 class _Network(nn.Module):
@@ -125,7 +127,12 @@ class Ensemble(_Network):
 
     def encode(self, x: torch.Tensor, h: torch.Tensor | None = None
                ) -> tuple[torch.Tensor, torch.Tensor]:
-        if not (self._by_member() or self.directions == 2):
+        """x : (B, T, C) -> the members' features side by side (B, T, K width), new h. A few
+        frames (a stream's step) run on the stacked weights (:class:`StackedWeights`, one
+        Python step a frame for all members); a whole recording runs each member's own GRU
+        over it, one call each (torch's compiled recurrence: 3.7 against 5.5 CPU s for 6,000
+        frames of the shipped 4-member shin model, one thread)."""
+        if not (self._by_member() or self.directions == 2 or x.shape[1] > STACKED_FRAMES):
             return self._weights().encode(x, h)
         k = len(self.members)
         hs = [None] * k if h is None else list(h.chunk(k, dim=0))
