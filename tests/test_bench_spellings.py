@@ -18,8 +18,10 @@ CALLS = {
     "fuzz": ("imuloco.lab.fuzz", "write_fuzz"), "real": ("imuloco.lab.real", "run_real"),
     "batch": ("imuloco.lab.batchbench", "batch_benchmark"),
     "load": ("imuloco.lab.loadspeed", "load_benchmark"),
+    "reconstruct": ("imuloco.lab.speed", "reconstruct_speed"),  # bench speed --reconstruct
 }
 PRINTERS = [("imuloco.lab.report", "table"), ("imuloco.lab.speed", "speed_table"),
+            ("imuloco.lab.speed", "reconstruct_table"),
             ("imuloco.lab.real", "summarize"), ("imuloco.lab.real", "table"),
             ("imuloco.lab.batchbench", "markdown"), ("imuloco.lab.loadspeed", "table")]
 
@@ -42,6 +44,9 @@ SPELLINGS = [
                "--against", "HEAD", *OUT],
      ["speed", "--method", "mean", "--data", "{d}/a", "--db-frames", "400,800", "--against",
       "HEAD", *OUT]),
+    ("reconstruct", ["--speed", "--reconstruct", "--lengths", "5,10", "--against", "HEAD", *OUT],
+     ["speed", "--reconstruct", "--lengths", "5,10", "--against", "HEAD", *OUT]),
+    ("reconstruct", ["--speed", "--reconstruct", *OUT], ["speed", "--reconstruct", *OUT]),
     ("fuzz", ["--fuzz", "6", "--readers", "sensorlog,model", "--seed", "2", *OUT],
      ["fuzz", "6", "--readers", "sensorlog,model", "--seed", "2", *OUT]),
     ("real", ["--real", "{d}/a", "--limit", "2", "--baseline", *OUT],
@@ -96,7 +101,8 @@ def test_bench_help_lists_the_subcommands_and_the_old_options():
     commands = res.output.split("Commands:")[1].split("Options of")[0].split()
     assert {"run", "speed", "fuzz", "real", "batch", "load"} <= set(commands)
     assert "single" not in commands  # the old spelling's command is hidden
-    for option in ("--speed", "--fuzz", "--real", "--batch", "--load", "--db-frames"):
+    for option in ("--speed", "--fuzz", "--real", "--batch", "--load", "--db-frames",
+                   "--reconstruct", "--lengths"):
         assert option in res.output
 
 

@@ -655,6 +655,11 @@ def bench_live(viewers: int, seconds: float, no_abuse: bool, out: Path) -> None:
 @click.option("--speed", is_flag=True, help="Instead: bench speed.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")
+@click.option("--reconstruct", "reconstruct_row", is_flag=True,
+              help="With --speed: time `imuloco reconstruct --report` instead (bench speed "
+                   "--reconstruct).")
+@click.option("--lengths", default="60,600,3600", show_default=True,
+              help="With --speed --reconstruct: recording lengths in seconds, comma separated.")
 @click.option("--fuzz", type=click.IntRange(1), default=None, metavar="N",
               help="Instead: bench fuzz N.")
 @click.option("--readers", default=None,
@@ -693,6 +698,8 @@ def bench_single(ctx: click.Context, method_names: str | None, speed: bool,
         return run(bench_batch, walkers=batch_walkers, method_names=method_names)
     if load_dirs:
         return run(bench_load, load_dirs=tuple(map(str, _folders(load_dirs, "--load"))))
+    if speed and options["reconstruct_row"]:  # bench speed --reconstruct needs no --method
+        return run(bench_speed, method_names=method_names)
     if not method_names:
         raise click.UsageError("Missing option '--method' (or pass --fuzz N, --batch N, "
                                "--load DIR or --real DIR).")
