@@ -7,7 +7,7 @@ The rule (:func:`follow`):
   steps, the truth), the root's horizontal position is the path's ``root_xy`` at each frame,
   carried into the motion's world frame (origin the motion's first root position, x axis its
   initial facing), and the whole body is turned about the vertical, frame by frame, so that
-  its own direction of travel is the path's heading (:func:`turn_to_path`: a reconstruction
+  its hips face the path's heading (:func:`turn_to_path`: a reconstruction
   whose heading drifts, 34 degrees over a 45 s walk for ``learned``, otherwise walked
   sideways along the path, its planted feet sliding, and lost its footfalls);
 - where it knows only distances (stride lengths: shank pivot, lower-back steps), the motion
@@ -33,7 +33,6 @@ from imuloco.core.recording import Recording
 from imuloco.methods.postprocess import lock_feet
 from imuloco.ops.rotations import about_y, qmul
 from imuloco.paths.base import BodyPath, Stride, to_floor
-from imuloco.paths.geometry import smooth_over, walking_heading
 from imuloco.paths.registry import ESTIMATORS, estimate_path
 from imuloco.paths.truth import HEADING_SIGMA_S, path_of_motion
 from imuloco.phases.contacts import FEET, foot_contacts
@@ -45,9 +44,7 @@ MAX_GAIN = 4.0  # a stride's gain is clipped to [1/MAX_GAIN, MAX_GAIN] (a still 
 def floor_frame(motion: Motion) -> tuple[np.ndarray, float]:
     """The origin (3,) and initial heading (radians) of ``motion``'s floor frame, as
     :func:`imuloco.paths.truth.path_of_motion` reads them."""
-    pos = motion.part_positions(["left_hip", "right_hip"])
-    theta = heading_angle(pos[:, 0], pos[:, 1], HEADING_SIGMA_S * motion.fps)
-    return motion.root[0].copy(), float(theta[0])
+    return motion.root[0].copy(), float(facing(motion)[0])
 
 
 def from_floor(xy: np.ndarray, origin: np.ndarray, heading0: float) -> np.ndarray:
@@ -87,18 +84,20 @@ def stride_gains(own_xy: np.ndarray, times: np.ndarray, path: BodyPath) -> np.nd
     return gains[pick]
 
 
-def turn_to_path(motion: Motion, path: BodyPath, origin: np.ndarray, heading0: float
-                 ) -> Motion:
+def facing(motion: Motion) -> np.ndarray:
+    """The hips' facing (T,), radians about +Y, unwrapped and smoothed over about a stride, as
+    :func:`imuloco.paths.truth.path_of_motion` reads a motion's heading."""
+    pos = motion.part_positions(["left_hip", "right_hip"])
+    return heading_angle(pos[:, 0], pos[:, 1], HEADING_SIGMA_S * motion.fps)
+
+
+def turn_to_path(motion: Motion, path: BodyPath, heading0: float) -> Motion:
     """``motion`` turned about the vertical at each frame (its root rotation, hence the whole
-    body about the root) so that its own direction of travel, its root's floor track averaged
-    over one stride, is ``path``'s ``heading_rad`` at that time (floor frame of ``origin``,
-    ``heading0``: a floor-frame angle is a world yaw about +Y, from the initial heading)."""
-    durations = [s.end_s - s.start_s for s in path.strides]
-    period = float(np.median(durations)) if durations else 1.1  # a typical walking stride
-    own = smooth_over(to_floor(motion.root, origin, heading0), motion.fps, period)
+    body about the root) so that its hips face ``path``'s ``heading_rad`` at that time (a
+    floor-frame angle, of the floor frame whose x axis is the world yaw ``heading0``)."""
     want = np.interp(motion.times, np.asarray(path.times_s, float),
                      np.unwrap(np.asarray(path.heading_rad, float)))
-    turn = about_y(want - walking_heading(own, motion.fps))
+    turn = about_y(want + heading0 - facing(motion))
     rotations = motion.rotations.copy()
     rotations[:, 0] = qmul(turn, rotations[:, 0])
     return Motion(motion.skeleton, rotations, motion.root, motion.fps, motion.name)
@@ -120,7 +119,7 @@ def follow(motion: Motion, path: BodyPath, lock: bool = True,
         xy = np.stack([np.interp(times, pt, path.root_xy[:, k]) for k in range(2)], axis=-1)
         if frame is None:
             xy -= xy[0]  # the motion starts where it starts
-        motion = turn_to_path(motion, path, origin, heading0)
+        motion = turn_to_path(motion, path, heading0)
     else:
         own = to_floor(motion.root, origin, heading0)
         steps = np.diff(own, axis=0) * stride_gains(own, times, path)[:, None]
