@@ -31,25 +31,11 @@ from pythonosc.dispatcher import Dispatcher
 from pythonosc.osc_packet import OscPacket
 from pythonosc.osc_server import ThreadingOSCUDPServer
 
+from imuloco.app.live.vmc import Bundles
 from imuloco.data import shared_data_dir
 from imuloco.io.atomic import atomic_write
 
 CALIBRATE_S = 5.0  # the live command's default
-
-
-class Packets(Dispatcher):
-    """Each bundle's messages as (address, arguments), kept together."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.lock, self.packets = threading.Lock(), []
-
-    def call_handlers_for_packet(self, data, client_address):
-        messages = [(m.message.address, list(m.message.params))
-                    for m in OscPacket(data).messages]
-        with self.lock:
-            self.packets.append(messages)
-        return []
 
 
 class Arrivals(Dispatcher):
@@ -123,7 +109,7 @@ def fidelity(speed: float = 20.0) -> dict:
     from imuloco.sensors.reallog import read_log
     from imuloco.sensors.simulate import simulate
 
-    packets = Packets()
+    packets = Bundles()
     osc = ThreadingOSCUDPServer(("127.0.0.1", 0), packets)
     osc.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
     threading.Thread(target=osc.serve_forever, daemon=True).start()

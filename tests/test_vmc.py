@@ -18,12 +18,11 @@ from imuloco.errors import InputError
 from imuloco.ops.rotations import qrot, to_matrix
 
 pytest.importorskip("pythonosc")
-from pythonosc.dispatcher import Dispatcher
-from pythonosc.osc_packet import OscPacket
 from pythonosc.osc_server import ThreadingOSCUDPServer
 
 from imuloco.app.live.vmc import (
     DEFAULT_PORT,
+    Bundles,
     parse_address,
     to_unity_position,
     to_unity_rotation,
@@ -89,22 +88,6 @@ def test_an_unknown_vmc_host_is_one_error_line(fitted):
         LiveServer(fitted, vmc=("no-such-host.invalid", DEFAULT_PORT))
 
 
-class _Packets(Dispatcher):
-    """Keeps each datagram's messages together (the threaded server handles datagrams in
-    threads of their own: messages of two bundles could interleave in handlers)."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.lock, self.packets = threading.Lock(), []
-
-    def call_handlers_for_packet(self, data, client_address):
-        messages = [(m.message.address, list(m.message.params))
-                    for m in OscPacket(data).messages]
-        with self.lock:
-            self.packets.append(messages)
-        return []
-
-
 def _rebuild(messages: list[tuple[str, list]]) -> tuple[float, dict[str, np.ndarray]]:
     """What a receiver makes of one bundle: its /VMC/Ext/T and the world position of each
     bone, from the root and the bones' local positions and rotations composed in Unity's
@@ -151,7 +134,7 @@ def received(fitted, sample_db, tmp_path_factory):
     clip = next(c for c in sample_db.clips if c.name == CLIP)
     path = write_generic_csv(simulate(clip, ["right_ankle"], 100.0, "phone", 12),
                              tmp_path_factory.mktemp("vmc") / "walk.csv")
-    packets = _Packets()
+    packets = Bundles()
     osc = ThreadingOSCUDPServer(("127.0.0.1", 0), packets)
     # the calibration's frames come out at once when it ends: room for that burst
     osc.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
@@ -295,7 +278,7 @@ def test_live_replay_sends_vmc_from_the_command_line(monkeypatch, fitted, receiv
     monkeypatch.setattr(live_server, "configure_logging", lambda: None)
     monkeypatch.setattr(pipeline, "choose_model", lambda *a, **k: ModelChoice(
         fitted, "given", "ridge"))
-    packets = _Packets()
+    packets = Bundles()
     osc = ThreadingOSCUDPServer(("127.0.0.1", 0), packets)
     osc.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
     threading.Thread(target=osc.serve_forever, daemon=True).start()

@@ -468,18 +468,16 @@ _protocol_options = _options(  # bench run's besides --method, --out
                  help="heldout-contents, heldout-actions: run only these folds (left-out "
                       "contents)."),
 )
+# everything the protocol bench takes besides --method (bench run, and the old single bench)
+_protocol_bench_options = _options(_split_option, noise_option, placement_option, data_options,
+                                   _protocol_options, _out_option("results.json and results.md"))
 METHODS_HELP = ("Method name(s), comma separated (see `imuloco methods`); a variant as "
                 "NAME[key=value;key=value], e.g. eom2014[variant=mlp-no-hmm]")
 
 
 @bench.command("run", short_help="The protocol bench: train methods, score their test clips.")
 @click.option("--method", "method_names", required=True, help=METHODS_HELP + ".")
-@_split_option
-@noise_option
-@placement_option
-@data_options
-@_protocol_options
-@_out_option("results.json and results.md")
+@_protocol_bench_options
 @_reading_options
 def bench_run(method_names: str, split_name: str, noise: str, placement: str,
               data_items: tuple[str, ...], limit: int | None, seed: int,
@@ -646,12 +644,7 @@ def bench_live(viewers: int, seconds: float, no_abuse: bool, out: Path) -> None:
 @click.option("--method", "method_names", default=None,
               help=METHODS_HELP + " [required but with --batch, which defaults to the shipped "
                                   "model].")
-@_split_option
-@noise_option
-@placement_option
-@data_options
-@_protocol_options
-@_out_option("results.json and results.md")
+@_protocol_bench_options
 @click.option("--speed", is_flag=True, help="Instead: bench speed.")
 @click.option("--db-frames", default=None,
               help="With --speed: database sizes in frames, comma separated.")

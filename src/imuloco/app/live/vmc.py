@@ -30,11 +30,14 @@ from __future__ import annotations
 
 import logging
 import socket
+import threading
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
+from pythonosc.dispatcher import Dispatcher
 from pythonosc.osc_message_builder import OscMessageBuilder
+from pythonosc.osc_packet import OscPacket
 from pythonosc.parsing import osc_types
 from pythonosc.parsing.osc_types import IMMEDIATELY
 
@@ -148,6 +151,24 @@ class Encoder:
             parts += [self.ok, self.time + times[4 * k:4 * k + 4]]
             out.append(self.head + b"".join(osc_types.write_int(len(m)) + m for m in parts))
         return out
+
+
+class Bundles(Dispatcher):
+    """A receiver's side, for checking a stream (tests, ``benchmarks/vmc_rate.py``): keeps each
+    datagram's messages together as ``[(address, arguments), ...]`` in :attr:`packets` (python-osc's
+    threaded server handles datagrams in threads of their own, so the messages of two bundles
+    could interleave in per-address handlers)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.lock = threading.Lock()
+        self.packets: list[list[tuple[str, list]]] = []
+
+    def call_handlers_for_packet(self, data: bytes, client_address: tuple[str, int]) -> list:
+        messages = [(m.message.address, list(m.message.params)) for m in OscPacket(data).messages]
+        with self.lock:
+            self.packets.append(messages)
+        return []
 
 
 class VmcSender:
