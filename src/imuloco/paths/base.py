@@ -45,8 +45,10 @@ class BodyPath:
 
     times_s : (T,) seconds; root_xy : (T, 2) the pelvis' horizontal position in metres in a floor
     frame whose x axis is the walker's initial heading (y to the left, right-handed, Y up as the
-    rest of imuloco), origin at the start; heading_rad : (T,) the walking direction's yaw in that
-    frame, or None where the estimator does not know it (then only distances are trusted);
+    rest of imuloco), origin at the start; heading_rad : (T,) the body's facing yaw in that frame
+    (the hip line's normal, as the truth's :func:`imuloco.paths.truth.path_of_motion` reads it;
+    the direction of walking when walking forward; the follower turns the body to it), or None
+    where the estimator does not know it (then only distances are trusted);
     footfalls, strides : as above (one foot's or both feet's, as the sensor sees them);
     source : the estimator's name ("foot-zupt", "shank-pivot", "lower-back-steps", ...);
     note : what the figures can and cannot be trusted for (shown to users).
