@@ -34,9 +34,8 @@ from imuloco.methods.postprocess import lock_feet
 from imuloco.ops.rotations import about_y, qmul
 from imuloco.paths.base import BodyPath, Stride, to_floor
 from imuloco.paths.registry import ESTIMATORS, estimate_path
-from imuloco.paths.truth import HEADING_SIGMA_S, path_of_motion
+from imuloco.paths.truth import facing, path_of_motion
 from imuloco.phases.contacts import FEET, foot_contacts
-from imuloco.phases.events import heading_angle
 
 MAX_GAIN = 4.0  # a stride's gain is clipped to [1/MAX_GAIN, MAX_GAIN] (a still motion's stride)
 
@@ -82,13 +81,6 @@ def stride_gains(own_xy: np.ndarray, times: np.ndarray, path: BodyPath) -> np.nd
     pick = np.where(np.abs(left - np.arange(len(gains))) < np.abs(nearest - np.arange(
         len(gains))), left, nearest)
     return gains[pick]
-
-
-def facing(motion: Motion) -> np.ndarray:
-    """The hips' facing (T,), radians about +Y, unwrapped and smoothed over about a stride, as
-    :func:`imuloco.paths.truth.path_of_motion` reads a motion's heading."""
-    pos = motion.part_positions(["left_hip", "right_hip"])
-    return heading_angle(pos[:, 0], pos[:, 1], HEADING_SIGMA_S * motion.fps)
 
 
 def turn_to_path(motion: Motion, path: BodyPath, heading0: float) -> Motion:

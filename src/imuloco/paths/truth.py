@@ -18,6 +18,13 @@ from imuloco.phases.events import heading_angle
 HEADING_SIGMA_S = 0.5  # damps the pelvis's yaw swing within a stride (about one stride long)
 
 
+def facing(motion: Motion) -> np.ndarray:
+    """The hips' facing (T,), radians about +Y: the hip line crossed with the vertical,
+    unwrapped and smoothed over HEADING_SIGMA_S (about a stride)."""
+    pos = motion.part_positions(["left_hip", "right_hip"])
+    return heading_angle(pos[:, 0], pos[:, 1], HEADING_SIGMA_S * motion.fps)
+
+
 def path_of_motion(motion: Motion, heading_from: str = "hips") -> BodyPath:
     """The path of ``motion``'s root (joint 0) and feet, in its floor frame.
 
@@ -26,8 +33,8 @@ def path_of_motion(motion: Motion, heading_from: str = "hips") -> BodyPath:
     """
     if heading_from != "hips":
         raise ValueError(f"heading_from must be 'hips', got {heading_from!r}")
-    pos = motion.part_positions(["left_hip", "right_hip", "left_ankle", "right_ankle"])
-    theta = heading_angle(pos[:, 0], pos[:, 1], HEADING_SIGMA_S * motion.fps)
+    ankles = motion.part_positions(["left_ankle", "right_ankle"])
+    theta = facing(motion)
     theta0 = float(theta[0])
     origin = motion.root[0]
     root_xy = to_floor(motion.root, origin, theta0)
@@ -39,7 +46,7 @@ def path_of_motion(motion: Motion, heading_from: str = "hips") -> BodyPath:
         for a, b in zip(starts[vals], stops[vals]):
             mid = (int(a) + int(b) - 1) // 2
             footfalls.append(Footfall(foot, float(times[mid]),
-                                      to_floor(pos[mid, 2 + k], origin, theta0), 1.0))
+                                      to_floor(ankles[mid, k], origin, theta0), 1.0))
     footfalls.sort(key=lambda f: f.time_s)
     return BodyPath(times, root_xy, np.unwrap(wrap_angle(theta - theta0)), footfalls,
                     strides_from_footfalls(footfalls), "truth",
