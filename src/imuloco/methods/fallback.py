@@ -57,7 +57,13 @@ from imuloco.methods import pose
 from imuloco.methods.base import Method, Reconstruction
 from imuloco.methods.postprocess import pin_feet
 from imuloco.methods.training import model_frames
-from imuloco.ops.rotations import about_y, from_rotvec, normalize, qinv, qmul, to_rotvec
+from imuloco.ops.rotations import (
+    about_y,
+    normalize,
+    qinv,
+    qmul,
+    slerp_toward,
+)
 from imuloco.sensors.placement import get_placement
 
 GROUPS = tuple(PART_GROUPS)  # ("legs", "arms", "trunk")
@@ -109,14 +115,6 @@ def position_groups(skeleton: Skeleton) -> np.ndarray:
     par = skeleton.parents
     return np.array([-1 if par[j] < 0 else (rot[par[j]] if rot[par[j]] >= 0 else legs)
                      for j in range(skeleton.num_joints)])
-
-
-def toward(q: np.ndarray, target: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Quaternions ``q`` (..., 4) slerped toward ``target`` (..., 4) by ``w`` (...) in [0, 1]:
-    ``q exp(w log(q^-1 target))`` (a per-element weight, which scipy's ``Slerp`` over key
-    times does not take)."""
-    step = to_rotvec(qmul(qinv(q), target))
-    return normalize(qmul(q, from_rotvec(np.asarray(w)[..., None] * step)))
 
 
 @dataclass(frozen=True)
@@ -288,14 +286,14 @@ def blend_motion(motion: Motion, weights: np.ndarray, still: np.ndarray,
     rot_groups = joint_groups(sk)
     legs = GROUPS.index("legs")
     wj = weights[:, np.where(rot_groups >= 0, rot_groups, legs)]  # (T, J); the root: legs
-    target = toward(np.broadcast_to(neutral[1], (n, *neutral[1].shape)),
+    target = slerp_toward(np.broadcast_to(neutral[1], (n, *neutral[1].shape)),
                     np.broadcast_to(neutral[0], (n, *neutral[0].shape)),
                     np.broadcast_to(still[:, None], (n, sk.num_joints)))
     yaw = about_y(np.unwrap(pose.heading(motion)))
     rot = normalize(motion.rotations).copy()
     tilt = qmul(qinv(yaw), rot[:, 0])
-    rot[:, 0] = qmul(yaw, toward(tilt, target[:, 0], wj[:, 0]))
-    rot[:, 1:] = toward(rot[:, 1:], target[:, 1:], wj[:, 1:])
+    rot[:, 0] = qmul(yaw, slerp_toward(tilt, target[:, 0], wj[:, 0]))
+    rot[:, 1:] = slerp_toward(rot[:, 1:], target[:, 1:], wj[:, 1:])
     root = motion.root.copy()
     steps = np.diff(motion.root[:, [0, 2]], axis=0) * (1.0 - still[1:, None])
     root[1:, [0, 2]] = motion.root[0, [0, 2]] + np.cumsum(steps, axis=0)

@@ -230,6 +230,14 @@ def about_y(theta: np.ndarray) -> np.ndarray:
     return np.stack([z, np.sin(theta / 2), z, np.cos(theta / 2)], axis=-1)
 
 
+def slerp_toward(q: np.ndarray, target: np.ndarray, w: np.ndarray | float) -> np.ndarray:
+    """Quaternions ``q`` (..., 4) slerped toward ``target`` (..., 4) by ``w`` (...) or a scalar
+    (0: ``q``, 1: ``target``): ``q exp(w log(q^-1 target))``. Written out because scipy's
+    ``Slerp`` interpolates one key-framed track, not pairs with a weight each."""
+    step = to_rotvec(qmul(qinv(q), target))
+    return normalize(qmul(q, from_rotvec(np.asarray(w, dtype=np.float64)[..., None] * step)))
+
+
 def slerp(q: np.ndarray, times: np.ndarray, new_times: np.ndarray) -> np.ndarray:
     """Spherical linear interpolation of a time series. q : (T, ..., 4) sampled at ``times``
     (T,) -> (len(new_times), ..., 4). Each trailing track is interpolated independently."""

@@ -78,12 +78,9 @@ from imuloco.ops.filters import gaussian_smooth
 from imuloco.ops.rotations import (
     about_y,
     from_6d,
-    from_rotvec,
-    normalize,
-    qinv,
     qmul,
     qrot,
-    to_rotvec,
+    slerp_toward,
 )
 from imuloco.phases import gait_phases
 
@@ -370,11 +367,6 @@ class Eom2014(Method):
             self.models_.append(_Model(gp, list(values["phases"][i]), hmms, regs))
 
 
-def _slerp_pair(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
-    """slerp(a, b, t) for quaternion arrays (..., 4) of equal shape."""
-    return normalize(qmul(a, from_rotvec(t * to_rotvec(qmul(qinv(a), b)))))
-
-
 class _Eom2014Stream(Stream):
     """Causal variant (see the module docstring): bounded buffers of the last samples."""
 
@@ -428,7 +420,7 @@ class _Eom2014Stream(Stream):
         rot = from_6d(y[:6 * j].reshape(j, 6))
         track = np.r_[y[6 * j], v]                  # root height, velocity (2), yaw rate
         if self.rot_prev is not None:               # causal exponential smoothing
-            rot = _slerp_pair(rot, self.rot_prev, self.a)
+            rot = slerp_toward(rot, self.rot_prev, self.a)
             track = (1 - self.a) * track + self.a * self.track_prev
             self.theta += track[3] / m.fps_
         self.track_prev = track
