@@ -352,6 +352,36 @@ def test_a_long_pause_restarts_the_model_and_the_walker_stays_where_it_was(fitte
     assert np.linalg.norm((root - before[1])[[0, 2]]) < 1e-9 and abs(yaw - before[2]) < 1e-9
 
 
+def test_the_followed_walker_stands_still_through_a_long_pause(fitted, phone):
+    """A walk, then 15 s of the shank standing still (samples on, no dropout): with the path
+    followed (the default; its estimate inline, so deterministic) the root holds from 3 s into
+    the pause on (the last stride's correction blended in by then) within 1 mm, while the
+    model's own root (ridge never saw standing) walks on: before the still rule the followed
+    root walked on with it (33 m over a 30 s pause)."""
+    from imuloco.paths.live import STILL_HOLD_S
+
+    times, acc, gyro = phone
+    rng = np.random.default_rng(0)
+    tp = times[-1] + 0.01 * np.arange(1, 1501)
+    still_acc = acc.mean(axis=0) + rng.normal(0, 0.02, (len(tp), 1, 3))  # gravity, inclined
+    still_gyro = rng.normal(0, 0.003, (len(tp), 1, 3))
+    t = np.r_[times, tp]
+    a, g = np.concatenate([acc, still_acc]), np.concatenate([gyro, still_gyro])
+    roots = {}
+    for follow in (True, False):
+        s = LiveSession(fitted, calibrate_s=CALIB_S, follow_path=follow)
+        frames = [f for i in range(len(t)) for f in s.push(t[i], a[i], g[i])]
+        assert s.dropouts == 0
+        ft = np.array([f.time for f in frames])
+        roots[follow] = np.stack([f.root for f in frames])[ft >= times[-1] + 3.0][:, [0, 2]]
+        if follow:
+            assert s.strides.still() and len(s.strides.read) >= 3  # it walked, then stood
+    assert STILL_HOLD_S < 3.0
+    held = np.linalg.norm(roots[True] - roots[True][0], axis=1).max()
+    own = np.linalg.norm(roots[False][-1] - roots[False][0])
+    assert held < 1e-3 and own > 1.0, (held, own)
+
+
 def test_a_one_second_dropout_is_recovered_within_one_second(fitted, sample_db):
     """Pose error against the run without the gap <= 1 cm from at most 1 s of stream time after
     the first sample after the gap on (see imuloco.lab.livebench), on three replays."""

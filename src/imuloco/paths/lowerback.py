@@ -84,4 +84,5 @@ class LowerBackSteps:
             if (f.foot, round(f.time_s, 3)) not in seen:
                 seen.add((f.foot, round(f.time_s, 3)))
                 unique.append(f)
-        return BodyPath(times, root, heading, unique, strides, self.name, NOTE)
+        # the root moves along the trunk's yaw: a direction of travel (forward walking assumed)
+        return BodyPath(times, root, heading, unique, strides, self.name, NOTE, "travel")
