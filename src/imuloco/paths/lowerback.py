@@ -155,7 +155,9 @@ def step_speed(times: np.ndarray, contacts: np.ndarray, strides: list[Stride],
         for (a, b, _), vk in zip(run, v):
             speed[(times >= a) & (times < b)] = vk
         if edge_steps > 0:
-            speed[(times >= run[0, 0] - edge_steps * step_s[0]) & (times < run[0, 0])] = v[0]
+            # only where no step walks: runs are apart, their edges may meet in a gap
+            speed[(times >= run[0, 0] - edge_steps * step_s[0]) & (times < run[0, 0])
+                  & (speed == 0)] = v[0]
             speed[(times >= run[-1, 1]) & (times < run[-1, 1] + edge_steps * step_s[-1])
                   & (speed == 0)] = v[-1]
     return speed
