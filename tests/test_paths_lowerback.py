@@ -88,7 +88,7 @@ def test_a_turning_stride_walks_its_arc():
     assert straight.length_m == 1.0
 
 
-def pendulum_walk(step_m: float, steps: int = 30, height_m: float = 1.70,
+def pendulum_walk(step_m: float, steps: int = 20, height_m: float = 1.70,
                   seed: int = 0) -> tuple[Recording, float]:
     """An L5 sensor (x forward, y left, z up) on a pelvis vaulting over rigid legs of
     L5_HEIGHT_RATIO x height, one step every STEP_S, standing 2 s before and after: the
