@@ -1044,7 +1044,7 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @click.option("--piece-seconds", type=_ZeroOrRange(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
                    "(bounded memory for long recordings; not with --video/--html/--skeleton/"
-                   "--sensor). Default: pieces of 300 s past 30 min of recording, where those "
+                   "--sensor). Default: pieces of 120 s past 5 min of recording, where those "
                    "options allow; 0: always one piece.")
 @height_option
 @click.option("--no-fallback", is_flag=True,

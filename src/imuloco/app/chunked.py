@@ -68,9 +68,12 @@ PIECE_SECONDS = 600.0  # 10 min: 18,000 frames at 30 fps, ~100 MB of analysis
 WARMUP_SECONDS = 20.0  # longer than any method's window (learned: 120 frames = 4 s)
 # Recordings longer than LONG_SECONDS are reconstructed in pieces of AUTO_PIECE_SECONDS by
 # default (plan_pieces). Measured (docs/results/speed/reconstruct.md, shipped shin model, one
-# thread): PLACEHOLDER
-LONG_SECONDS = 1800.0
-AUTO_PIECE_SECONDS = 300.0
+# thread): one piece peaks at the stack's ~450 MB plus ~0.6 MB a second of recording (60 s:
+# 495 MB, 600 s: 843 MB), pieces at what their window (piece and both warm-ups) costs in one
+# piece whatever the length (1 h in pieces of 300 s: 885 MB; 600 s in pieces of 120 s: 616
+# MB, no more CPU than one piece). Past 300 s one piece would cost more than pieces of 120 s.
+LONG_SECONDS = 300.0
+AUTO_PIECE_SECONDS = 120.0
 
 
 def _yaw(q: np.ndarray) -> np.ndarray:
