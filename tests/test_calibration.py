@@ -247,11 +247,10 @@ def test_calibrating_a_shoe_sensor_and_measuring_its_gait_track_it_once(foot_wal
     assert gait.measured and after.misses == before.misses + 1 and after.hits >= before.hits + 1
 
 
-def test_gaitmaps_kernels_the_track_runs_are_cached_on_disk(foot_walks):
-    """gaitmap compiles its RTS Kalman filter afresh in every process (~40 CPU s, 3/4 of a
-    60 s shoe walk's reconstruction) unless numba's on-disk cache is on: after a track, every
-    kernel of GAITMAP_KERNELS exists in the installed gaitmap and caches (a renamed one fails
-    here rather than silently compiling again)."""
+def test_gaitmaps_cacheable_kernels_are_cached_on_disk(foot_walks):
+    """gaitmap compiles its kernels afresh in every process unless numba's on-disk cache is
+    on: after a track, every kernel of GAITMAP_KERNELS exists in the installed gaitmap and
+    caches (a renamed one fails here rather than silently compiling again)."""
     from importlib import import_module
 
     from numba.core.caching import NullCache

@@ -252,15 +252,13 @@ def foot_track(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray) -> FootTrac
     return _track(t.tobytes(), a.tobytes(), g.tobytes())
 
 
-# gaitmap's numba kernels the track runs that gaitmap compiles without numba's on-disk cache:
-# (module, function). Compiled afresh in every process they cost ~40 CPU s (the RTS Kalman
-# filter, which takes its motion model as a function argument), 3/4 of a 60 s shoe walk's
-# reconstruction (docs/results/speed/reconstruct.md); cached, a process loads them in <1 s.
-GAITMAP_KERNELS = (
-    ("gaitmap.trajectory_reconstruction.trajectory_methods._kalman_numba_funcs",
-     "_rts_kalman_update_series"),
-    ("gaitmap.utils.array_handling", "_solve_overlap"),
-)
+# gaitmap's numba kernels the track runs that gaitmap compiles without numba's on-disk cache
+# and that numba can cache: (module, function). Its RTS Kalman filter
+# (``_rts_kalman_update_series``, ~40 CPU s of a 60 s shoe walk's reconstruction, compiled
+# afresh in every process) cannot be: it takes its motion model as a function argument, and
+# numba's cache misses on such signatures in every new process (numba issue #9237); only a
+# change in gaitmap would keep it (docs/results/speed/reconstruct.md).
+GAITMAP_KERNELS = (("gaitmap.utils.array_handling", "_solve_overlap"),)
 
 
 @lru_cache(maxsize=1)
