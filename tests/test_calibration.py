@@ -245,3 +245,20 @@ def test_calibrating_a_shoe_sensor_and_measuring_its_gait_track_it_once(foot_wal
     gait = sensor_gait(rec, rec.placements[0])
     after = _track.cache_info()
     assert gait.measured and after.misses == before.misses + 1 and after.hits >= before.hits + 1
+
+
+def test_gaitmaps_cacheable_kernels_are_cached_on_disk(foot_walks):
+    """gaitmap compiles its kernels afresh in every process unless numba's on-disk cache is
+    on: after a track, every kernel of GAITMAP_KERNELS exists in the installed gaitmap and
+    caches (a renamed one fails here rather than silently compiling again)."""
+    from importlib import import_module
+
+    from numba.core.caching import NullCache
+
+    from imuloco.sensors.foottrack import GAITMAP_KERNELS, foot_track
+
+    w = foot_walks[0]
+    foot_track(w.times, w.acc[:, 0] + 2e-9, w.gyro[:, 0])  # signals no other test tracked
+    for module, name in GAITMAP_KERNELS:
+        kernel = getattr(import_module(module), name)
+        assert not isinstance(kernel._cache, NullCache), name

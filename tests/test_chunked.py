@@ -46,6 +46,44 @@ def test_pieces_equal_one_piece(sample_db, long_rec, name):
 
 
 
+@pytest.fixture(scope="module")
+def standing_rec(long_rec) -> Recording:
+    """``long_rec`` with the phone lying still on a standing shin from 12 to 22 s."""
+    t = long_rec.times - long_rec.times[0]
+    still = (t > 12) & (t < 22)
+    rng = np.random.default_rng(0)
+    acc, gyro = long_rec.acc.copy(), long_rec.gyro.copy()
+    acc[still] = rng.normal(0.0, 0.05, acc[still].shape) + [0.0, 9.81, 0.0]
+    gyro[still] = rng.normal(0.0, 0.01, gyro[still].shape)
+    return Recording(long_rec.times, acc, gyro, long_rec.placements)
+
+
+def test_the_fallback_in_pieces_is_the_fallback_of_one_piece(sample_db, standing_rec):
+    """The per-part fallback runs on each piece with its warm-up (its 1 s windows see the
+    signal one piece sees): with a windowed method the pieces' motion, its still weights and
+    the fallback's report are one piece's to rounding, and it acted (the standing 10 s)."""
+    from imuloco.app.chunked import fallback_pieces
+    from imuloco.methods import get_method
+    from imuloco.methods.fallback import FallbackReport
+
+    method = get_method("ridge").fit(sample_db.subset([0, 1, 2]), ["right_ankle"], "phone", 0)
+    whole, info = reconstruct_recording(standing_rec, method, calibrate=False, pin=False)
+    off, _ = reconstruct_recording(standing_rec, method, calibrate=False, pin=False,
+                                   fallback=False)
+    pieces = list(fallback_pieces(standing_rec, method, pin=False, piece_s=3.0, warmup_s=2.0))
+    assert len(pieces) > 10
+    rot = np.concatenate([p.motion.rotations for p, _ in pieces])
+    root = np.concatenate([p.motion.root for p, _ in pieces])
+    assert geodesic(rot, whole.rotations).max() < 1e-9
+    np.testing.assert_allclose(root, whole.root, atol=1e-9)
+    assert geodesic(off.rotations, whole.rotations).max() > 0.1  # the fallback moved it
+    report = FallbackReport.concatenate([r for _, r in pieces])
+    np.testing.assert_allclose(report.still, info["fallback"].still, atol=1e-12)
+    np.testing.assert_allclose(report.weights, info["fallback"].weights, atol=1e-12)
+    assert report.to_json() == info["fallback"].to_json()
+    assert 0.2 < report.to_json()["still_fraction"] < 0.3
+
+
 def test_learned_pieces_keep_their_look_ahead(long_rec):
     """The shipped ``learned`` model (8 frames of look-ahead, recurrent): with signal after
     each piece as before it, every joint but the root turns as in one piece to well under a
@@ -177,6 +215,7 @@ def test_pieces_report_what_one_piece_reports(sample_db, long_rec, tmp_path):
         assert pieces[key] == one[key] is not None, key
     assert list(pieces["gait"]) == list(one["gait"])
     assert list(pieces["plausibility"]) == list(one["plausibility"])
+    assert pieces["fallback"] == one["fallback"] and pieces["fallback"]["enabled"]
 
 
 def test_pieces_walk_as_one_piece_with_the_shipped_model(long_rec, tmp_path):
@@ -208,3 +247,46 @@ def test_pieces_walk_as_one_piece_with_the_shipped_model(long_rec, tmp_path):
     assert pieces["path"]["animation"]["distance_m"] == pytest.approx(
         one["path"]["animation"]["distance_m"], rel=0.05)
     assert pieces["path"]["distance_m"] == pytest.approx(one["path"]["distance_m"], rel=0.05)
+
+
+def test_long_recordings_go_in_pieces_on_their_own(sample_db, standing_rec, tmp_path,
+                                                   monkeypatch, caplog):
+    """``imuloco reconstruct`` works in pieces past :data:`~imuloco.app.chunked.LONG_SECONDS`
+    (here made 30 s, pieces of 10 s: the 40 s walk) with the fallback run on every piece, and
+    the report says what one piece's says of it; ``--piece-seconds 0`` keeps one piece, and
+    outputs that need the whole motion keep it with a warning. The motion is one piece's as
+    ``--piece-seconds`` gives it (see test_cli_reconstruct_in_pieces for the tolerance: the
+    joints above the legs to 1e-6 rad, the root within 0.5 m)."""
+    from imuloco.app import chunked
+    from imuloco.cli import cli
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.methods import get_method
+
+    monkeypatch.setattr(chunked, "LONG_SECONDS", 30.0)
+    monkeypatch.setattr(chunked, "AUTO_PIECE_SECONDS", 10.0)
+    model = get_method("ridge").fit(sample_db.subset([0, 1, 2]), ["right_ankle"], "phone", 0)
+    log = write_generic_csv(standing_rec, tmp_path / "long.csv")
+    args = ["reconstruct", str(log), "--model", str(model.save(tmp_path / "ridge.npz")),
+            "--no-calibrate"]
+    runs = {}
+    for tag, extra in [("auto", []), ("one", ["--piece-seconds", "0"])]:
+        r = CliRunner().invoke(cli, [*args, "-o", str(tmp_path / f"{tag}.bvh"), "--report",
+                                     str(tmp_path / f"{tag}.json"), *extra])
+        assert r.exit_code == 0, r.output
+        runs[tag] = (r.output, json.loads((tmp_path / f"{tag}.json").read_text()))
+    (auto_out, auto), (one_out, one) = runs["auto"], runs["one"]
+    a, b = read_bvh(tmp_path / "auto.bvh"), read_bvh(tmp_path / "one.bvh")
+    count = -(-a.num_frames // 300)
+    assert count > 3 and f"in {count} piece(s)" in auto_out and auto["pieces"]["count"] == count
+    assert "piece(s)" not in one_out and "pieces" not in one
+    assert auto["fallback"] == one["fallback"] and auto["fallback"]["acted"]
+    legs = {a.skeleton.part(p) for leg in LEGS for p in leg}
+    keep = [j for j in range(1, a.skeleton.num_joints) if j not in legs]
+    assert a.num_frames == b.num_frames
+    assert geodesic(a.rotations[:, keep], b.rotations[:, keep]).max() < 1e-6
+    assert np.abs(a.root - b.root).max() < 0.5
+    with caplog.at_level("WARNING"):
+        r = CliRunner().invoke(cli, [*args, "-o", str(tmp_path / "v.bvh"), "--html",
+                                     str(tmp_path / "v.html")])
+    assert r.exit_code == 0, r.output
+    assert "piece(s)" not in r.output and "--html needs the whole motion" in caplog.text

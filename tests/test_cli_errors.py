@@ -168,6 +168,8 @@ def test_a_model_of_another_placement_names_the_one_to_give(log, tmp_path, sampl
     ("reconstruct", "--height", "nan"),
     ("reconstruct", "--video-seconds", "0"),
     ("reconstruct", "--piece-seconds", "inf"),
+    ("reconstruct", "--piece-seconds", "5"),  # 0 is one piece, else at least 10 s
+    ("reconstruct", "--piece-seconds", "-1"),
     ("train", "--limit", "-2"),  # an empty database
     ("train", "--limit", "0"),  # read every clip
     ("train", "--seed", "-1"),
@@ -204,6 +206,9 @@ def test_a_piece_longer_than_any_recording(log, tmp_path):
     code, out = run("reconstruct", log, "-o", tmp_path / "x.bvh", "--piece-seconds", "1e308",
                     "--method", "mean")
     assert code == 0 and "in 1 piece(s)" in out, out
+    code, out = run("reconstruct", log, "-o", tmp_path / "y.bvh", "--piece-seconds", "0",
+                    "--method", "mean")  # one piece, as a short recording goes by default
+    assert code == 0 and "piece(s)" not in out, out
 
 
 @pytest.fixture(scope="module")

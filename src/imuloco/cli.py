@@ -131,6 +131,19 @@ class _Range(click.FloatRange):
         return number
 
 
+class _ZeroOrRange(_Range):
+    """0, or a finite number in the range (``--piece-seconds 0``: one piece)."""
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+                ) -> Any:
+        try:
+            if float(value) == 0:
+                return 0.0
+        except (TypeError, ValueError):
+            pass  # the range's own message
+        return super().convert(value, param, ctx)
+
+
 class _LibraryRange(_Range):
     """A finite number between two constants of a library ``module`` (``low`` and ``high``
     name them), e.g. a sampling rate ``read_log`` accepts
@@ -1028,9 +1041,11 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
 @platform_option
 @columns_option
 @sensor_option
-@click.option("--piece-seconds", type=_Range(10.0), default=None,
+@click.option("--piece-seconds", type=_ZeroOrRange(10.0), default=None,
               help="Reconstruct in pieces of this many seconds and write the BVH piece by piece "
-                   "(bounded memory for long recordings; not with --video/--html/--skeleton).")
+                   "(bounded memory for long recordings; not with --video/--html/--skeleton/"
+                   "--sensor). Default: pieces of 120 s past 5 min of recording, where those "
+                   "options allow; 0: always one piece.")
 @height_option
 @click.option("--no-fallback", is_flag=True,
               help="Keep the model's pose everywhere: do not move the parts the sensor cannot "
@@ -1054,7 +1069,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     gyroscope_*.csv).
     """
     # heavy (the app, the methods, torch): on use, so that --help stays fast
-    from imuloco.app.chunked import reconstruct_to_bvh
+    from imuloco.app.chunked import plan_pieces, reconstruct_to_bvh
     from imuloco.app.export import check_motion_output, check_report_output
     from imuloco.app.outputs import Outputs, write_outputs
     from imuloco.app.pipeline import reconstruct_file
@@ -1074,16 +1089,25 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
     outputs = Outputs(output, report_path, video, html_path, video_seconds, units,
                       _preset(rig, skeleton))
     source = recording[0] if len(recording) == 1 else list(recording)
-    if piece_seconds is not None:
+    whole = next((name for name, given in [("--video", video), ("--html", html_path),
+                                           ("--skeleton", skeleton),
+                                           ("a glTF -o", output.suffix.lower() != ".bvh")]
+                  if given), None)
+    if piece_seconds:
         if sensors:
             raise click.UsageError("--piece-seconds reads one log: drop --sensor")
-        if video or html_path or skeleton or output.suffix.lower() != ".bvh":
+        if whole:
             raise click.UsageError("--piece-seconds writes a BVH on a --rig preset only: "
                                    "drop --video/--html/--skeleton, write a .bvh")
+    piece_seconds, imported = plan_pieces(source, piece_seconds, whole, sensors,
+                                          placement=placement, fmt=fmt, platform=platform,
+                                          columns=columns)
+    if piece_seconds is not None:
         pieces = reconstruct_to_bvh(source, output, method_name, model_path, placement, fmt,
                                     not no_calibrate, platform=platform, overwrite=True,
                                     piece_s=piece_seconds, progress=True, unit=units,
-                                    height=height, rig=outputs.rig, columns=columns)
+                                    height=height, rig=outputs.rig, columns=columns,
+                                    fallback=not no_fallback, imported=imported)
         written = write_outputs(outputs, pieces)  # the report: the BVH is written
         if summary_path:
             written.append(write_summary(pieces.to_json(), summary_path, overwrite=True)[0])
@@ -1097,7 +1121,7 @@ def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_nam
                                       placement=placement, fmt=fmt, calibrate=not no_calibrate,
                                       progress=True, platform=platform, skeleton=skeleton,
                                       height=height, columns=columns, sensors=sensors,
-                                      fallback=not no_fallback)
+                                      fallback=not no_fallback, imported=imported)
     click.echo(f"model: {report.model}", err=True)
     written = write_outputs(outputs, report, motion, progress=True)
     if summary_path:

@@ -18,10 +18,12 @@ and summarised over the whole recording (a few bytes per frame).
 
 from __future__ import annotations
 
+import logging
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -51,17 +53,27 @@ from imuloco.measures.gait import (
 )
 from imuloco.measures.sensorgait import GaitReport, estimator_of, gait_report
 from imuloco.methods.base import Reconstruction
-from imuloco.methods.fallback import FallbackReport
+from imuloco.methods.fallback import FallbackReport, fallback_signals
 from imuloco.methods.postprocess import pin_detected_contacts
 from imuloco.methods.training import frame_times, model_frames
 from imuloco.ops.rotations import about_y, qmul, qrot
 from imuloco.paths.follow import PieceFollower, estimated_path
 from imuloco.phases import gait_phases
-from imuloco.sensors.reallog import read_log
+from imuloco.sensors.multi import read_sensors
+from imuloco.sensors.reallog import LogReport, read_log
+
+_log = logging.getLogger(__name__)
 
 PIECE_SECONDS = 600.0  # 10 min: 18,000 frames at 30 fps, ~100 MB of analysis
 WARMUP_SECONDS = 20.0  # longer than any method's window (learned: 120 frames = 4 s)
-LONG_SECONDS = 1800.0  # recordings longer than this are reconstructed in pieces by default
+# Recordings longer than LONG_SECONDS are reconstructed in pieces of AUTO_PIECE_SECONDS by
+# default (plan_pieces). Measured (docs/results/speed/reconstruct.md, shipped shin model, one
+# thread): one piece peaks at the stack's ~450 MB plus ~0.6 MB a second of recording (60 s:
+# 495 MB, 600 s: 843 MB), pieces at what their window (piece and both warm-ups) costs in one
+# piece whatever the length (1 h in pieces of 300 s: 885 MB; 600 s in pieces of 120 s: 616
+# MB, no more CPU than one piece). Past 300 s one piece would cost more than pieces of 120 s.
+LONG_SECONDS = 300.0
+AUTO_PIECE_SECONDS = 120.0
 
 
 def _yaw(q: np.ndarray) -> np.ndarray:
@@ -104,6 +116,18 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
     """:func:`reconstruct_pieces` with each piece's confidence: consecutive
     :class:`imuloco.methods.base.Reconstruction` pieces (``error_m``, ``unreliable`` cut as
     the motion)."""
+    for full, _ in fallback_pieces(rec, method, pin, piece_s, warmup_s, fallback=False):
+        yield full
+
+
+def fallback_pieces(rec: Recording, method, pin: bool = False, piece_s: float = PIECE_SECONDS,
+                    warmup_s: float = WARMUP_SECONDS, fallback: bool = True
+                    ) -> Iterator[tuple[Reconstruction, FallbackReport | None]]:
+    """:func:`reconstruction_pieces` with, when ``fallback``, the per-part fallback applied to
+    each piece before its feet are pinned, as in one piece
+    (:func:`imuloco.methods.fallback.fallback_signals`, run over the piece and its warm-ups so
+    that its windows see the signal one piece sees), and each piece's
+    :class:`~imuloco.methods.fallback.FallbackReport` (None without ``fallback``)."""
     fps = method.fps_
     rec = rec.select(method.placements_)
     # the grid Method.reconstruct reads: (F, 6 S), ~50 MB for 10 h
@@ -119,7 +143,9 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
             stop = frames
         # the warm-up before and as much signal after: the last frames see their look-ahead
         begin, end = max(0, start - warm), min(frames, stop + warm)
-        full = method.reconstruct_signals_full(signals[begin:end])
+        full, report = method.reconstruct_signals_full(signals[begin:end]), None
+        if fallback:  # before the pinning, as reconstruct_recording does
+            full, report = fallback_signals(full, signals[begin:end], method)
         motion = full.motion
         if pin:
             motion = pin_detected_contacts(motion)
@@ -129,8 +155,42 @@ def reconstruction_pieces(rec: Recording, method, pin: bool = False,
         last = (piece.rotations[-1, 0].copy(), piece.root[-1].copy())
         err, flags = (None if a is None else np.asarray(a)[start - begin:stop - begin]
                       for a in (full.error_m, full.unreliable))
-        yield Reconstruction(piece, err, flags, full.note)
+        cut = None if report is None else report.sliced(start - begin, stop - begin)
+        yield Reconstruction(piece, err, flags, full.note), cut
         start = stop
+
+
+def plan_pieces(recording_path, piece_s: float | None = None, whole: str | None = None,
+                sensors: Sequence[tuple[str, str | Path]] = (), **options: Any
+                ) -> tuple[float | None, tuple[Recording, LogReport] | None]:
+    """Whether ``imuloco reconstruct`` works in pieces, and how long they are.
+
+    piece_s : the user's choice (``--piece-seconds``): seconds, 0 for one piece, None to
+        decide here: pieces of :data:`AUTO_PIECE_SECONDS` for a recording longer than
+        :data:`LONG_SECONDS` (memory then stays flat in the recording's length), else one.
+    whole : why the outputs need the whole motion at once (``"--video"``...), or None: a long
+        recording is then reconstructed in one piece, with a warning.
+    sensors, options : :func:`imuloco.sensors.multi.read_sensors`'s, to read the log when
+        deciding (several sensors are read in one piece: pieces read one log).
+
+    Returns the piece length (None: one piece) and the log read to decide (None when it was
+    not read), for :func:`reconstruct_to_bvh` or :func:`imuloco.app.pipeline.reconstruct_file`.
+    """
+    if piece_s is not None:
+        return (float(piece_s) if piece_s > 0 else None), None
+    if "placement" in options:
+        require_extras(options["placement"])  # before reading a long log
+    log = read_sensors(recording_path, sensors, **options)
+    seconds = float(log[0].times[-1] - log[0].times[0]) if len(log[0].times) else 0.0
+    if seconds <= LONG_SECONDS:
+        return None, log
+    why = whole or ("--sensor" if sensors else None)
+    if why is not None:
+        _log.warning("%.0f s of recording reconstructed in one piece (%s needs the whole "
+                     "motion): memory grows with its length; drop %s to work in pieces",
+                     seconds, why, why)
+        return None, log
+    return AUTO_PIECE_SECONDS, log
 
 
 def combine(reports: list[dict[str, float]], frames: list[int]) -> dict[str, float]:
@@ -155,7 +215,8 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
                        piece_s: float = PIECE_SECONDS, warmup_s: float = WARMUP_SECONDS,
                        progress: bool = False, unit: str = "cm",
                        height: float | None = None, rig: str | None = DEFAULT_RIG,
-                       columns: dict[str, str] | None = None) -> ReconstructionReport:
+                       columns: dict[str, str] | None = None, fallback: bool = True,
+                       imported: tuple[Recording, LogReport] | None = None) -> ReconstructionReport:
     """Import a log, reconstruct it in pieces and write the BVH to ``output`` piece by piece.
 
     Parameters as :func:`imuloco.app.pipeline.reconstruct_file` (``method`` a name, or a fitted
@@ -174,11 +235,14 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     ``rig``: the rig preset written (:func:`imuloco.core.rigs.apply_rig`; None: the model's
     skeleton as it is), its T-pose rest :func:`imuloco.app.export.rest_of` the first piece,
     used for every piece.
+    ``fallback``: the per-part fallback on every piece (:func:`fallback_pieces`), reported
+    over the whole recording as in one piece.
+    ``imported``: the log at ``recording_path`` already read (:func:`plan_pieces`), not read again.
     """
     t0 = time.perf_counter()
     require_extras(placement)  # before reading a long log
-    rec, log_report = read_log(recording_path, placement=placement, fmt=fmt, platform=platform,
-                               columns=columns)
+    rec, log_report = imported or read_log(recording_path, placement=placement, fmt=fmt,
+                                      platform=platform, columns=columns)
     available = [placement, *(p for p in rec.placements if p != placement)]
     if method is None or isinstance(method, str):
         choice = choose_model(method, model, placement, progress=progress, available=available)
@@ -197,13 +261,14 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     frames = len(frame_times(rec, fitted.fps_))
     path = estimated_path(rec, fitted.placements_[0], height)
     follower = PieceFollower(path) if path is not None else None
-    gait, checks, sizes, confidences = [], [], [], []
+    gait, checks, sizes, confidences, fallbacks = [], [], [], [], []
     final: list = []  # the last piece and its gait phases
     bar = tqdm(total=frames, desc="reconstruct", unit="frame", disable=not progress)
 
     def pieces() -> Iterator[Motion]:
-        for full in reconstruction_pieces(rec, fitted, pin, piece_s, warmup_s):
+        for full, report in fallback_pieces(rec, fitted, pin, piece_s, warmup_s, fallback):
             piece = full.motion
+            fallbacks.append(report)
             conf = Confidence.of(full, piece.fps, f"method {fitted.name!r}")
             if height is not None:  # a uniform scale: the joins stay joined
                 k = height_scale(piece.skeleton, height)
@@ -245,5 +310,6 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
         confidence=Confidence.concatenate(confidences), started=t0,
         pieces=Pieces(len(sizes), piece_s, warmup_s),
         path=None if follower is None else follower.report(),
-        fallback=FallbackReport(False, note="not run on a reconstruction in pieces"))
+        fallback=FallbackReport.concatenate(fallbacks) if fallback else
+        FallbackReport(False, note="switched off (--no-fallback)"))
 

@@ -59,7 +59,7 @@ from imuloco.phases import foot_contacts, gait_phases
 from imuloco.sensors.calibration import calibrate
 from imuloco.sensors.multi import read_sensors
 from imuloco.sensors.placement import PRESETS
-from imuloco.sensors.reallog import recording_name
+from imuloco.sensors.reallog import LogReport, recording_name
 from imuloco.sensors.simulate import simulate
 from imuloco.viz.plots import plot_errors, plot_phases, plot_signals
 
@@ -327,7 +327,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
                      progress: bool = False, fitted: Method | ModelChoice | None = None,
                      platform: str | None = None, skeleton: str | Path | None = None,
                      height: float | None = None, columns: dict[str, str] | None = None,
-                     sensors: Sequence[tuple[str, str | Path]] = (), fallback: bool = True
+                     sensors: Sequence[tuple[str, str | Path]] = (), fallback: bool = True,
+                     imported: tuple[Recording, LogReport] | None = None
                      ) -> tuple[Motion, ReconstructionReport]:
     """Import a phone's sensor log and reconstruct the wearer's motion.
 
@@ -353,6 +354,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         (:func:`imuloco.sensors.multi.read_sensors`). With several sensors the shipped model
         reading them is chosen (:func:`choose_model`'s ``available``); a sensor no model reads
         is named in a warning and in the report's ``sensors`` (``used``: false).
+    imported : the log at ``recording_path`` (with ``sensors``) already read
+        (:func:`imuloco.app.chunked.plan_pieces`), not read again.
 
     Returns
     -------
@@ -368,8 +371,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
     bar = tqdm(total=len(steps), desc="reconstruct", unit="step", disable=not progress)
     t0 = time.perf_counter()
     bar.set_postfix_str("reading the log")
-    rec, log_report = read_sensors(recording_path, sensors, placement=placement, fmt=fmt,
-                                   platform=platform, columns=columns)
+    rec, log_report = imported or read_sensors(recording_path, sensors, placement=placement,
+                                          fmt=fmt, platform=platform, columns=columns)
     if placement not in rec.placements:  # a file that names its sensors: its first leads
         placement = rec.placements[0]
         require_extras(placement)

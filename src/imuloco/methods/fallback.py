@@ -246,6 +246,22 @@ class FallbackReport:
     note: str = ""
     acted_weight: float = field(default=0.1, repr=False)
 
+    def sliced(self, start: int, stop: int) -> FallbackReport:
+        """Frames ``start:stop`` (a piece of a reconstruction in pieces)."""
+        def cut(a):
+            return None if a is None else a[start:stop]
+
+        return replace(self, weights=cut(self.weights), still=cut(self.still))
+
+    @classmethod
+    def concatenate(cls, parts: Sequence[FallbackReport]) -> FallbackReport:
+        """Consecutive pieces' reports as one (the first's when any piece has no weights: a
+        fallback switched off or not applied says so for every piece)."""
+        if any(p.weights is None for p in parts):
+            return parts[0]
+        return replace(parts[0], weights=np.concatenate([p.weights for p in parts]),
+                       still=np.concatenate([p.still for p in parts]))
+
     @property
     def acted(self) -> bool:
         """Whether some part of some frame moved toward neutral (weight over 0.1)."""
@@ -363,11 +379,17 @@ def fallback_recording(full: Reconstruction, rec: Recording, method: Method
     as the method read it) with the shipped neutral poses: the pipeline's one call
     (:func:`imuloco.app.pipeline.reconstruct_recording`). A model whose skeleton the neutral
     poses do not fit is left as it is, and the report says why."""
-    placement = method.placements_[0]
+    signals = model_frames(rec.select(method.placements_), method.fps_, method.gaps_missing)
+    return fallback_signals(full, signals, method)
+
+
+def fallback_signals(full: Reconstruction, signals: np.ndarray, method: Method
+                     ) -> tuple[Reconstruction, FallbackReport]:
+    """:func:`fallback_recording` on the signals (T, 6 S) ``method`` read at its frame rate
+    (a piece of a recording with its warm-up: :mod:`imuloco.app.chunked`)."""
     neutral = shipped_neutral()
     try:
         neutral.on(full.motion.skeleton)
     except ModelFileError as e:
         return full, FallbackReport(True, note=f"not applied: {e}")
-    signals = model_frames(rec.select(method.placements_), method.fps_, method.gaps_missing)
-    return apply_fallback(full, signals, placement, neutral)
+    return apply_fallback(full, signals, method.placements_[0], neutral)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 from functools import lru_cache
+from importlib import import_module
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -251,10 +252,34 @@ def foot_track(times: np.ndarray, acc: np.ndarray, gyro: np.ndarray) -> FootTrac
     return _track(t.tobytes(), a.tobytes(), g.tobytes())
 
 
+# gaitmap's numba kernels the track runs that gaitmap compiles without numba's on-disk cache
+# and that numba can cache: (module, function). Its RTS Kalman filter
+# (``_rts_kalman_update_series``, ~40 CPU s of a 60 s shoe walk's reconstruction, compiled
+# afresh in every process) cannot be: it takes its motion model as a function argument, and
+# numba's cache misses on such signatures in every new process (numba issue #9237); only a
+# change in gaitmap would keep it (docs/results/speed/reconstruct.md).
+GAITMAP_KERNELS = (("gaitmap.utils.array_handling", "_solve_overlap"),)
+
+
+@lru_cache(maxsize=1)
+def _cache_gaitmap_kernels() -> None:
+    """Turn numba's on-disk cache on for :data:`GAITMAP_KERNELS` (as ``cache=True`` would:
+    beside gaitmap's sources, else numba's per-user cache folder); a kernel a gaitmap version
+    does not have, or names differently, is left as it is."""
+    for module, name in GAITMAP_KERNELS:
+        try:
+            kernel = getattr(import_module(module), name)
+        except (ImportError, AttributeError):
+            continue
+        if hasattr(kernel, "enable_caching"):  # a numba dispatcher
+            kernel.enable_caching()
+
+
 @lru_cache(maxsize=4)
 def _track(times_b: bytes, acc_b: bytes, gyro_b: bytes) -> FootTrack:
     """:func:`foot_track` of signals given as float64 bytes."""
     _gaitmap()  # before pandas, which the [gait] extra brings too
+    _cache_gaitmap_kernels()
     # the [gait] extra's (gaitmap, and pandas, which it brings): imported when used
     import pandas as pd
     from gaitmap.preprocessing.sensor_alignment import align_dataset_to_gravity
