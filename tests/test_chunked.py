@@ -198,8 +198,9 @@ def test_pieces_report_a_foot_sensors_own_gait(sample_db, tmp_path):
 
 
 def test_pieces_report_what_one_piece_reports(sample_db, long_rec, tmp_path):
-    """The report in pieces has the one-piece report's keys (but the strides: the motion's are
-    per piece), the raw signal's cadence and swing as one piece reads them included."""
+    """The report in pieces has the one-piece report's keys, the raw signal's cadence and swing
+    as one piece reads them included, and its strides on the recording's clock (a stride
+    across a join is in neither piece)."""
     from imuloco.app.chunked import reconstruct_to_bvh
     from imuloco.app.pipeline import reconstruct_file
     from imuloco.io.sensorlog import write_generic_csv
@@ -210,7 +211,13 @@ def test_pieces_report_what_one_piece_reports(sample_db, long_rec, tmp_path):
     pieces = reconstruct_to_bvh(log, tmp_path / "p.bvh", ridge, piece_s=10.0).to_json()
     _, one = reconstruct_file(log, fitted=ridge)
     one = one.to_json()
-    assert set(one) - set(pieces) == {"strides"} and set(pieces) - set(one) == {"pieces"}
+    assert set(one) <= set(pieces) and set(pieces) - set(one) == {"pieces"}
+    joins = pieces["pieces"]["count"] - 1
+    assert joins >= 2
+    assert len(one["strides"]) - 2 * joins - 2 <= len(pieces["strides"]) <= len(one["strides"]) + 2
+    starts = [r["start_s"] for r in pieces["strides"]]
+    assert starts == sorted(starts) and starts[-1] > 2 * 10.0  # the last piece's, shifted
+    assert abs(pieces["strides"][-1]["end_s"] - one["strides"][-1]["end_s"]) < 1.5
     for key in ("signal_cadence_spm", "signal_swing_deg", "feet_pinned_by", "calibration"):
         assert pieces[key] == one[key] is not None, key
     assert list(pieces["gait"]) == list(one["gait"])

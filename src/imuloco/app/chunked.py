@@ -52,6 +52,7 @@ from imuloco.measures.gait import (
     to_height,
 )
 from imuloco.measures.sensorgait import GaitReport, estimator_of, gait_report
+from imuloco.measures.strides import stride_rows
 from imuloco.methods.base import Reconstruction
 from imuloco.methods.fallback import FallbackReport, fallback_signals
 from imuloco.methods.postprocess import pin_detected_contacts
@@ -94,6 +95,14 @@ def continue_from(piece: Motion, at: int, root_rotation: np.ndarray, root: np.nd
     shift = root - path[at]
     shift[1] = 0.0
     return Motion(piece.skeleton, rotations, path + shift, piece.fps, piece.name)
+
+
+def shifted(rows: list[dict[str, Any]], offset_s: float) -> list[dict[str, Any]]:
+    """Stride rows (:func:`imuloco.measures.strides.stride_rows`) of a piece starting
+    ``offset_s`` into the recording, on the recording's clock; a stride across a join is in
+    neither piece's rows."""
+    return [{**r, "start_s": round(r["start_s"] + offset_s, 4),
+             "end_s": round(r["end_s"] + offset_s, 4)} for r in rows]
 
 
 def reconstruct_pieces(rec: Recording, method, pin: bool = False,
@@ -262,6 +271,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     path = estimated_path(rec, fitted.placements_[0], height)
     follower = PieceFollower(path) if path is not None else None
     gait, checks, sizes, confidences, fallbacks = [], [], [], [], []
+    strides: list[dict[str, Any]] = []  # every piece's strides, on the recording's clock
     final: list = []  # the last piece and its gait phases
     bar = tqdm(total=frames, desc="reconstruct", unit="frame", disable=not progress)
 
@@ -278,6 +288,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
             confidences.append(conf)
             phases = gait_phases(piece)  # the piece's contacts: found once, read twice
             gait.append(gait_parameters(piece, phases))
+            strides.extend(shifted(stride_rows(piece, phases), sum(sizes) / piece.fps))
             checks.append(plausibility(piece, phases.contacts))
             sizes.append(piece.num_frames)
             bar.update(piece.num_frames)
@@ -296,7 +307,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     bar.close()
     motion_gait = Gait(**combine(gait, sizes))
     if estimator_of(placement) is None:
-        walk = GaitReport(motion_gait, "the reconstructed motion, per piece", None, None)
+        walk = GaitReport(motion_gait, "the reconstructed motion, per piece", None, strides)
     else:  # the sensor's own gait over the whole recording; ``final``, on the reported
         # skeleton, gives the stature when ``height`` is None
         sensor = gait_report(*final[:1], raw, placement, height, final[1])
