@@ -216,3 +216,16 @@ def test_no_strip_without_a_confidence_and_contacts_are_marked(walk):
     t = int(np.flatnonzero(down.any(axis=1))[0])
     orange = np.all(np.abs(r.frame(t).astype(int) - [255, 127, 14]) < 40, axis=-1)
     assert orange[:-sk.LEGEND_PX].sum() > 5  # a dot at the foot, above the legend's own
+
+
+def test_frames_do_not_depend_on_the_order_they_are_drawn_in(walk, monkeypatch):
+    """The renderer prepares the geometry of several frames at once (sk.CHUNK_FRAMES): a
+    frame drawn out of order, or again, is the same image."""
+    monkeypatch.setattr(sk, "CHUNK_FRAMES", 16)
+    r = StickRenderer([walk], ["walk"], panel_size=SMALL)
+    times = range(0, 121, 7)
+    forwards = [r.frame(t) for t in times]
+    backwards = [r.frame(t) for t in reversed(times)][::-1]
+    for a, b in zip(forwards, backwards):
+        np.testing.assert_array_equal(a, b)
+    assert len({a.tobytes() for a in forwards}) == len(forwards)  # the figure moves

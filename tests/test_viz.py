@@ -46,6 +46,15 @@ def test_project_front_view_keeps_x_and_y():
                                atol=1e-12)
 
 
+
+def test_project_with_one_camera_per_frame_is_each_frame_projected_alone():
+    """Azimuths (F,) project points (F, ..., 3) frame by frame, as F scalar calls do."""
+    rng = np.random.default_rng(0)
+    pts, az = rng.normal(size=(5, 4, 2, 3)), rng.uniform(-np.pi, np.pi, 5)
+    one_each = np.stack([project(p, a, 0.3) for p, a in zip(pts, az)])
+    np.testing.assert_allclose(project(pts, az, 0.3), one_each, atol=1e-12)
+    assert camera_axes(az, 0.3)[0].shape == (5, 3)
+
 def test_joint_sides_of_the_sample_skeleton(sample_db):
     sk = sample_db.skeleton
     sides = dict(zip(sk.names, joint_sides(sk)))

@@ -18,6 +18,7 @@ and summarised over the whole recording (a few bytes per frame).
 
 from __future__ import annotations
 
+import itertools
 import logging
 import time
 from collections.abc import Iterator, Sequence
@@ -29,7 +30,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from imuloco.app.confidence import Confidence
-from imuloco.app.export import rest_of
+from imuloco.app.export import figure_height, rest_of
 from imuloco.app.pipeline import (
     ModelChoice,
     calibrated,
@@ -42,6 +43,7 @@ from imuloco.app.report import MotionInfo, Pieces, ReconstructionReport, build_r
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
 from imuloco.core.rigs import DEFAULT_RIG, MODEL, apply_rig
+from imuloco.io.atomic import check_output
 from imuloco.io.bvh import write_bvh_pieces
 from imuloco.measures.gait import (
     Gait,
@@ -249,6 +251,7 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
     ``imported``: the log at ``recording_path`` already read (:func:`plan_pieces`), not read again.
     """
     t0 = time.perf_counter()
+    check_output(Path(output), overwrite)  # before any work (the first piece is made first)
     require_extras(placement)  # before reading a long log
     rec, log_report = imported or read_log(recording_path, placement=placement, fmt=fmt,
                                       platform=platform, columns=columns)
@@ -303,7 +306,11 @@ def reconstruct_to_bvh(recording_path, output: str | Path, method=None, model=No
                 piece = apply_rig(piece, rig, rest)
             yield piece
 
-    write_bvh_pieces(on_rig(pieces()), frames, output, unit=unit, overwrite=overwrite)
+    written = on_rig(pieces())
+    first = next(written, None)  # its skeleton sets the head's End Site (figure_height)
+    write_bvh_pieces(itertools.chain([] if first is None else [first], written), frames,
+                     output, unit=unit, overwrite=overwrite,
+                     height=None if first is None else figure_height(first.skeleton))
     bar.close()
     motion_gait = Gait(**combine(gait, sizes))
     if estimator_of(placement) is None:

@@ -81,21 +81,30 @@ def rest_of(motion: Motion) -> np.ndarray:
     return measure_rest(motion) if rest is None else rest
 
 
+def figure_height(skeleton: Skeleton) -> float | None:
+    """The body height (metres) a figure on ``skeleton`` stands for: gait's stature, from the
+    legs (:func:`imuloco.measures.gait.stature`; the ``--height`` a reconstruction was scaled
+    to), which the writers' head End Site reaches at rest (:func:`imuloco.io.bvh.end_sites`);
+    None for a rig without legs."""
+    try:
+        return stature(skeleton)
+    except UnknownNameError:  # a rig without legs: the head keeps its End Site
+        return None
+
+
 def write_reconstruction(motion: Motion, path: str | Path, rig: str | None = DEFAULT_RIG,
                          unit: str = "cm", overwrite: bool = False,
                          rest: np.ndarray | None = None) -> Path:
     """Write ``motion`` to ``path`` (``.bvh``: lengths in ``unit``; ``.glb``/``.gltf``: metres)
     on preset ``rig`` (:func:`imuloco.core.rigs.apply_rig`; None or ``model``: as it is, e.g.
-    a motion already retargeted onto the user's ``--skeleton``). ``rest``: the T-pose rest of
-    ``motion``'s skeleton (:func:`rest_of` when None). Returns the path."""
+    a motion already retargeted onto the user's ``--skeleton``), the figure at rest as tall as
+    :func:`figure_height`. ``rest``: the T-pose rest of ``motion``'s skeleton (:func:`rest_of`
+    when None). Returns the path."""
     path = check_motion_output(path)
     out = motion
     if rig is not None and check_rig_name(rig) != MODEL:
         out = apply_rig(motion, rig, rest_of(motion) if rest is None else rest)
+    height = figure_height(out.skeleton)
     if path.suffix.lower() == ".bvh":
-        return write_bvh(out, path, unit=unit, overwrite=overwrite)
-    try:  # the figure's head top at the body's height (gait's stature, from the legs)
-        height = stature(out.skeleton)
-    except UnknownNameError:  # a rig without legs: the head keeps its End Site
-        height = None
+        return write_bvh(out, path, unit=unit, overwrite=overwrite, height=height)
     return write_gltf(out, path, overwrite=overwrite, height=height)

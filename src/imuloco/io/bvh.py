@@ -51,7 +51,7 @@ from imuloco.io.upaxis import (
     spread_index,
     to_y_up,
 )
-from imuloco.ops.kinematics import joint_positions
+from imuloco.ops.kinematics import fk, joint_positions
 from imuloco.ops.rotations import IDENTITY, euler_components, qmul, qrot, to_euler
 
 # Metres per file unit. "cmu": the CMU motion capture unit, (1 / 0.45) inch.
@@ -771,21 +771,23 @@ def _decimals(unit_scale: float) -> int:
 
 
 def write_bvh(motion: Motion, path: str | Path, unit: str = "cm", order: str = "ZXY",
-              overwrite: bool = False) -> Path:
+              overwrite: bool = False, height: float | None = None) -> Path:
     """Write a Motion as BVH.
 
     The root gets 6 channels (position, then rotation), every other joint 3 rotation channels,
     in the intrinsic Euler ``order`` (a permutation of ``XYZ``); lengths are in ``unit``
     (``m, cm, mm, in, cmu``; Blender's importer takes the file's numbers as metres, so import
     a centimetre file with scale 0.01), angles in degrees with 6 decimals, lengths with enough
-    decimals for 1e-8 m. Leaf joints get a non-zero End Site (:func:`end_site`). Refuses to
-    replace an existing file unless ``overwrite``. Returns the path.
+    decimals for 1e-8 m. Leaf joints get a non-zero End Site (:func:`end_sites`; ``height``:
+    the body height in metres the head's top reaches at rest). Refuses to replace an existing
+    file unless ``overwrite``. Returns the path.
     """
-    return write_bvh_pieces([motion], motion.num_frames, path, unit, order, overwrite)
+    return write_bvh_pieces([motion], motion.num_frames, path, unit, order, overwrite, height)
 
 
 def write_bvh_pieces(pieces: Iterable[Motion], frames: int, path: str | Path, unit: str = "cm",
-                     order: str = "ZXY", overwrite: bool = False) -> Path:
+                     order: str = "ZXY", overwrite: bool = False,
+                     height: float | None = None) -> Path:
     """Write consecutive Motions (one skeleton and frame rate, ``frames`` frames in all) as one
     BVH file, a piece at a time: a long reconstruction never needs to be in memory whole. See
     :func:`write_bvh` for the options; the file appears (atomically) only when complete."""
@@ -803,7 +805,7 @@ def write_bvh_pieces(pieces: Iterable[Motion], frames: int, path: str | Path, un
         for motion in pieces:
             if written == 0:
                 dfs = depth_first(motion.skeleton.parents)
-                f.write("\n".join(_hierarchy(motion.skeleton, k, dec, order)) + "\n")
+                f.write("\n".join(_hierarchy(motion.skeleton, k, dec, order, height)) + "\n")
                 f.write(f"MOTION\nFrames: {frames}\nFrame Time: {1.0 / motion.fps:.10g}\n")
             # the file's joints are in depth-first order, each its own rotation channels
             eul = to_euler(motion.rotations[:, dfs], order).reshape(motion.num_frames, -1)
@@ -845,6 +847,40 @@ def end_site(sk: Skeleton, j: int) -> np.ndarray:
     return direction * length
 
 
+def end_sites(sk: Skeleton, height: float | None = None, flat_toes: bool = False
+              ) -> dict[int, np.ndarray]:
+    """The End Site offsets (3,) in metres of every joint that gets one (each leaf, and any
+    joint with the rig's own), by joint: :func:`end_site`'s, then
+
+    - ``flat_toes``: a toe's (body map ``*_toe``) laid flat along the floor at rest, its
+      length kept (the glTF writer's, whose mesh shows it);
+    - ``height``: the head's, when the rig has none of its own and the head's End Site points
+      up at rest (a T-pose rest, not the model rig's bones along +X), along the same direction
+      to where the head's top is ``height`` above the rest figure's lowest joint or End Site
+      (its feet on the floor): the figure at rest, as Blender shows it, is then as tall as the
+      body it stands for (the stature rule above alone left it 0.2 % short on the sample's
+      rig, and any rig whose head is not 0.13 of its stature further off).
+    """
+    ends = {j: end_site(sk, j) for j in range(sk.num_joints)
+            if j in sk.end_sites or not sk.children(j)}
+    part = {sk.names.index(n): p for p, n in (sk.body_map or {}).items()}
+    if flat_toes:
+        for j, e in ends.items():
+            if part.get(j, "").endswith("_toe") and np.linalg.norm(e[[0, 2]]) > 1e-9:
+                ends[j] = e * [1.0, 0.0, 1.0] * np.linalg.norm(e) / np.linalg.norm(e[[0, 2]])
+    head = next((j for j in ends if part.get(j) == "head"), None)
+    if height is None or head is None or np.linalg.norm(sk.end_sites.get(head, 0.0)) > 1e-6:
+        return ends
+    up = ends[head] / np.linalg.norm(ends[head])
+    if up[1] < 0.5:  # not within 60 degrees of up at rest: no height to reach
+        return ends
+    _, rest = fk(np.broadcast_to(IDENTITY, (sk.num_joints, 4)), np.zeros(3), sk.offsets,
+                 sk.parents)
+    lowest = min(rest[:, 1].min(), *(rest[j, 1] + e[1] for j, e in ends.items() if j != head))
+    ends[head] = up * max((lowest + height - rest[head, 1]) / up[1], 0.01)
+    return ends
+
+
 def check_joint_names(names: Iterable[str], where: str = "skeleton") -> None:
     """InputError naming the first joint name a BVH file cannot hold (empty, with blanks at an
     end, braces, tabs or line breaks): a rig's names are written back as they are, so a rig
@@ -855,9 +891,12 @@ def check_joint_names(names: Iterable[str], where: str = "skeleton") -> None:
                              "braces, tabs, line breaks or blanks at its ends): rename it")
 
 
-def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
-    """The HIERARCHY section's lines of ``sk`` (lengths times ``k``, ``dec`` decimals)."""
+def _hierarchy(sk: Skeleton, k: float, dec: int, order: str, height: float | None = None
+               ) -> list[str]:
+    """The HIERARCHY section's lines of ``sk`` (lengths times ``k``, ``dec`` decimals; End
+    Sites :func:`end_sites` reaching ``height``)."""
     check_joint_names(sk.names)
+    ends = end_sites(sk, height)
     rot_channels = " ".join(f"{a}rotation" for a in order)
     out: list[str] = ["HIERARCHY"]
 
@@ -866,9 +905,9 @@ def _hierarchy(sk: Skeleton, k: float, dec: int, order: str) -> list[str]:
 
     def close(j: int) -> None:
         pad = "\t" * len(open_)
-        if j in sk.end_sites or not sk.children(j):
+        if j in ends:
             out.extend([f"{pad}\tEnd Site", f"{pad}\t{{",
-                        f"{pad}\t\tOFFSET {vec(end_site(sk, j) * k)}", f"{pad}\t}}"])
+                        f"{pad}\t\tOFFSET {vec(ends[j] * k)}", f"{pad}\t}}"])
         out.append(f"{pad}}}")
 
     open_: list[int] = []  # a loop, not recursion: a long chain cannot overflow the stack

@@ -26,7 +26,7 @@ import numpy as np
 from imuloco.core.motion import Motion
 from imuloco.errors import MissingExtraError
 from imuloco.io.atomic import atomic_path, check_output
-from imuloco.io.bvh import end_site
+from imuloco.io.bvh import end_sites
 from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import IDENTITY, continuous, normalize
 
@@ -48,25 +48,11 @@ def pygltflib_module():
 
 def rest_ends(motion: Motion, height: float | None = None) -> dict[int, np.ndarray]:
     """Each leaf joint's end vector (3,), metres, in its frame at rest: the BVH writer's End
-    Site (:func:`imuloco.io.bvh.end_site`), a toe's laid flat along the floor, and the head's,
-    when the body ``height`` is given, reaching that height above the rest pose's floor (its
-    lowest joint or end): the figure is then as tall as the body it stands for."""
+    Site with the toes laid flat along the floor and, when the body ``height`` is given, the
+    head's top that high above the rest figure's feet (:func:`imuloco.io.bvh.end_sites`)."""
     sk = motion.skeleton
-    leaves = [j for j in range(sk.num_joints) if not sk.children(j)]
-    ends = {j: end_site(sk, j) for j in leaves}
-    part = {sk.names.index(n): p for p, n in (sk.body_map or {}).items()}
-    _, pos = fk(np.broadcast_to(IDENTITY, (sk.num_joints, 4)), np.zeros(3), sk.offsets,
-                sk.parents)
-    for j in leaves:
-        if part.get(j, "").endswith("_toe") and np.linalg.norm(ends[j][[0, 2]]) > 1e-9:
-            flat = ends[j] * [1.0, 0.0, 1.0]
-            ends[j] = flat * np.linalg.norm(ends[j]) / np.linalg.norm(flat)
-    head = next((j for j in leaves if part.get(j) == "head"), None)
-    if height is not None and head is not None:
-        floor = min(pos[:, 1].min(), *(pos[j, 1] + e[1] for j, e in ends.items() if j != head))
-        ends[head] = ends[head] / np.linalg.norm(ends[head]) * max(
-            floor + height - pos[head, 1], 0.01)
-    return ends
+    return {j: e for j, e in end_sites(sk, height, flat_toes=True).items()
+            if not sk.children(j)}
 
 
 def _octahedron(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -15,6 +15,7 @@ import logging
 import math
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import ExitStack
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Self
@@ -65,33 +66,40 @@ def joint_sides(skeleton: Skeleton) -> list[str]:
     return sides
 
 
-def camera_axes(azimuth: float, elevation: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Screen right, screen up and towards-the-camera unit vectors (3,) of an orthographic
-    camera at ``azimuth`` radians about +Y (0: on +Z looking towards -Z) and ``elevation``
-    radians above the horizon."""
-    right = np.array([np.cos(azimuth), 0.0, -np.sin(azimuth)])
-    back = np.array([np.sin(azimuth), 0.0, np.cos(azimuth)])
+def camera_axes(azimuth: float | np.ndarray, elevation: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Screen right, screen up and towards-the-camera unit vectors, each shape
+    ``(*np.shape(azimuth), 3)``, of an orthographic camera at ``azimuth`` radians about +Y (0: on
+    +Z looking towards -Z; one camera per value) and ``elevation`` radians above the horizon."""
+    a = np.asarray(azimuth, dtype=np.float64)
+    zero = np.zeros_like(a)
+    right = np.stack([np.cos(a), zero, -np.sin(a)], axis=-1)
+    back = np.stack([np.sin(a), zero, np.cos(a)], axis=-1)
     up = np.array([0.0, 1.0, 0.0])
     to_camera = np.cos(elevation) * back + np.sin(elevation) * up
     screen_up = -np.sin(elevation) * back + np.cos(elevation) * up
     return right, screen_up, to_camera
 
 
-def project(points: np.ndarray, azimuth: float, elevation: float) -> np.ndarray:
+def project(points: np.ndarray, azimuth: float | np.ndarray, elevation: float) -> np.ndarray:
     """Orthographic projection of world points (Y up).
 
     Parameters
     ----------
-    points : ndarray, shape (..., 3), metres.
-    azimuth, elevation : radians, see :func:`camera_axes`.
+    points : ndarray, shape (*A, ..., 3), metres.
+    azimuth : float, or ndarray of shape A (the points' leading axes): one camera each.
+    elevation : radians, see :func:`camera_axes`.
 
     Returns
     -------
-    ndarray, shape (..., 2): screen x (right) and y (up), metres.
+    ndarray, shape (*A, ..., 2): screen x (right) and y (up), metres.
     """
     right, up, _ = camera_axes(azimuth, elevation)
     points = np.asarray(points, dtype=np.float64)
-    return np.stack([points @ right, points @ up], axis=-1)
+    trailing = (1,) * (points.ndim - right.ndim)  # the points' axes after A
+    right = right.reshape(right.shape[:-1] + trailing + (3,))
+    up = up.reshape(up.shape[:-1] + trailing + (3,))
+    return np.stack([(points * right).sum(axis=-1), (points * up).sum(axis=-1)], axis=-1)
 
 
 def follow_azimuth(motion: Motion, offset_deg: float = 30.0, sigma_s: float = 1.0,
@@ -133,6 +141,40 @@ def _foot_contacts(motion: Motion) -> tuple[np.ndarray, np.ndarray] | None:
     joints = np.array([motion.skeleton.part(p) for p in FOOT_PARTS])
     return joints, np.stack([c["left_heel"], c["right_heel"], c["left_toe"], c["right_toe"]],
                             axis=1)
+
+
+CHUNK_FRAMES = 64  # frames whose pixel geometry is computed at once: numpy's per-call cost,
+# paid for each frame, took a third of a frame's drawing
+
+
+def _grid(centers: np.ndarray, floor: float) -> np.ndarray:
+    """Floor grid lines (n, L, 2, 3), world metres relative to each frame's ``centers``
+    (n, 3) (the pelvis over the floor), every :data:`GRID_STEP` within :data:`GRID_HALF` of it
+    along X and Z, at height ``floor``: the grid scrolls under the figure."""
+    count = round(2 * GRID_HALF / GRID_STEP) + 1  # lines per direction (the first at or
+    # below centre - GRID_HALF, so the last at or below centre + GRID_HALF)
+    lines = []
+    for axis in (0, 2):
+        other = 2 - axis
+        start = np.floor((centers[:, axis] - GRID_HALF) / GRID_STEP) * GRID_STEP
+        a = np.empty((len(centers), count, 2, 3))
+        a[..., axis] = (start[:, None] + GRID_STEP * np.arange(count))[..., None]
+        a[..., other] = centers[:, other, None, None] + np.array([-GRID_HALF, GRID_HALF])
+        a[..., 1] = floor
+        lines.append(a)
+    return np.concatenate(lines, axis=1) - centers[:, None, None]
+
+
+@dataclass(frozen=True)
+class _Geometry:
+    """What moves in a panel over frames ``first`` to ``first + n``, in pixels: the floor grid
+    (n, L, 2, 2), each side's bones (n, 2 B, 2) in :attr:`StickRenderer._limb_gcs`'s order and
+    the foot joints (n, 4, 2) of :data:`FOOT_PARTS` (None: feet not marked)."""
+
+    first: int
+    grid: np.ndarray
+    limbs: list[np.ndarray]
+    feet: np.ndarray | None
 
 
 class StickRenderer:
@@ -292,6 +334,7 @@ class StickRenderer:
         self._identity = IdentityTransform()
         self._mpl_path = MplPath
         self._codes: dict[int, np.ndarray] = {}  # MOVETO, LINETO per segment, by count
+        self._chunks: dict[int, _Geometry] = {}  # per panel, the frames being drawn
 
         def gc(ax, color: str, width: float):
             g = self._renderer.new_gc()
@@ -317,16 +360,6 @@ class StickRenderer:
             self._strip_to_pixels = self.strip.transData.frozen()
             y0, y1 = self.strip.bbox.y0, self.strip.bbox.y1
             self._cursor_y = (y0, y1)
-
-    def _segments(self, gc, to_pixels, segments: np.ndarray) -> None:
-        """Draw segments (N, 2, 2) in data coordinates as one path."""
-        verts = to_pixels.transform(segments.reshape(-1, 2))
-        codes = self._codes.get(len(segments))
-        if codes is None:
-            codes = self._codes[len(segments)] = np.tile(
-                np.array([self._mpl_path.MOVETO, self._mpl_path.LINETO], np.uint8),
-                len(segments))
-        self._renderer.draw_path(gc, self._mpl_path(verts, codes), self._identity)
 
     def _clock_glyphs(self, x: float, y: float, chars: int) -> tuple:
         """The clock's place (row, column slices of the frame) and its characters' images
@@ -362,20 +395,38 @@ class StickRenderer:
                 cell = image[rows, x:x + width]
                 np.minimum(cell, glyphs[c][:, :cell.shape[1]], out=cell)
 
-    def _grid(self, center: np.ndarray, floor: float, azimuth: float) -> np.ndarray:
-        """Floor grid lines (N, 2, 2) on screen around ``center`` (3,), scrolling with it."""
-        lines = []
-        for axis in (0, 2):
-            other = 2 - axis
-            start = np.floor((center[axis] - GRID_HALF) / GRID_STEP) * GRID_STEP
-            values = np.arange(start, center[axis] + GRID_HALF + 1e-9, GRID_STEP)
-            a = np.empty((len(values), 2, 3))
-            a[:, :, axis] = values[:, None]
-            a[:, :, other] = center[other] + np.array([-GRID_HALF, GRID_HALF])
-            a[:, :, 1] = floor
-            lines.append(a)
-        pts = np.concatenate(lines) - np.array([center[0], 0.0, center[2]])
-        return project(pts, azimuth, self.elevation)
+    def _geometry(self, k: int, f: int) -> _Geometry:
+        """Pixel geometry of motion ``k``'s frames ``f`` to ``f + CHUNK_FRAMES`` (cached: the
+        frames are drawn in order)."""
+        g = self._chunks.get(k)
+        if g is not None and g.first <= f < g.first + len(g.grid):
+            return g
+        m = self.motions[k]
+        frames = slice(f, min(f + CHUNK_FRAMES, m.num_frames))
+        pos = self.positions[k][frames]
+        center = pos[:, 0] * [1.0, 0.0, 1.0]  # (n, 3): the pelvis over the floor
+        az = self.azimuths[k][frames]
+        to_pixels = self._to_pixels[k].transform
+
+        def pixels(world: np.ndarray) -> np.ndarray:  # (n, ..., 3) -> (n, ..., 2)
+            screen = project(world, az, self.elevation)
+            return to_pixels(screen.reshape(-1, 2)).reshape(screen.shape)
+
+        joints = pixels(pos - center[:, None])  # (n, J, 2)
+        limbs = [joints[:, self.bones[k][bones]].reshape(len(joints), -1, 2)
+                 for bones, _ in self._limb_gcs[k]]
+        feet = None if self.contacts[k] is None else joints[:, self.contacts[k][0]]
+        g = self._chunks[k] = _Geometry(f, pixels(_grid(center, self.floors[k])), limbs, feet)
+        return g
+
+    def _draw_segments(self, gc, verts: np.ndarray) -> None:
+        """Draw segments, vertices (2 N, 2) in pixels (start, end, start, ...), as one path."""
+        codes = self._codes.get(len(verts))
+        if codes is None:
+            codes = self._codes[len(verts)] = np.tile(
+                np.array([self._mpl_path.MOVETO, self._mpl_path.LINETO], np.uint8),
+                len(verts) // 2)
+        self._renderer.draw_path(gc, self._mpl_path(verts, codes), self._identity)
 
     def frame(self, t: int) -> np.ndarray:
         """RGB image (H, W, 3) uint8 of frame ``t`` of the first motion."""
@@ -388,25 +439,21 @@ class StickRenderer:
         time_s = t / self.fps
         for k, m in enumerate(self.motions):
             f = min(max(round(time_s * m.fps), 0), m.num_frames - 1)
-            pos = self.positions[k][f]
-            center = np.array([pos[0, 0], 0.0, pos[0, 2]])
-            az = self.azimuths[k][f]
-            screen = project(pos - center, az, self.elevation)
-            to_pixels = self._to_pixels[k]
-            self._segments(self._grid_gc[k], to_pixels, self._grid(center, self.floors[k], az))
-            for bones, gc in self._limb_gcs[k]:
-                self._segments(gc, to_pixels, screen[self.bones[k][bones]])
-            if self.contacts[k] is not None:
-                joints, down = self.contacts[k]
-                if down[f].any():
-                    feet = to_pixels.transform(screen[joints[down[f]]])
+            g = self._geometry(k, f)
+            i = f - g.first
+            self._draw_segments(self._grid_gc[k], g.grid[i].reshape(-1, 2))
+            for verts, (_, gc) in zip(g.limbs, self._limb_gcs[k]):
+                self._draw_segments(gc, verts[i])
+            if g.feet is not None:
+                down = self.contacts[k][1][f]
+                if down.any():
                     self._renderer.draw_markers(self._foot_gc[k], self._dot, self._dot_size,
-                                                self._mpl_path(feet), self._identity,
-                                                self._dot_face)
+                                                self._mpl_path(g.feet[i][down]),
+                                                self._identity, self._dot_face)
         if self.strip is not None:
             x = self._strip_to_pixels.transform([[time_s, 0.0]])[0, 0]
             y0, y1 = self._cursor_y
-            self._segments(self._cursor_gc, self._identity, np.array([[[x, y0], [x, y1]]]))
+            self._draw_segments(self._cursor_gc, np.array([[x, y0], [x, y1]]))
         image = np.asarray(self.canvas.buffer_rgba())
         self._stamp_clock(image, time_s)
         return image
@@ -460,12 +507,14 @@ class VideoWriter:
         if suffix == ".mp4":
             if h % 2 or w % 2:
                 raise ValueError(f"write_video: H.264 needs even frame sizes, got {w}x{h}")
-            # x264's superfast preset at CRF 23: at its default (medium; CRF 15 before) the
-            # encoder took 13 ms of CPU a frame, six times the drawing; superfast takes 3.5
-            # for files of the same size, and a stick figure on white looks the same
-            # (docs/results/render)
+            # x264's ultrafast preset with CABAC and B-frames back, at CRF 23: ffmpeg took 13
+            # ms of CPU a frame at x264's default (medium, CRF 15), 3.3 at superfast, 2.2
+            # so (RGBA in, YUV conversion included), for files 20 % larger than superfast's
+            # (plain ultrafast: 60 %) that look the same on a stick figure on white (mean
+            # absolute pixel difference to the drawn frames 1.06 of 255; docs/results/render)
             self.options = {"codec": "libx264", "pix_fmt_out": "yuv420p", "quality": None,
-                            "output_params": ["-preset", "superfast", "-crf", "23"]}
+                            "output_params": ["-preset", "ultrafast", "-x264-params",
+                                              "cabac=1:bframes=3", "-crf", "23"]}
         elif suffix == ".gif":
             # ffmpeg's palettegen/paletteuse: one palette for the clip, several times faster
             # than Pillow's per-frame quantization; whole frames, no transparency: decoders
