@@ -144,7 +144,8 @@ def main() -> None:
         for i, e in enumerate(act_ex):
             if e.labels.get("content") != c:
                 continue
-            on, _ = apply_fallback(fulls[i], e.signals, "right_ankle", neutral)
+            on, _ = apply_fallback(fulls[i], e.signals, "right_ankle", neutral,
+                                   novelty_threshold=model.novelty_threshold)
             base = None if args.actions_only else mean.reconstruct_signals_full(e.signals)
             for name, f in (("mean", base), ("shipped", fulls[i]), ("fallback", on)):
                 if f is None or args.actions_only and name != "fallback":
@@ -165,7 +166,8 @@ def main() -> None:
     neutral = build_neutral(both, walking, "all")
     lrows: dict[str, dict[str, list]] = {}
     for e, f in zip(loco_ex, loco_full):
-        on, _ = apply_fallback(f, e.signals, "right_ankle", neutral)
+        on, _ = apply_fallback(f, e.signals, "right_ankle", neutral,
+                               novelty_threshold=model.novelty_threshold)
         for name, g in (("shipped", f), ("fallback", on)):
             lrows.setdefault(name, {}).setdefault(e.labels.get("content"), []).append(
                 score(e, g))

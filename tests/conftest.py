@@ -154,6 +154,46 @@ def serve_threaded():
     return _serve_threaded
 
 
+@contextlib.asynccontextmanager
+async def _serve_loopback(method, **kwargs):
+    """An async context: a LiveServer of ``method`` (no calibration; ``kwargs`` to it)
+    listening on a free loopback port in the running event loop: yields (server, its ws://
+    base address)."""
+    from imuloco.app.live.server import LiveServer  # the [live] extra's
+
+    server = LiveServer(method, calibrate_s=0, **kwargs)
+    await server.start("127.0.0.1", 0)
+    try:
+        yield server, f"ws://127.0.0.1:{server.port}"
+    finally:
+        await server.close()
+
+
+@pytest.fixture
+def serve_loopback():
+    """:func:`_serve_loopback`, for the tests of the live server's websockets."""
+    pytest.importorskip("websockets")
+    return _serve_loopback
+
+
+async def _ws_closed(ws, timeout: float = 30) -> tuple[int, str]:
+    """Code and reason the server closed the websocket ``ws`` with (reading what came
+    before, each message within ``timeout`` seconds)."""
+    from websockets.exceptions import ConnectionClosed  # the [live] extra's
+
+    try:
+        while True:
+            await asyncio.wait_for(ws.recv(), timeout)
+    except ConnectionClosed as e:
+        return e.rcvd.code, e.rcvd.reason
+
+
+@pytest.fixture
+def ws_closed():
+    """:func:`_ws_closed`."""
+    return _ws_closed
+
+
 # a page script's function: the live page drawn once, then its canvas's pixels of one colour
 COUNT_PIXELS_JS = """
     function countPixels(r, g, b) {

@@ -56,14 +56,16 @@ def test_simulate_rates_the_reader_refuses(tmp_path, rate):
     assert "5.0<=x<=10000.0" in out
 
 
-def test_simulate_rates_follow_the_readers(tmp_path, monkeypatch):
-    """The bounds are read_log's own constants, read when the option is parsed."""
+def test_simulate_rates_follow_the_readers(tmp_path):
+    """The bounds are read_log's own constants (imuloco.limits, which the CLI imports without
+    numpy)."""
+    from imuloco import limits
     from imuloco.sensors import reallog
 
-    monkeypatch.setattr(reallog, "MIN_RATE", 8.0)
-    code, out = run("simulate", BVH, "--rate", "6", "-o", tmp_path / "s.csv")
-    assert code == 2 and "8.0<=x<=10000.0" in out
-    assert "8.0<=x<=10000.0" in run("simulate", "--help")[1]
+    assert (reallog.MIN_RATE, reallog.MAX_RATE) == (limits.MIN_RATE, limits.MAX_RATE)
+    code, out = run("simulate", BVH, "--rate", "4", "-o", tmp_path / "s.csv")
+    assert code == 2 and "5.0<=x<=10000.0" in out
+    assert "5.0<=x<=10000.0" in run("simulate", "--help")[1]
 
 
 def test_train_with_an_invalid_hyperparameter(tmp_path):
@@ -393,21 +395,22 @@ def test_a_bad_model_or_rig_leaves_no_partial_demo_and_is_refused_first(tmp_path
         reconstruct_file(tmp_path / "no-such-log.csv", skeleton=rig)
 
 
-def test_the_height_range_has_one_source(monkeypatch, tmp_path, two_joint_skeleton):
+def test_the_height_range_has_one_source(tmp_path, two_joint_skeleton):
     """--height, a walkers file and height_scale take the body heights of
-    :mod:`imuloco.measures.gait`: the command line reads them on first use (so that importing
-    it imports no numpy); each had its own copy of 0.5 to 2.6."""
+    :mod:`imuloco.limits` (which the command line imports without numpy); each had its own
+    copy of 0.5 to 2.6."""
+    from imuloco import limits
     from imuloco.app.walkers import HEIGHT_RANGE_M
     from imuloco.measures import gait
 
-    assert HEIGHT_RANGE_M == (gait.MIN_HEIGHT_M, gait.MAX_HEIGHT_M)
-    monkeypatch.setattr(gait, "MAX_HEIGHT_M", 2.0)
-    # options are checked in the order given: a range of its own would pass 2.1 on to the
+    assert HEIGHT_RANGE_M == (gait.MIN_HEIGHT_M, gait.MAX_HEIGHT_M) == (
+        limits.MIN_HEIGHT_M, limits.MAX_HEIGHT_M)
+    # options are checked in the order given: a range of its own would pass 2.7 on to the
     # recording, which does not exist
-    code, out = run("batch", "--height", "2.1", tmp_path / "none.csv", "--out", tmp_path)
-    assert code == 2 and "2.1 is not in the range 0.5<=x<=2.0" in out
-    with pytest.raises(ValueError, match=r"\(0.5 to 2\), got 2.1"):
-        gait.height_scale(two_joint_skeleton, 2.1)
+    code, out = run("batch", "--height", "2.7", tmp_path / "none.csv", "--out", tmp_path)
+    assert code == 2 and "2.7 is not in the range 0.5<=x<=2.6" in out
+    with pytest.raises(ValueError, match=r"\(0.5 to 2.6\), got 2.7"):
+        gait.height_scale(two_joint_skeleton, 2.7)
 
 
 @pytest.mark.parametrize("other", ["--report", "--html", "--video"])

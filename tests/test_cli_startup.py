@@ -8,11 +8,8 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from importlib import import_module
 
 import pytest
-
-from imuloco import cli as cli_module
 
 HEAVY = ("numpy", "scipy", "torch", "sklearn", "matplotlib", "pandas", "pyarrow", "dask")
 LIGHT_METHODS = {"imuloco.methods", "imuloco.methods.registry", "imuloco.methods.names"}
@@ -55,9 +52,3 @@ def test_every_help_is_built_without_the_heavy_stack(fresh_help):
                      m not in LIGHT_METHODS)
     assert not methods, methods  # the method stack
     assert not [m for m in modules if m.startswith(("imuloco.lab", "imuloco.app.pipeline"))]
-
-
-@pytest.mark.parametrize(("module", "attr"), sorted(cli_module._SHOWN))
-def test_the_help_s_copies_are_the_library_s_values(module, attr):
-    """--help shows these copies while the library is not loaded; each is the library's."""
-    assert cli_module._SHOWN[module, attr] == getattr(import_module(module), attr)

@@ -9,8 +9,10 @@ from imuloco.methods.base import Reconstruction
 from imuloco.methods.fallback import (
     GROUPS,
     FallbackRule,
+    FallbackStream,
     NeutralPoses,
     apply_fallback,
+    fallback_recording,
     joint_groups,
     position_groups,
     shipped_neutral,
@@ -97,13 +99,14 @@ def test_a_walking_signal_leaves_the_walk_untouched(walk, neutral):
 
 
 def test_unseen_parts_under_high_novelty_move_to_neutral(walk, neutral):
-    """An unfamiliar motion (novelty 10) over a walking sensor: the arms and trunk take the
+    """An unfamiliar motion (novelty 10, the threshold 3.6) over a walking sensor: the arms and trunk take the
     walking neutral pose, the legs the shin sees stay the model's; the predicted error rises
     to at least what the neutral arms and trunk miss, and the frames are flagged."""
     n = walk.motion.num_frames
     full = Reconstruction(walk.motion, np.full(n, 0.01), np.zeros(n, bool),
                           scores={"novelty": np.full(n, 10.0)})
-    out, report = apply_fallback(full, walk.signals, "right_ankle", neutral)
+    out, report = apply_fallback(full, walk.signals, "right_ankle", neutral,
+                                 novelty_threshold=3.6)
     m, moving = out.motion, neutral.on(walk.motion.skeleton)[1]
     for g in ("arms", "trunk"):
         j = group_joints(m, g)
@@ -120,10 +123,113 @@ def test_unseen_parts_under_high_novelty_move_to_neutral(walk, neutral):
 def test_the_weights_are_smooth_in_the_evidence():
     rule = FallbackRule()
     x = np.linspace(0.0, 6.0, 601)
-    w = rule.novel(x, len(x))
-    assert w[x <= rule.novelty_low].max() == 0 and w[x >= rule.novelty_high].min() == 1
+    w = rule.novel(x, len(x), 3.0)
+    assert w[x <= 3.0 * rule.novelty_start].max() == 0
+    assert w[x >= 3.0 * rule.novelty_full].min() == 1
     assert np.all(np.diff(w) >= 0) and np.abs(np.diff(w)).max() < 0.02  # no jump
-    assert np.array_equal(rule.novel(None, 5), np.zeros(5))
+    assert np.array_equal(rule.novel(None, 5, 3.0), np.zeros(5))
+    assert np.array_equal(rule.novel(x, len(x), None), np.zeros(len(x)))  # no scale: no say
+
+
+def _arms_moved(out, walk, neutral) -> float:
+    """The largest angle (radians) between the arms' rotations of ``out`` and the walking
+    neutral pose's."""
+    j = group_joints(out.motion, "arms")
+    return float(geodesic(out.motion.rotations[:, j], neutral.on(walk.motion.skeleton)[1][j])
+                 .max())
+
+
+def test_novelty_is_judged_on_the_methods_own_scale(walk, neutral):
+    """The same novelty score (5.0) is far beyond a method's flag threshold of 2.5 (the
+    arms take the walking neutral pose) and under one of 10 (the model's arms stay): the
+    range follows the method's threshold, not the shipped shin model's 3.62 (which would
+    hold the arms 90 % of the way at 5.0 with a threshold of 10, and 90 %, not all the way,
+    with 2.5)."""
+    n = walk.motion.num_frames
+    full = Reconstruction(walk.motion, np.full(n, 0.01), np.zeros(n, bool),
+                          scores={"novelty": np.full(n, 5.0)})
+    low, _ = apply_fallback(full, walk.signals, "right_ankle", neutral, novelty_threshold=2.5)
+    assert _arms_moved(low, walk, neutral) < 1e-6 and low.unreliable.all()
+    high, report = apply_fallback(full, walk.signals, "right_ankle", neutral,
+                                  novelty_threshold=10.0)
+    j = group_joints(walk.motion, "arms")
+    assert geodesic(high.motion.rotations[:, j], walk.motion.rotations[:, j]).max() < 1e-6
+    assert not high.unreliable.any() and not report.acted
+
+
+def test_the_pipeline_reads_the_threshold_from_the_method(walk, neutral):
+    """:func:`fallback_recording` judges the novelty on the method's own
+    ``novelty_threshold``; the shipped learned model's is its file's."""
+    from types import SimpleNamespace
+
+    from imuloco.app.pipeline import shipped_model
+    from imuloco.core.recording import Recording
+    from imuloco.methods import load_model
+
+    n, fps = walk.motion.num_frames, walk.motion.fps
+    sig = walk.signals
+    rec = Recording(np.arange(n) / fps, sig[:, None, :3], sig[:, None, 3:], ["right_ankle"])
+    full = Reconstruction(walk.motion, np.full(n, 0.01), np.zeros(n, bool),
+                          scores={"novelty": np.full(n, 5.0)})
+    for threshold, moved in ((2.5, True), (10.0, False)):
+        method = SimpleNamespace(placements_=["right_ankle"], fps_=fps, gaps_missing=False,
+                                 novelty_threshold=threshold)
+        out, _ = fallback_recording(full, rec, method)
+        assert (_arms_moved(out, walk, neutral) < 1e-6) is moved
+    model = load_model(shipped_model("learned", "right_ankle"))
+    assert model.novelty_threshold == model.novelty_threshold_ > 1.0
+
+
+def test_a_shin_and_a_watch_observe_the_legs_and_the_arm(walk, neutral):
+    """A shin lying still and a watch that moves (``right_ankle`` + ``left_wrist``): the legs
+    stand (the shin sees them still), the arms stay the model's (the watch sees them move),
+    the trunk, which neither sees, takes the standing pose and is the one part flagged; the
+    report says both sensors' parts are observed."""
+    n = walk.motion.num_frames
+    signals = np.concatenate([still_signals(n), walk.signals], axis=1)
+    full = Reconstruction(walk.motion, np.full(n, 0.01), np.zeros(n, bool))
+    out, report = apply_fallback(full, signals, ["right_ankle", "left_wrist"], neutral)
+    m, stand = out.motion, neutral.on(walk.motion.skeleton)[0]
+    for g in ("legs", "trunk"):
+        j = group_joints(m, g)
+        assert geodesic(m.rotations[:, j], stand[j]).max() < 1e-6
+    arms = group_joints(m, "arms")
+    assert geodesic(m.rotations[:, arms], walk.motion.rotations[:, arms]).max() < 1e-6
+    assert out.unreliable.all()  # the trunk is a guess
+    j = report.to_json()
+    assert j["observes"] == ["legs", "arms"]
+    assert j["frames_fraction"] == {"legs": 1.0, "arms": 0.0, "trunk": 1.0}
+    # the same watch alone (no leg sensor): the body's stillness is the watch's
+    alone, _ = apply_fallback(full, signals[:, 6:], "left_wrist", neutral)
+    assert geodesic(alone.motion.rotations[:, arms], walk.motion.rotations[:, arms]).max() \
+        < 1e-6
+
+
+def test_the_live_fallback_is_the_causal_offline_one_frame_for_frame(walk, neutral):
+    """:class:`FallbackStream` fed a walk whose sensor lies still for 2 s, then walks, with a
+    novelty rising through the threshold: the poses, roots, errors and flags of
+    :func:`apply_fallback` with ``causal=True``, frame for frame; the causal still weight
+    lags the centred one (the walk is seen half a window later)."""
+    n = walk.motion.num_frames
+    signals = walk.signals.copy()
+    signals[:60] = still_signals(60)
+    novelty = np.linspace(0.0, 12.0, n)
+    full = Reconstruction(walk.motion, np.full(n, 0.01), np.zeros(n, bool),
+                          scores={"novelty": novelty})
+    off, report = apply_fallback(full, signals, "right_ankle", neutral, novelty_threshold=4.0,
+                                 causal=True)
+    live = FallbackStream(walk.motion.skeleton, walk.motion.fps, ["right_ankle"], neutral,
+                          novelty_threshold=4.0)
+    got = [live.step(signals[k], walk.motion.rotations[k], walk.motion.root[k], novelty[k],
+                     0.01, False) for k in range(n)]
+    rot = np.stack([g[0] for g in got])
+    assert geodesic(rot, off.motion.rotations).max() < 1e-6
+    np.testing.assert_allclose(np.stack([g[1] for g in got]), off.motion.root, atol=1e-9)
+    np.testing.assert_allclose([g[2] for g in got], off.error_m, atol=1e-12)
+    assert [g[3] for g in got] == off.unreliable.tolist()
+    _, centred = apply_fallback(full, signals, "right_ankle", neutral, novelty_threshold=4.0)
+    assert report.still[:60].min() > 0.99 and report.still[75:].max() < 0.01
+    assert np.argmax(report.still < 0.5) > np.argmax(centred.still < 0.5)
 
 
 def test_neutral_poses_round_trip_and_refuse_other_files(tmp_path, neutral):

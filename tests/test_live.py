@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 import urllib.error
 import urllib.request
@@ -18,7 +17,9 @@ from imuloco.app.live.session import (
     kernel_resample,
     offline_frames,
 )
+from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
+from imuloco.methods.fallback import apply_fallback, shipped_neutral
 from imuloco.ops.rotations import from_rotvec, qrot
 from imuloco.sensors.calibration import calibrate
 from imuloco.sensors.simulate import simulate
@@ -41,6 +42,14 @@ def phone(sample_db):
     rec = simulate(clip, ["right_ankle"], rate=100.0, noise="phone", seed=11)
     q = from_rotvec(np.array([0.4, -1.2, 2.0]))
     return rec.times, qrot(q, rec.acc), qrot(q, rec.gyro)
+
+
+def _offline(method, signals: np.ndarray) -> Motion:
+    """The offline reconstruction of ``signals`` with the fallback as the live mode runs it
+    (its still weight over the past second: ``causal``)."""
+    full = method.reconstruct_signals_full(signals)
+    return apply_fallback(full, signals, method.placements_, shipped_neutral(),
+                          novelty_threshold=method.novelty_threshold, causal=True)[0].motion
 
 
 def _irregular(n: int, seed: int) -> np.ndarray:
@@ -95,9 +104,10 @@ def test_session_calibrates_then_streams_the_offline_reconstruction(fitted, phon
                                     ["right_ankle"]))
     np.testing.assert_allclose(c.rotations[0], mounts[0].rotation)
     assert times[c.samples - 1] - times[0] >= CALIB_S > times[c.samples - 2] - times[0]
-    # every frame, in order, equal to the offline reconstruction of the same frames
+    # every frame, in order, equal to the offline reconstruction of the same frames (with the
+    # fallback, which holds the standing start)
     signals = offline_frames(times, acc, gyro, fitted.fps_, c.rotations)
-    offline = fitted.reconstruct_signals(signals).positions()
+    offline = _offline(fitted, signals).positions()
     assert [f.index for f in frames] == list(range(len(signals)))
     streamed = np.stack([f.positions for f in frames])
     assert streamed.shape == offline.shape == (len(signals), fitted.skeleton_.num_joints, 3)
@@ -120,7 +130,7 @@ def test_session_streams_in_the_wearers_height(fitted, phone):
     frames = [f for i in range(len(times)) for f in s.push(times[i], acc[i], gyro[i])]
     # the poses of the offline reconstruction scaled to that height, as reconstruct --height
     signals = offline_frames(times, acc, gyro, fitted.fps_, s.calibration.rotations)
-    offline = to_height(fitted.reconstruct_signals(signals), 1.55)
+    offline = to_height(_offline(fitted, signals), 1.55)
     streamed = np.stack([f.positions for f in frames])
     np.testing.assert_allclose(streamed, offline.positions(), atol=1e-9)
     np.testing.assert_allclose(np.stack([f.root for f in frames]), offline.root, atol=1e-9)
@@ -153,7 +163,8 @@ class _Late:
 
 def test_session_labels_a_late_streams_frames_by_the_frame_they_show(fitted, phone):
     times, acc, gyro = phone
-    s = LiveSession(_Late(fitted), calibrate_s=0, follow_path=False)  # the model's own root
+    s = LiveSession(_Late(fitted), calibrate_s=0, follow_path=False,  # the model's own root
+                    fallback=False)
     frames = [f for i in range(len(times)) for f in s.push(times[i], acc[i], gyro[i])]
     signals = offline_frames(times, acc, gyro, fitted.fps_)
     offline = fitted.reconstruct_signals(signals).positions()
@@ -240,7 +251,7 @@ class _Confident(_Late):
 def test_frames_and_pose_messages_carry_the_streams_confidence(fitted, phone):
     times, acc, gyro = phone
     frames = []
-    s = LiveSession(_Confident(fitted), calibrate_s=CALIB_S)
+    s = LiveSession(_Confident(fitted), calibrate_s=CALIB_S, fallback=False)
     for i in range(600):
         frames += s.push(times[i], acc[i], gyro[i])
     err = np.array([f.error_m for f in frames])
@@ -250,16 +261,51 @@ def test_frames_and_pose_messages_carry_the_streams_confidence(fitted, phone):
     assert [m["error_m"] for m in messages] == [round(e, 4) for e in err]
     assert [m["unreliable"] for m in messages] == [f.unreliable for f in frames]
     # in the wearer's height, the predicted error (a length) is scaled with the skeleton
-    tall = LiveSession(_Confident(fitted), calibrate_s=CALIB_S, height_m=1.95)
+    tall = LiveSession(_Confident(fitted), calibrate_s=CALIB_S, height_m=1.95,
+                       fallback=False)
     got = [f for i in range(600) for f in tall.push(times[i], acc[i], gyro[i])]
     assert tall.scale > 1.05
     np.testing.assert_allclose([f.error_m for f in got], err * tall.scale)
     assert [f.unreliable for f in got] == [f.unreliable for f in frames]
-    # a method without confidence: null, not NaN (browsers' JSON.parse refuses NaN)
+    # a method without confidence: null, not NaN (browsers' JSON.parse refuses NaN); the
+    # fallback that holds the standing start flags nothing of it (as offline)
     plain = LiveSession(fitted, calibrate_s=CALIB_S)
     out = [f for i in range(600) for f in plain.push(times[i], acc[i], gyro[i])]
     text = json.dumps(frames_to_json(out), allow_nan=False)
     assert all(m["error_m"] is None and m["unreliable"] is False for m in json.loads(text))
+
+
+def test_a_standing_wearer_gets_no_invented_arm_swing_live(fitted, sample_db):
+    """A wearer standing still for 6 s, a phone on the shin, streamed through the live
+    session: with the fallback every frame after the first second holds the standing neutral
+    pose (no arm swing, no step: the wrists stay within 1 mm); without it the model's own
+    arms come out, not that pose."""
+    from imuloco.methods.fallback import GROUPS, joint_groups
+    from imuloco.ops.rotations import geodesic
+
+    clip = next(c for c in sample_db.clips if c.name == CLIP)
+    n = int(6 * clip.fps)
+    stand = Motion(clip.skeleton, np.repeat(clip.rotations[:1], n, 0),
+                   np.repeat(clip.root[:1], n, 0), clip.fps, "stand")
+    rec = simulate(stand, ["right_ankle"], rate=100.0, noise="phone", seed=3)
+
+    def stream(fallback: bool) -> list:
+        s = LiveSession(fitted, calibrate_s=0, follow_path=False, fallback=fallback)
+        return [f for i in range(rec.num_samples)
+                for f in s.push(rec.times[i], rec.acc[i], rec.gyro[i])]
+
+    on, off = stream(True), stream(False)
+    after = slice(int(fitted.fps_), None)  # the window has forgotten the start
+    sk = fitted.skeleton_
+    arms = joint_groups(sk) == GROUPS.index("arms")
+    target = shipped_neutral().on(sk)[0]  # the standing pose
+    held = np.stack([f.rotations for f in on])[after]
+    assert len(held) > 100 and geodesic(held[:, arms], target[arms]).max() < 1e-6
+    wrists = [sk.part("left_wrist"), sk.part("right_wrist")]
+    pos = np.stack([f.positions for f in on])[after]
+    assert np.ptp(pos[:, wrists], axis=0).max() < 1e-3
+    raw = np.stack([f.rotations for f in off])[after]
+    assert geodesic(raw[:, arms], target[arms]).max() > 0.1
 
 
 def test_server_streams_poses_equal_to_the_offline_method(fitted, phone):
@@ -280,7 +326,7 @@ def test_server_streams_poses_equal_to_the_offline_method(fitted, phone):
     assert np.isfinite(pos).all()
     times, acc, gyro = phone
     signals = offline_frames(times[:n], acc[:n], gyro[:n], fitted.fps_, calibration)
-    offline = fitted.reconstruct_signals(signals).positions()
+    offline = _offline(fitted, signals).positions()
     np.testing.assert_allclose(pos, offline, atol=0.06e-3)  # sent rounded to 0.1 mm
     # a standing-height figure whose feet stay near the floor
     assert np.all(np.ptp(pos[:, :, 1], axis=1) > 1.0)
@@ -421,21 +467,6 @@ def test_session_buffers_stay_bounded_whatever_the_timestamps(fitted):
 
 
 # ---- access and limits, with the real websockets library on 127.0.0.1 -----------------------
-def _serve(fitted, **kwargs):
-    """An async context: a LiveServer on a free loopback port and its ws:// base address."""
-
-    from imuloco.app.live.server import LiveServer
-
-    @contextlib.asynccontextmanager
-    async def serving():
-        server = LiveServer(fitted, calibrate_s=0, **kwargs)
-        await server.start("127.0.0.1", 0)
-        try:
-            yield server, f"ws://127.0.0.1:{server.port}"
-        finally:
-            await server.close()
-
-    return serving()
 
 
 async def _refused(url: str, **kwargs) -> tuple[int, str]:
@@ -449,27 +480,18 @@ async def _refused(url: str, **kwargs) -> tuple[int, str]:
     return e.value.response.status_code, e.value.response.body.decode()
 
 
-async def _closed(ws) -> tuple[int, str]:
-    """Code and reason the server closed ``ws`` with (reading what came before)."""
-    from websockets.exceptions import ConnectionClosed
-
-    try:
-        while True:
-            await asyncio.wait_for(ws.recv(), 30)
-    except ConnectionClosed as e:
-        return e.rcvd.code, e.rcvd.reason
 
 
 def _rows(t: np.ndarray) -> str:
     return json.dumps({"rows": [[ti, 0.0, 9.81, 0.0, 0.0, 0.0, 0.0] for ti in t]})
 
 
-def test_token_is_required_off_loopback_and_checked_when_given(fitted):
+def test_token_is_required_off_loopback_and_checked_when_given(fitted, serve_loopback):
     pytest.importorskip("websockets")
     from websockets.asyncio.client import connect
 
     async def main():
-        async with _serve(fitted, require_token=True) as (server, base):
+        async with serve_loopback(fitted, require_token=True) as (server, base):
             token = server.token
             assert len(token) >= 20 and server.urls("localhost")["phone"].endswith(token)
             for path in ("/ws/phone", "/ws/view", f"/ws/view?token={token}x"):
@@ -486,7 +508,8 @@ def test_token_is_required_off_loopback_and_checked_when_given(fitted):
                                           timeout=10)
             got.close()
             assert got.status == 200
-        async with _serve(fitted) as (server, base):  # loopback: no token is fine, a wrong no
+        # loopback: no token is fine, a wrong no
+        async with serve_loopback(fitted) as (server, base):
             assert not server.require_token
             async with connect(base + "/ws/view") as view:
                 assert json.loads(await asyncio.wait_for(view.recv(), 10))["type"] == "skeleton"
@@ -497,12 +520,12 @@ def test_token_is_required_off_loopback_and_checked_when_given(fitted):
     asyncio.run(main())
 
 
-def test_other_origins_and_hosts_are_refused(fitted):
+def test_other_origins_and_hosts_are_refused(fitted, serve_loopback):
     pytest.importorskip("websockets")
     from websockets.asyncio.client import connect
 
     async def main():
-        async with _serve(fitted, allow_origins=["https://viewer.example:9000/"]) as (
+        async with serve_loopback(fitted, allow_origins=["https://viewer.example:9000/"]) as (
                 server, base):
             own = f"http://127.0.0.1:{server.port}"
             status, body = await _refused(base + "/ws/phone", origin="https://evil.example")
@@ -524,7 +547,8 @@ def test_other_origins_and_hosts_are_refused(fitted):
     asyncio.run(main())
 
 
-def test_limits_close_the_connection_with_a_code_and_a_reason(fitted, caplog):
+def test_limits_close_the_connection_with_a_code_and_a_reason(fitted, caplog, serve_loopback,
+                                                              ws_closed):
     pytest.importorskip("websockets")
     from websockets.asyncio.client import connect
 
@@ -536,10 +560,10 @@ def test_limits_close_the_connection_with_a_code_and_a_reason(fitted, caplog):
         async with connect(base + "/ws/phone", max_size=None) as ph:
             for m in messages:
                 await ph.send(m)
-            return await _closed(ph)
+            return await ws_closed(ph)
 
     async def main():
-        async with _serve(fitted, limits=limits) as (_, base):
+        async with serve_loopback(fitted, limits=limits) as (_, base):
             noise = np.random.default_rng(0).normal(size=(14_000, 6))
             rows = np.round(np.c_[np.arange(14_000) * 0.01, noise], 6)
             one_mib = json.dumps({"rows": rows.tolist()})  # 14k rows, about 1 MiB
@@ -550,16 +574,16 @@ def test_limits_close_the_connection_with_a_code_and_a_reason(fitted, caplog):
             assert code == 1009 and "101 rows" in reason
             code, reason = await phone_closed(base, *[_rows([0.01 * i]) for i in range(50)])
             assert code == 1008 and "messages/s" in reason
-        async with _serve(fitted, limits=Limits()) as (_, base):
+        async with serve_loopback(fitted, limits=Limits()) as (_, base):
             # rows 0.9 s apart: 90 s of samples at once, faster than real time
             code, reason = await phone_closed(base, _rows(np.arange(100) * 0.9))
             assert code == 1008 and "real time" in reason
-        async with _serve(fitted, limits=limits) as (_, base), \
+        async with serve_loopback(fitted, limits=limits) as (_, base), \
                 connect(base + "/ws/view") as a, connect(base + "/ws/view") as b:
             async with connect(base + "/ws/view") as c:
-                assert await _closed(c) == (1013, "too many viewers (at most 2)")
+                assert await ws_closed(c) == (1013, "too many viewers (at most 2)")
             await a.send("hello")
-            assert await _closed(a) == (1008, "viewers only listen on /ws/view")
+            assert await ws_closed(a) == (1008, "viewers only listen on /ws/view")
             assert json.loads(await asyncio.wait_for(b.recv(), 10))["type"] == "skeleton"
 
     with caplog.at_level("INFO", logger="imuloco"):
@@ -568,7 +592,7 @@ def test_limits_close_the_connection_with_a_code_and_a_reason(fitted, caplog):
     assert len(closing) == 5  # one line per connection a limit closed (1009 is websockets')
 
 
-def test_a_phone_closed_for_a_limit_frees_its_place_at_once(fitted, phone):
+def test_a_phone_closed_for_a_limit_frees_its_place_at_once(fitted, phone, serve_loopback):
     """A phone that broke a limit and does not read (its closing handshake pending) does not
     keep the next phone out: the next one streams at once and viewers see its poses."""
     pytest.importorskip("websockets")
@@ -580,7 +604,7 @@ def test_a_phone_closed_for_a_limit_frees_its_place_at_once(fitted, phone):
     rows = np.concatenate([times[:, None], acc[:, 0], gyro[:, 0]], axis=1)
 
     async def main():
-        async with _serve(fitted, limits=Limits(messages_per_s=1.0)) as (server, base), \
+        async with serve_loopback(fitted, limits=Limits(messages_per_s=1.0)) as (server, base), \
                 connect(base + "/ws/view") as view, connect(base + "/ws/phone") as rude:
             for i in range(50):  # never reads what the server says
                 await rude.send(_rows([0.01 * i]))
@@ -601,14 +625,14 @@ def test_a_phone_closed_for_a_limit_frees_its_place_at_once(fitted, phone):
     asyncio.run(main())
 
 
-def test_rows_closer_than_the_rate_limit_do_not_grow_the_servers_buffers(fitted):
+def test_rows_closer_than_the_rate_limit_do_not_grow_the_servers_buffers(fitted, serve_loopback):
     pytest.importorskip("websockets")
     from websockets.asyncio.client import connect
 
     from imuloco.app.live.session import RATE_BURST
 
     async def main():
-        async with _serve(fitted) as (server, base), connect(base + "/ws/phone") as ph:
+        async with serve_loopback(fitted) as (server, base), connect(base + "/ws/phone") as ph:
             for i in range(20):  # 20 messages of 1000 rows 1e-7 s apart
                 await ph.send(_rows(i * 1e-4 + np.arange(1000) * 1e-7))
             await ph.send(_rows([1.0]))
@@ -620,7 +644,7 @@ def test_rows_closer_than_the_rate_limit_do_not_grow_the_servers_buffers(fitted)
     asyncio.run(asyncio.wait_for(main(), 120))
 
 
-def test_the_model_runs_off_the_event_loop(fitted):
+def test_the_model_runs_off_the_event_loop(fitted, serve_loopback):
     pytest.importorskip("websockets")
     import threading
 
@@ -642,7 +666,8 @@ def test_the_model_runs_off_the_event_loop(fitted):
             return S()
 
     async def main():
-        async with _serve(Recorded(fitted)) as (_, base), connect(base + "/ws/view") as view, \
+        async with serve_loopback(Recorded(fitted)) as (_, base), \
+                connect(base + "/ws/view") as view, \
                 connect(base + "/ws/phone") as ph:
             await ph.send(_rows(np.arange(100) * 0.01))
             while True:
@@ -656,7 +681,7 @@ def test_the_model_runs_off_the_event_loop(fitted):
     assert all(name.startswith("imuloco-live-model") for name in threads)
 
 
-def test_a_dropped_viewer_is_one_log_line(fitted, phone, caplog):
+def test_a_dropped_viewer_is_one_log_line(fitted, phone, caplog, serve_loopback):
     """A viewer whose connection is lost while poses stream: one line from the server, none of
     asyncio's 'socket.send() raised exception' per pose."""
     pytest.importorskip("websockets")
@@ -666,7 +691,7 @@ def test_a_dropped_viewer_is_one_log_line(fitted, phone, caplog):
     rows = np.concatenate([times[:, None], acc[:, 0], gyro[:, 0]], 1)
 
     async def main():
-        async with _serve(fitted) as (server, base):
+        async with serve_loopback(fitted) as (server, base):
             async with connect(base + "/ws/view") as view:
                 await asyncio.wait_for(view.recv(), 10)
                 (ws,) = server.viewers

@@ -19,7 +19,7 @@ pytest.importorskip("websockets")
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed
 
-from imuloco.app.live.server import Limits, LiveServer
+from imuloco.app.live.server import Limits
 
 CLIP = "dataset-2_walk_normal_001"
 
@@ -34,14 +34,6 @@ def rows(sample_db) -> np.ndarray:
                           axis=1)
 
 
-@contextlib.asynccontextmanager
-async def serving(method, **kwargs):
-    server = LiveServer(method, calibrate_s=0, **kwargs)
-    await server.start("127.0.0.1", 0)
-    try:
-        yield server, f"ws://127.0.0.1:{server.port}"
-    finally:
-        await server.close()
 
 
 def client(n: int) -> dict:
@@ -49,13 +41,6 @@ def client(n: int) -> dict:
     return {"local_addr": (f"127.0.0.{n}", 0)}
 
 
-async def closed(ws, timeout: float = 30) -> tuple[int, str]:
-    """Code and reason the server closed ``ws`` with (reading what came before)."""
-    try:
-        while True:
-            await asyncio.wait_for(ws.recv(), timeout)
-    except ConnectionClosed as e:
-        return e.rcvd.code, e.rcvd.reason
 
 
 async def reply(ws, kind: str, timeout: float = 30) -> dict:
@@ -84,13 +69,13 @@ HUGE_INT = '{"rows": [[' + "9" * 400 + ', 0, 9.81, 0, 0, 0, 0]]}'
 @pytest.mark.parametrize("message", [DEEP, '{"rows": ' + DEEP + "}", HUGE_INT],
                          ids=["deep", "deep-rows", "400-digit-int"])
 def test_unreadable_messages_close_cleanly_with_a_reason(ridge_without_demo_clip, caplog,
-                                                         message):
+                                                         message, serve_loopback, ws_closed):
     """Closed 1011 with a traceback in the log before (RecursionError, OverflowError)."""
     async def main():
-        async with serving(ridge_without_demo_clip) as (_, base), \
+        async with serve_loopback(ridge_without_demo_clip) as (_, base), \
                 connect(base + "/ws/phone", max_size=None) as ph:
             await ph.send(message)
-            return await closed(ph)
+            return await ws_closed(ph)
 
     with caplog.at_level("INFO"):
         code, reason = asyncio.run(main())
@@ -99,10 +84,10 @@ def test_unreadable_messages_close_cleanly_with_a_reason(ridge_without_demo_clip
 
 
 @pytest.mark.parametrize("value", [1e308, -1e308])
-def test_times_beyond_any_clock_are_dropped_and_the_session_goes_on(ridge_without_demo_clip,
-                                                                    rows, caplog, value):
+def test_times_beyond_any_clock_are_dropped_and_the_session_goes_on(
+        ridge_without_demo_clip, rows, caplog, value, serve_loopback):
     async def main():
-        async with serving(ridge_without_demo_clip) as (server, base), \
+        async with serve_loopback(ridge_without_demo_clip) as (server, base), \
                 connect(base + "/ws/phone", max_size=None) as ph:
             await ph.send(_msg(rows[:100]))
             bad = rows[100:110].copy()
@@ -121,10 +106,11 @@ def test_times_beyond_any_clock_are_dropped_and_the_session_goes_on(ridge_withou
 
 
 @pytest.mark.parametrize("header", ["Host", "Origin"])
-def test_duplicate_headers_are_a_bad_request(ridge_without_demo_clip, caplog, header):
+def test_duplicate_headers_are_a_bad_request(ridge_without_demo_clip, caplog, header,
+                                             serve_loopback):
     """Two Host or Origin headers gave HTTP 500 and a traceback."""
     async def main():
-        async with serving(ridge_without_demo_clip) as (server, _):
+        async with serve_loopback(ridge_without_demo_clip) as (server, _):
             reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
             own = f"127.0.0.1:{server.port}"
             extra = (f"Host: {own}\r\n" if header == "Host"
@@ -148,11 +134,11 @@ def test_duplicate_headers_are_a_bad_request(ridge_without_demo_clip, caplog, he
 # ---- 17: implausible samples ----------------------------------------------------------------
 
 def test_implausible_samples_are_dropped_and_the_session_keeps_streaming(
-        ridge_without_demo_clip, rows, caplog):
+        ridge_without_demo_clip, rows, caplog, serve_loopback):
     """Half a second at 1e200 made every later message fail ("Found zero norm quaternions")
     until the phone reconnected."""
     async def main():
-        async with serving(ridge_without_demo_clip) as (_, base), \
+        async with serve_loopback(ridge_without_demo_clip) as (_, base), \
                 connect(base + "/ws/view") as view, \
                 connect(base + "/ws/phone", max_size=None) as ph:
             await ph.send(_msg(rows[:200]))
@@ -184,19 +170,20 @@ def test_implausible_samples_are_dropped_and_the_session_keeps_streaming(
 
 # ---- 18: limits per client; an idle phone gives way ---------------------------------------
 
-def test_an_idle_phone_gives_way_to_a_new_one(ridge_without_demo_clip, rows):
+def test_an_idle_phone_gives_way_to_a_new_one(ridge_without_demo_clip, rows, serve_loopback,
+                                              ws_closed):
     """An idle phone held the only phone slot until websockets' ping timeout (over 35 s)."""
     async def main():
         limits = Limits(phone_idle_s=1.0)
-        async with serving(ridge_without_demo_clip, limits=limits) as (server, base), \
+        async with serve_loopback(ridge_without_demo_clip, limits=limits) as (server, base), \
                 connect(base + "/ws/phone", **client(2)) as idle:
             await idle.send(_msg(rows[:50]))
             await reply(idle, "status")
             async with connect(base + "/ws/phone", **client(3)) as busy:  # idle is not yet
-                assert await closed(busy) == (1013, "another phone is streaming")
+                assert await ws_closed(busy) == (1013, "another phone is streaming")
             await asyncio.sleep(1.1)
             async with connect(base + "/ws/phone", **client(3)) as new:
-                code, reason = await closed(idle)
+                code, reason = await ws_closed(idle)
                 await new.send(_msg(rows[:50]))
                 await reply(new, "status")
                 return code, reason, server.phone is not None
@@ -205,13 +192,14 @@ def test_an_idle_phone_gives_way_to_a_new_one(ridge_without_demo_clip, rows):
     assert code == 1001 and "idle" in reason and holds
 
 
-def test_a_flooder_gets_no_fresh_allowance_by_reconnecting(ridge_without_demo_clip, rows):
+def test_a_flooder_gets_no_fresh_allowance_by_reconnecting(ridge_without_demo_clip, rows,
+                                                           serve_loopback, ws_closed):
     """Limits were per connection: each reconnect started a fresh allowance and a fresh session
     (viewers saw 9 resets in 10 s)."""
     async def main():
         # few connections refill (0.01/s): the verdict holds on a slow, loaded machine
         limits = Limits(messages_per_s=2.0, phone_connects_per_s=0.01)
-        async with serving(ridge_without_demo_clip, limits=limits) as (_, base), \
+        async with serve_loopback(ridge_without_demo_clip, limits=limits) as (_, base), \
                 connect(base + "/ws/view") as view:
             await reply(view, "status")
             codes = []
@@ -220,7 +208,7 @@ def test_a_flooder_gets_no_fresh_allowance_by_reconnecting(ridge_without_demo_cl
                     for k in range(5):
                         with contextlib.suppress(ConnectionClosed):
                             await ph.send(_msg(rows[k:k + 1]))
-                    codes.append((await closed(ph))[0])
+                    codes.append((await ws_closed(ph))[0])
             resets = 0
             with contextlib.suppress(asyncio.TimeoutError):
                 while True:
@@ -237,11 +225,11 @@ def test_a_flooder_gets_no_fresh_allowance_by_reconnecting(ridge_without_demo_cl
     assert resets <= Limits().phone_connect_burst  # 10 before: one per reconnect
 
 
-def test_bytes_after_a_request_are_one_log_line(ridge_without_demo_clip, caplog):
+def test_bytes_after_a_request_are_one_log_line(ridge_without_demo_clip, caplog, serve_loopback):
     """websockets 17.4 logged an AssertionError's traceback for a request followed by bytes
     (found by the fuzzer): the connection is dropped, with one line."""
     async def main():
-        async with serving(ridge_without_demo_clip) as (server, _):
+        async with serve_loopback(ridge_without_demo_clip) as (server, _):
             reader, writer = await asyncio.open_connection("127.0.0.1", server.port)
             writer.write(f"GET /ws/phone HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\n\r\n"
                          "Connection: Upgrade\r\n\r\n".encode())

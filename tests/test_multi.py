@@ -152,6 +152,18 @@ def test_the_model_reading_every_sensor_is_chosen(monkeypatch, tmp_path, pair_mo
     assert one.method.placements_ == ["right_ankle"]
 
 
+def test_the_fallback_reads_what_both_sensors_observe(pair_rec, pair_model):
+    """A shin and a watch: the fallback's report says the legs and the arms are observed
+    (the union of the two placements'), only the trunk left to guess."""
+    from imuloco.app.pipeline import reconstruct_recording
+    from imuloco.methods import load_model
+
+    _, info = reconstruct_recording(pair_rec, load_model(pair_model))
+    got = info["fallback"].to_json()
+    assert got["enabled"] and got["observes"] == ["legs", "arms"]
+    assert "(trunk)" in got["note"] and "right_ankle+left_wrist" in got["note"]
+
+
 def test_an_ignored_sensor_is_warned_and_reported(tmp_path, pair_rec, ridge_without_demo_clip,
                                                   caplog):
     from imuloco.app.pipeline import reconstruct_file

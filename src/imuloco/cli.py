@@ -20,7 +20,6 @@ import os
 import sys
 import tempfile
 from collections.abc import Callable
-from importlib import import_module
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +29,16 @@ from imuloco.app.console import console
 from imuloco.core.bodymap import PARTS
 from imuloco.errors import ImulocoError, InputError, MissingExtraError, UnknownNameError
 from imuloco.io.atomic import FULL, atomic_write, check_output, check_outputs
+from imuloco.limits import (
+    FORMATS,
+    MAX_CALIBRATE_S,
+    MAX_HEIGHT_M,
+    MAX_RATE,
+    MIN_CALIBRATE_S,
+    MIN_HEIGHT_M,
+    MIN_RATE,
+    RIG_NAMES,
+)
 
 
 class Commands(click.Group):
@@ -76,49 +85,6 @@ def _options(*decorators: Callable) -> Callable:
     return apply
 
 
-# What --help shows of the library's names and limits while their modules are not loaded:
-# importing those modules for a help text loaded numpy and scipy (seconds, issue #43). The
-# library stays the one source: a value given is checked once the option's module is
-# imported, --help shows the module's own value once it is loaded, and
-# tests/test_cli_startup.py checks these copies against the library.
-_SHOWN: dict[tuple[str, str], Any] = {
-    ("imuloco.io.logformats", "FORMATS"): ("generic", "realworld", "phyphox", "sensorlogger",
-                                           "xsens"),
-    ("imuloco.core.rigs", "RIG_NAMES"): ("bvh-default", "mixamo", "unreal", "unity", "model"),
-    ("imuloco.measures.gait", "MIN_HEIGHT_M"): 0.5,
-    ("imuloco.measures.gait", "MAX_HEIGHT_M"): 2.6,
-    ("imuloco.sensors.reallog", "MIN_RATE"): 5.0,
-    ("imuloco.sensors.reallog", "MAX_RATE"): 10000.0,
-    ("imuloco.app.live.session", "MIN_CALIBRATE_S"): 0.0,
-    ("imuloco.app.live.session", "MAX_CALIBRATE_S"): 60.0,
-}
-
-
-def _library(module: str, attr: str) -> Any:
-    """``module.attr`` when ``module`` is loaded, else its copy in :data:`_SHOWN`."""
-    loaded = sys.modules.get(module)
-    return _SHOWN[module, attr] if loaded is None else getattr(loaded, attr)
-
-
-class _LibraryChoice(click.Choice):
-    """``also`` or one of a library ``module``'s names (its tuple constant ``attr``), e.g. the
-    log formats of :data:`imuloco.io.logformats.FORMATS`; the module is imported to check a
-    value (see :data:`_SHOWN`)."""
-
-    def __init__(self, module: str, attr: str, also: tuple[str, ...] = ()) -> None:
-        self.module, self.attr, self.also = module, attr, also
-        self.case_sensitive = True
-
-    @property
-    def choices(self) -> tuple[str, ...]:  # type: ignore[override]
-        return (*self.also, *_library(self.module, self.attr))
-
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
-                ) -> Any:
-        import_module(self.module)  # the library's own names
-        return super().convert(value, param, ctx)
-
-
 class _Range(click.FloatRange):
     """A finite number in a range: click's FloatRange lets NaN through (it fails every
     comparison) and inf where a side is open, which then broke deep inside (``int(nan)``)."""
@@ -141,30 +107,6 @@ class _ZeroOrRange(_Range):
                 return 0.0
         except (TypeError, ValueError):
             pass  # the range's own message
-        return super().convert(value, param, ctx)
-
-
-class _LibraryRange(_Range):
-    """A finite number between two constants of a library ``module`` (``low`` and ``high``
-    name them), e.g. a sampling rate ``read_log`` accepts
-    (:data:`imuloco.sensors.reallog.MIN_RATE` to ``MAX_RATE``); the module is imported to
-    check a value (see :data:`_SHOWN`)."""
-
-    def __init__(self, module: str, low: str, high: str) -> None:
-        self.module, self.low, self.high = module, low, high
-        self.min_open = self.max_open = self.clamp = False
-
-    @property
-    def min(self) -> float:  # type: ignore[override]
-        return _library(self.module, self.low)
-
-    @property
-    def max(self) -> float:  # type: ignore[override]
-        return _library(self.module, self.high)
-
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None
-                ) -> Any:
-        import_module(self.module)  # the library's own limits
         return super().convert(value, param, ctx)
 
 
@@ -201,6 +143,12 @@ def _placements(ctx: click.Context, param: click.Parameter, value: str) -> str:
 
 
 force_option = click.option("--force", is_flag=True, help="Replace existing output files.")
+no_fallback_option = click.option(
+    "--no-fallback", is_flag=True,
+    help="Keep the model's pose everywhere: do not move the parts the sensor cannot see "
+         "toward a neutral pose where the motion is unfamiliar, nor the body toward the "
+         "standing pose where the sensor is still (a report's 'fallback' says what the "
+         "fallback did).")
 placement_option = click.option("--placement", default="right_ankle", show_default=True,
                                 callback=_placements,
                                 help="Sensor placement preset(s), comma separated.")
@@ -234,7 +182,7 @@ log_options = _options(
                       "left_ankle for a shin, right_foot or left_foot for a shoe IMU, "
                       "lower_back at L5 (these three need the [gait] extra)."),
     click.option("--format", "fmt", default="auto", show_default=True,
-                 type=_LibraryChoice("imuloco.io.logformats", "FORMATS", also=("auto",)),
+                 type=click.Choice(("auto", *FORMATS)),
                  help="Sensor log format."),
 )
 platform_option = click.option(
@@ -242,7 +190,7 @@ platform_option = click.option(
     help="Phone of a Sensor Logger export [default: from its Metadata.csv, else guessed with "
          "a warning].")
 height_option = click.option(
-    "--height", type=_LibraryRange("imuloco.measures.gait", "MIN_HEIGHT_M", "MAX_HEIGHT_M"),
+    "--height", type=_Range(MIN_HEIGHT_M, MAX_HEIGHT_M),
     default=None, metavar="METRES",
     help="The wearer's body height: the skeleton and every length and speed in their "
          "proportions [default: the training skeleton's].")
@@ -251,7 +199,7 @@ skeleton_option = click.option(
     help="A BVH of your rig: the motion is retargeted onto it (its joint names, offsets and "
          "rest pose) [default: the model's training skeleton].")
 rig_option = click.option(
-    "--rig", type=_LibraryChoice("imuloco.core.rigs", "RIG_NAMES"), default=None,
+    "--rig", type=click.Choice(RIG_NAMES), default=None,
     help="Joint names, hierarchy and T-pose rest of the written motion (the same motion on "
          "each): bvh-default (the model's joint names), mixamo, unreal (UE4 mannequin), unity "
          "(Humanoid), or model (the training skeleton's own rest pose) [default: bvh-default; "
@@ -953,7 +901,7 @@ def calibrate(results: tuple[Path, ...], method_spec: str | None, check_dirs: tu
 @placement_option
 @noise_option
 @click.option("--rate", default=100.0, show_default=True,
-              type=_LibraryRange("imuloco.sensors.reallog", "MIN_RATE", "MAX_RATE"),
+              type=_Range(MIN_RATE, MAX_RATE),
               help="Sampling rate, Hz (as reconstruct reads logs).")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
               help="Seed of the noise draws.")
@@ -1047,11 +995,7 @@ def simulate(motion_file: Path, placement: str, noise: str, rate: float, seed: i
                    "--sensor). Default: pieces of 120 s past 5 min of recording, where those "
                    "options allow; 0: always one piece.")
 @height_option
-@click.option("--no-fallback", is_flag=True,
-              help="Keep the model's pose everywhere: do not move the parts the sensor cannot "
-                   "see toward a neutral pose where the motion is unfamiliar, nor the body "
-                   "toward the standing pose where the sensor is still (the report's "
-                   "'fallback' says what the fallback did).")
+@no_fallback_option
 @force_option
 @_units_option
 def reconstruct(recording: tuple[Path, ...], model_path: Path | None, method_name: str | None,
@@ -1363,8 +1307,7 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
 @model_options
 @log_options
 @click.option("--calibrate-seconds", default=5.0, show_default=True,
-              type=_LibraryRange("imuloco.app.live.session", "MIN_CALIBRATE_S",
-                                 "MAX_CALIBRATE_S"),
+              type=_Range(MIN_CALIBRATE_S, MAX_CALIBRATE_S),
               help="Seconds of samples to calibrate the phone on the leg (0: none).")
 @click.option("--replay", type=click.Path(exists=True, path_type=Path), default=None,
               help="Stream this recorded log (of --format) at real time instead of waiting "
@@ -1385,10 +1328,12 @@ def batch(recordings: tuple[Path, ...], patterns: tuple[str, ...], out_dir: Path
               help="Also send every pose over the VMC protocol (OSC/UDP; port 39539 by "
                    "default) to VSeeFace, VMC4B (Blender), EVMC4U (Unity), ...")
 @height_option
+@no_fallback_option
 def live(host: str, port: int, model_path: Path | None, method_name: str | None,
          placement: str, calibrate_seconds: float, replay: Path | None, fmt: str, speed: float,
          loop: bool, certfile: str | None, keyfile: str | None, self_signed: bool,
-         allow_origins: tuple[str, ...], vmc: str | None, height: float | None) -> None:
+         allow_origins: tuple[str, ...], vmc: str | None, height: float | None,
+         no_fallback: bool) -> None:
     """Watch a walker live: a phone on the leg streams its sensors (open /phone on it), a
     browser shows the reconstruction as it walks (open /live); --vmc also sends it to a VMC
     protocol receiver (Unity HumanBodyBones, T-pose rest). Ctrl-C stops."""
@@ -1410,7 +1355,8 @@ def live(host: str, port: int, model_path: Path | None, method_name: str | None,
     vmc_to = None if vmc is None else parse_address(vmc)  # before the model loads
     choice = choose_model(method_name, model_path, placement, progress=True)
     server = LiveServer(choice.method, calibrate_seconds, choice.description,
-                        allow_origins=allow_origins, height_m=height, vmc=vmc_to)
+                        allow_origins=allow_origins, height_m=height, vmc=vmc_to,
+                        fallback=not no_fallback)
     shown = lan.shown_host(host)
     with tempfile.TemporaryDirectory(prefix="imuloco-live-") as tmp:  # the session's key
         if self_signed:

@@ -43,6 +43,7 @@ from imuloco.core.motion import Motion
 from imuloco.core.retarget import Rig, check_mapped
 from imuloco.core.skeleton import Skeleton
 from imuloco.errors import UnknownNameError
+from imuloco.limits import MODEL_RIG, RIG_NAMES, RIG_PRESETS
 from imuloco.ops.restpose import rebase_offsets, rebase_rotations
 from imuloco.ops.rotations import IDENTITY, from_matrix, qinv, qmul, qrot
 
@@ -113,9 +114,11 @@ PRESETS: dict[str, RigPreset] = {p.name: p for p in (
                                  "{Side}Hand")},
               "{Side}Shoulder"),
 )}
-MODEL = "model"  # the model's skeleton as it is, no preset
+MODEL = MODEL_RIG  # the model's skeleton as it is, no preset
 DEFAULT_RIG = "bvh-default"  # what reconstruct, batch and demo write without --rig
-RIG_NAMES: tuple[str, ...] = (*PRESETS, MODEL)
+if tuple(PRESETS) != RIG_PRESETS:  # the names the CLI shows, from the import-light module
+    raise RuntimeError(f"imuloco.limits.RIG_PRESETS {RIG_PRESETS} must name PRESETS in order, "
+                       f"{tuple(PRESETS)}")
 
 
 def check_rig_name(name: str) -> str:

@@ -29,6 +29,7 @@ from imuloco.io.sensorlog import (
     read_sensor_logger,
 )
 from imuloco.io.xsens import is_xsens, read_xsens
+from imuloco.limits import FORMATS
 
 
 @dataclass(frozen=True)
@@ -77,7 +78,9 @@ LOG_FORMATS: tuple[LogFormat, ...] = (
     LogFormat("xsens", lambda path, h: is_xsens(path), _read_xsens),
 )
 BY_NAME = {f.name: f for f in LOG_FORMATS}
-FORMATS = tuple(BY_NAME)  # the names, in sniffing order
+if tuple(BY_NAME) != FORMATS:  # the names the CLI shows, from the import-light module
+    raise RuntimeError(f"imuloco.limits.FORMATS {FORMATS} must name the rows of LOG_FORMATS "
+                       f"in order, {tuple(BY_NAME)}")
 
 
 def log_format(name: str) -> LogFormat:

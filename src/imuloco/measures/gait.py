@@ -35,6 +35,7 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt, welch
 
 from imuloco.core.motion import Motion
+from imuloco.limits import MAX_HEIGHT_M, MIN_HEIGHT_M
 from imuloco.measures.metrics import foot_skate
 from imuloco.ops.filters import resample_linear
 from imuloco.phases import foot_contacts, gait_phases
@@ -164,7 +165,6 @@ class Gait:
 LEG_TO_HEIGHT = 0.530 - 0.039
 # the body heights taken (height_scale, --height, a walkers file): outside, a number is no
 # standing human's height in metres
-MIN_HEIGHT_M, MAX_HEIGHT_M = 0.5, 2.6
 
 
 def stature(skeleton) -> float:

@@ -94,6 +94,7 @@ class Stream(ABC):
     delay_frames: int = 0
     error_m: float = float("nan")
     unreliable: bool = False
+    novelty: float | None = None  # the novelty of the frame read (Method.novelty_threshold)
 
     def delay_ms(self, fps: float) -> float:
         """``delay_frames`` in milliseconds at ``fps`` frames per second."""
@@ -157,6 +158,14 @@ class Method(ABC, metaclass=_Checked):
         """Whether :meth:`reconstruct` pins the feet during their contacts itself (with
         contacts it predicts); the pipeline then does not pin them again."""
         return False
+
+    @property
+    def novelty_threshold(self) -> float | None:
+        """The novelty score (``scores["novelty"]`` of :meth:`reconstruct_signals_full`, a
+        stream's ``novelty``) over which the method flags a frame as motion it does not know,
+        on its own scale (what :mod:`imuloco.methods.fallback` judges novelty against);
+        ``None``: the method gives no novelty."""
+        return None
 
     # ---- learning ---------------------------------------------------------------------------
     def fit(self, db: MotionDatabase, placements: Sequence[str] = ("right_ankle",),

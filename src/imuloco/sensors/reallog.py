@@ -41,6 +41,7 @@ from imuloco.io.logformats import (  # noqa: F401  (realworld_accelerometer: bat
     realworld_accelerometer,
 )
 from imuloco.io.sensorlog import PLATFORMS, Stream
+from imuloco.limits import MAX_RATE, MIN_RATE
 from imuloco.ops.filters import resample_linear
 from imuloco.sensors.resample import Gap, find_gaps, resample
 
@@ -191,7 +192,6 @@ def _merge_gaps(gaps: list[Gap]) -> list[Gap]:
 
 
 # plausibility ranges of an imported log (bad files are refused with the line that breaks them)
-MIN_RATE, MAX_RATE = 5.0, 10_000.0  # Hz, median source rate: gait needs > 5 Hz; IMUs < 10 kHz
 # a median rate this close to a bound is on it: the median step of a log with timestamp jitter
 # estimates its rate only so closely (phone jitter: up to 1.2 % off at 5 Hz over 1 s, 0.3 % at
 # 10 kHz, so such a log at a bound was refused by chance), as does the float rounding of the

@@ -262,12 +262,15 @@ class LiveServer:
         :class:`LiveSession`; its estimate on a thread of its own); False: the model's root.
     vmc : (host, port) of a VMC protocol receiver every frame is also sent to
         (:mod:`imuloco.app.live.vmc`; ``None``: none).
+    fallback : the per-part fallback toward neutral poses (see :class:`LiveSession`;
+        ``imuloco live --no-fallback``: off).
     """
 
     def __init__(self, method, calibrate_s: float = 5.0, note: str = "", token: str | None = None,
                  allow_origins: Iterable[str] = (), limits: Limits = Limits(),
                  require_token: bool | None = None, height_m: float | None = None,
-                 follow_path: bool = True, vmc: tuple[str, int] | None = None) -> None:
+                 follow_path: bool = True, vmc: tuple[str, int] | None = None,
+                 fallback: bool = True) -> None:
         probe = LiveSession(method, calibrate_s, height_m=height_m,
                             follow_path=False)  # fails early: offline
         self.vmc = None
@@ -277,6 +280,7 @@ class LiveServer:
             self.vmc = VmcSender(probe.skeleton, method.fps_, *vmc)
         self.height_m = height_m
         self.follow_path = follow_path
+        self.fallback = fallback
         self.method = method
         self.calibrate_s = calibrate_s
         self.note = note
@@ -579,7 +583,7 @@ class LiveServer:
             self.session.close()
         self.session = LiveSession(self.method, self.calibrate_s, calibration=calibration,
                                    height_m=self.height_m, follow_path=self.follow_path,
-                                   path_background=True)
+                                   path_background=True, fallback=self.fallback)
         self._last_status_t = -np.inf
         self.publish({"type": "reset"})
         self.set_status(self.session.describe())

@@ -23,8 +23,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imuloco.core.recording import Recording
-from imuloco.errors import InputError, MissingExtraError
+from imuloco.errors import InputError, MissingExtraError, ModelFileError
+from imuloco.limits import MAX_CALIBRATE_S, MIN_CALIBRATE_S
 from imuloco.measures.gait import height_scale
+from imuloco.methods.fallback import FallbackStream
 from imuloco.ops.kinematics import fk
 from imuloco.ops.rotations import about_y, qmul, qrot
 from imuloco.paths.live import RootFollower, StrideStream
@@ -38,8 +40,6 @@ MAX_RATE_HZ = 1000.0  # samples beyond this rate (per second of their own clock)
 RATE_BURST = 100  # samples that may come closer together than that before any is dropped
 MAX_GAP_S = 1.0  # a longer pause in the samples is a dropout: the model restarts
 DEAD_RECKON_S = 3.0  # the walker moves on through a dropout up to this long, then holds
-MIN_CALIBRATE_S = 0.0  # none
-MAX_CALIBRATE_S = 60.0  # longest calibration (bounds the calibration buffer)
 
 
 def _kernel_frame(t: np.ndarray, x: np.ndarray, tk: float, sigma: float, radius: float
@@ -213,6 +213,10 @@ class LiveSession:
         smoothly); False: the model's own root. No frame waits for it: the delay is the same.
     path_background : the path's estimate runs on a thread of its own (the server), not
         inline in :meth:`push` (deterministic: tests and benches).
+    fallback : the per-part fallback toward neutral poses, causally
+        (:class:`imuloco.methods.fallback.FallbackStream`: the still weight over the past
+        second, the novelty of the frame read), so that the avatar does not invent an arm
+        swing while the wearer stands or gestures; False: the method's poses as they are.
 
     Bounded state: samples beyond ``MAX_RATE_HZ`` per second of their own timestamps (after a
     burst of ``RATE_BURST``) are dropped and counted in :attr:`dropped`, so the calibration
@@ -223,7 +227,8 @@ class LiveSession:
     def __init__(self, method, calibrate_s: float = 5.0, sigma_s: float | None = None,
                  radius_s: float | None = None, calibration: Calibration | None = None,
                  max_gap_s: float = MAX_GAP_S, height_m: float | None = None,
-                 follow_path: bool = True, path_background: bool = False) -> None:
+                 follow_path: bool = True, path_background: bool = False,
+                 fallback: bool = True) -> None:
         if not (getattr(method, "supports_online", False)
                 and getattr(method, "can_stream", lambda: True)()):
             raise InputError(f"method {method.name!r} has no online mode as configured; live "
@@ -240,6 +245,7 @@ class LiveSession:
         self.scale = 1.0 if height_m is None else height_scale(method.skeleton_, height_m)
         self.skeleton = method.skeleton_.scaled(self.scale)  # the skeleton frames are posed on
         self.stream = method.stream()
+        self.fallback = _fallback(method) if fallback else None
         self.resampler = KernelResampler(float(method.fps_), sigma_s, radius_s)
         self.calibration = calibration
         # raw samples while calibrating: rows (t, acc (S*3), gyro (S*3)), preallocated
@@ -344,6 +350,8 @@ class LiveSession:
             self._n, self._next_try = 0, self.calibrate_s
             return
         self.stream = self.method.stream()
+        if self.fallback is not None:
+            self.fallback.restart()
         if self.strides is not None:
             self.strides.reset()
             self.follower.restart()
@@ -393,6 +401,14 @@ class LiveSession:
         d = self.stream.delay_frames  # a model with look-ahead returns frame k - d
         for k, tk, x in self.resampler.push(t, row):
             rot, root = self.stream.step(x)
+            # a duck-typed stream may lack them; one without confidence flags nothing (as
+            # offline: error_m and unreliable None), the fallback's guesses included
+            err = float(getattr(self.stream, "error_m", math.nan))
+            flag = bool(getattr(self.stream, "unreliable", False))
+            if self.fallback is not None:  # on the frame read: the returned one is d older
+                rot, root, err, held = self.fallback.step(
+                    x, rot, root, getattr(self.stream, "novelty", None), err, flag)
+                flag = held if math.isfinite(err) else flag
             root = root * self.scale
             if k < self._first_k + d:
                 continue
@@ -405,9 +421,7 @@ class LiveSession:
                 root[[0, 2]] = self.follower.step(tf, root[[0, 2]], self.strides.still())
             self._recent.append((tf, root, float(_yaw(rot[0]))))
             pos = fk(rot, root, sk.offsets, sk.parents)[1]
-            out.append(Frame(k - d, tf, t, rot, root, pos,  # a duck-typed stream may lack them
-                             float(getattr(self.stream, "error_m", math.nan)) * self.scale,
-                             bool(getattr(self.stream, "unreliable", False))))
+            out.append(Frame(k - d, tf, t, rot, root, pos, err * self.scale, flag))
         return out
 
     def _continue_walker(self, t: float, rot: np.ndarray, root: np.ndarray) -> None:
@@ -427,6 +441,17 @@ class LiveSession:
         if self.follower is not None:  # the follower's offset is added after the shift
             self._shift[[0, 2]] -= self.follower.offset
         self._shift[1] = 0.0  # the model's own root height
+
+
+def _fallback(method) -> FallbackStream | None:
+    """The live per-part fallback of ``method``'s poses with the shipped neutral poses and its
+    novelty threshold; None (logged) when they do not fit its skeleton."""
+    try:
+        return FallbackStream(method.skeleton_, float(method.fps_), method.placements_,
+                              novelty_threshold=getattr(method, "novelty_threshold", None))
+    except ModelFileError as e:
+        log.warning("the live stream runs without the fallback: %s", e)
+        return None
 
 
 def _path_placement(placements: list[str]) -> str | None:

@@ -386,6 +386,12 @@ class Learned(ConfidenceMixin, MirrorMixin, Method):
         """Always: the feet are pinned on the contacts the network predicts."""
         return True
 
+    @property
+    def novelty_threshold(self) -> float | None:
+        """The flag threshold of its novelty (:meth:`_fit_novelty`: the 99 % quantile on
+        held-out training motion; None for a file from before novelty was measured)."""
+        return None if self.novelty_mean_ is None else self.novelty_threshold_
+
     # ---- the other leg ----------------------------------------------------------------------
 
     def write_training_report(self, model_path: str | Path) -> list[Path]:
