@@ -39,16 +39,27 @@ def _error_lines(output: str) -> list[str]:
     return [line for line in output.split("\n") if "Error:" in line]
 
 
-def test_a_library_error_is_one_line_of_its_own_after_the_progress_bar(tmp_path, model_file):
+def test_a_library_error_is_one_line_of_its_own_after_the_progress_bar(tmp_path, model_file,
+                                                                        log_file):
+    # the log reads (before the bar: it decides the pieces), the model does not fit it
+    res = CliRunner().invoke(cli, ["reconstruct", str(log_file), "--model", str(model_file),
+                                   "--placement", "left_ankle", "-o", str(tmp_path / "o.bvh")])
+    assert res.exit_code == 1
+    assert "reconstruct:" in res.output  # the progress bar was drawn ...
+    (line,) = _error_lines(res.output)
+    assert line.startswith("Error: ") and "ridge.npz" in line  # ... and the error is not on it
+    assert "Traceback" not in res.output
+
+
+def test_a_bad_log_is_one_line_naming_its_line(tmp_path, model_file):
     bad = tmp_path / "bad.csv"
     bad.write_text("time_s,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z\n0,1,2,3,4,5,6\n"
                    "0.01,1,2,x,4,5,6\n")
     res = CliRunner().invoke(cli, ["reconstruct", str(bad), "--model", str(model_file), "-o",
                                    str(tmp_path / "o.bvh")])
     assert res.exit_code == 1
-    assert "reconstruct:" in res.output  # the progress bar was drawn ...
     (line,) = _error_lines(res.output)
-    assert line.startswith("Error: ") and "bad.csv:3" in line  # ... and the error is not on it
+    assert line.startswith("Error: ") and "bad.csv:3" in line
     assert "Traceback" not in res.output
 
 

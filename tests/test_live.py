@@ -405,7 +405,9 @@ def test_the_followed_walker_stands_still_through_a_long_pause(fitted, phone):
     root (ridge never saw standing) walks on. The sensor is still from 0.8 s in
     (STILL_HOLD_S); the last stride, ending at the pause's first mid-stance, is read at 2 s and
     its correction (the model walked on 1 m past it) blended in by 4 s. Before the still rule
-    the followed root walked on with the model (33 m over a 30 s pause)."""
+    the followed root walked on with the model (33 m over a 30 s pause). The follower is
+    checked with the fallback off; the fallback alone (on by default) stands the model's own
+    walker still too."""
     from imuloco.paths.live import STILL_HOLD_S
 
     times, acc, gyro = phone
@@ -416,20 +418,23 @@ def test_the_followed_walker_stands_still_through_a_long_pause(fitted, phone):
     t = np.r_[times, tp]
     a, g = np.concatenate([acc, still_acc]), np.concatenate([gyro, still_gyro])
     roots = {}
-    for follow in (True, False):
-        s = LiveSession(fitted, calibrate_s=CALIB_S, follow_path=follow)
+    for follow, fallback in ((True, False), (False, False), (False, True)):
+        s = LiveSession(fitted, calibrate_s=CALIB_S, follow_path=follow, fallback=fallback)
         frames = [f for i in range(len(t)) for f in s.push(t[i], a[i], g[i])]
         assert s.dropouts == 0
         ft = np.array([f.time for f in frames])
         r = np.stack([f.root for f in frames])[:, [0, 2]]
-        roots[follow] = r[ft >= times[-1] + 5.0], r[ft <= times[-1]][-1]
+        roots[follow, fallback] = r[ft >= times[-1] + 5.0], r[ft <= times[-1]][-1]
         if follow:
             assert s.strides.still() and len(s.strides.read) >= 3  # it walked, then stood
     assert STILL_HOLD_S < 5.0
-    pause, walked_to = roots[True]
+    pause, walked_to = roots[True, False]  # the follower alone (the fallback off)
     held = np.linalg.norm(pause - pause[0], axis=1).max()
-    own = np.linalg.norm(roots[False][0][-1] - roots[False][0][0])
+    own = np.linalg.norm(roots[False, False][0][-1] - roots[False, False][0][0])
     assert held < 1e-3 and own > 1.0, (held, own)
+    # the fallback alone (the default) also stands the model's own walker still
+    standing = roots[False, True][0]
+    assert np.linalg.norm(standing - standing[0], axis=1).max() < 1e-3
     assert np.linalg.norm(pause[-1] - walked_to) < 0.3
 
 

@@ -89,7 +89,7 @@ def _steps(root: np.ndarray) -> np.ndarray:
 
 
 def _live(method, rec: Recording, follow: bool = True) -> tuple[np.ndarray, LiveSession]:
-    s = LiveSession(method, 4.0, follow_path=follow)
+    s = LiveSession(method, 4.0, follow_path=follow, fallback=False)  # the follower alone
     frames = [f for i in range(len(rec.times)) for f in s.push(rec.times[i], rec.acc[i],
                                                                  rec.gyro[i])]
     return np.stack([f.root for f in frames]), s

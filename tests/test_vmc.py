@@ -141,7 +141,8 @@ def received(fitted, sample_db, tmp_path_factory):
     thread = threading.Thread(target=osc.serve_forever, daemon=True)
     thread.start()
     # the model's own root (follow_path=False): compared with the offline reconstruction below
-    server = LiveServer(fitted, calibrate_s=CALIB_S, vmc=("127.0.0.1", osc.server_address[1]),
+    server = LiveServer(fitted, calibrate_s=CALIB_S, fallback=False,  # offline is the model's
+                        vmc=("127.0.0.1", osc.server_address[1]),
                         follow_path=False)
     try:
         asyncio.run(asyncio.wait_for(server.replay(path, speed=25.0), 60))

@@ -92,8 +92,10 @@ def require_extras(placement: str) -> None:
 
 
 def shipped_placements(method: str = DEFAULT_METHOD) -> list[str]:
-    """The placements ``method`` has a pretrained model of in the package."""
-    return sorted(p.stem.removeprefix(f"{method}_") for p in MODELS_DIR.glob(f"{method}_*.npz"))
+    """The placements ``method`` has a pretrained one-sensor model of in the package (those
+    reading several sensors: :func:`shipped_combination`)."""
+    return sorted(p.stem.removeprefix(f"{method}_") for p in MODELS_DIR.glob(f"{method}_*.npz")
+                  if "+" not in p.stem)
 
 
 def shipped_model(method: str, placement: str) -> Path | None:
