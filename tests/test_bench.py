@@ -198,3 +198,18 @@ def test_a_split_that_leaves_no_test_clips_is_refused_by_name(sample_db):
     keep = [i for i, lab in enumerate(sample_db.labels) if lab.get("style") not in HELDOUT_STYLES]
     with pytest.raises(InputError, match=r"heldout-styles.*\(\d+ / 0 clips\)"):
         split(sample_db.subset(keep), "heldout-styles")
+
+
+def test_two_sensors_bench_rows_have_the_body_parts(tmp_path):
+    """``bench run --placement right_ankle,left_ankle`` (issue 46): every method reads both
+    shins (mousas2017's HMM both as one observation), each row has legs, arms and trunk, and
+    results.md sets them against the mean pose."""
+    recs = run_bench(["mean", "ridge", "mousas2017"], out=tmp_path,
+                     **{**QUICK, "placements": ["right_ankle", "left_ankle"]})
+    rows = {r["method"]: r for r in recs if r["motion_type"] == "all"}
+    for r in rows.values():
+        assert r["placements"] == ["right_ankle", "left_ankle"]
+        assert all(r[f"{g}_cm"] > 0 for g in ("legs", "arms", "trunk"))
+    for m in ("ridge", "mousas2017"):
+        assert rows[m]["legs_cm"] < 0.8 * rows["mean"]["legs_cm"], (m, rows[m]["legs_cm"])
+    assert "| mousas2017 | all |" in (tmp_path / "results.md").read_text()
