@@ -2,10 +2,11 @@
 all shipped weights within 60 minutes on a 2-core CPU).
 
 Runs the recipes of ``src/imuloco/data/models/README.md`` as ``imuloco`` commands, ``--jobs``
-trainings at a time (one thread each): the shin ensemble's four runs, the foot model and the
-lower-back model, then the ensemble, its mirror and the two calibrations. Prints each step's
-wall time, CPU time (the process and its threads, from ``os.wait4``) and peak memory, the
-machine's load while it ran, and how far each file's weights lie from the shipped file's.
+trainings at a time (one thread each): the shin ensemble's four runs, the foot model, the
+lower-back model and the shin + watch pair's two runs, then the ensembles, their mirrors and
+the shin's two calibrations. Prints each step's wall time, CPU time (the process and its
+threads, from ``os.wait4``) and peak memory, the machine's load while it ran, and how far each
+file's weights lie from the shipped file's.
 
     python benchmarks/train_shipped.py --shared ../shared/data --out train-shipped
     python benchmarks/train_shipped.py --dry-run   # print the commands only
@@ -30,6 +31,11 @@ ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "src" / "imuloco" / "data" / "models"
 MOTION = ("bandai-namco-2", "bandai-namco-1", "cmu-iclone")
 SHIN_SEEDS = (0, 1, 2, 3)
+# the phone on the shin and the watch on the left wrist (issue 46): two runs on all motion and
+# the everyday actions, the shin recipe otherwise
+ACTIONS = ("bandai-namco-1-actions", "bandai-namco-2-actions")
+PAIR = "right_ankle,left_wrist"
+PAIR_SEEDS = (0, 1)
 # the calibration the shin ensemble ships with: fitted on the out-of-fold results of two
 # draws of 3-network ensembles (sigma, novelty and the members' spread; fourteenth round)
 CALIBRATION_RESULTS = ROOT / "docs" / "results" / "generalization" / "ensemble-spread"
@@ -68,7 +74,21 @@ def trainings(shared: Path, out: Path) -> list[Step]:
     steps.append(Step("lower back", common + [
         "--placement", "lower_back", "--param", "epochs=6", "-o",
         str(out / "learned_lower_back.npz")]))
+    pair = ["--data", ",".join(str(shared / m) for m in MOTION + ACTIONS), *common[5:]]  # the common flags after --data
+    steps += [Step(f"shin+watch seed {s}", ["train", "--method", "learned", *pair,
+                   "--placement", PAIR, "--param", "epochs=5", "--param", "strap=0.5",
+                   "--param", "incline=15", "--param", f"seed={s}", "-o",
+                   str(out / f"pair{s}.npz")]) for s in PAIR_SEEDS]
     return steps
+
+
+def pair_finish(shared: Path, out: Path) -> list[Step]:
+    """The shin + watch ensemble and its mirror, after its runs."""
+    return [Step("shin+watch ensemble + mirror", [
+        "ensemble", *(str(out / f"pair{s}.npz") for s in PAIR_SEEDS), "--data",
+        str(shared / MOTION[0]), "--limit", "20", "-o",
+        str(out / "learned_right_ankle+left_wrist.npz"), "--mirrored",
+        str(out / "learned_left_ankle+right_wrist.npz"), "--force"])]
 
 
 def shin_finish(shared: Path, out: Path) -> list[Step]:
@@ -135,11 +155,12 @@ def main() -> None:
     ap.add_argument("--dry-run", action="store_true", help="print the commands and stop")
     args = ap.parse_args()
     train, finish = trainings(args.shared, args.out), shin_finish(args.shared, args.out)
+    finish_pair = pair_finish(args.shared, args.out)
     if args.dry_run:
-        for step in train + finish:
+        for step in train + finish + finish_pair:
             print(shlex.join(["imuloco", *step.args]))
         return
-    missing = [m for m in MOTION if not (args.shared / m).is_dir()]
+    missing = [m for m in MOTION + ACTIONS if not (args.shared / m).is_dir()]
     if missing:
         raise SystemExit(f"{args.shared}: no {', '.join(missing)} (give --shared)")
     args.out.mkdir(parents=True, exist_ok=True)
@@ -155,6 +176,9 @@ def main() -> None:
             run(step, args.out)
         for f in rest:
             f.result()
+        for step in finish_pair:
+            run(step, args.out)
+    finish += finish_pair
     total = time.monotonic() - t0
     load.stop.set()
     print("\n| step | wall min | CPU min | peak GB | max weight difference from the shipped "

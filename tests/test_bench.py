@@ -200,6 +200,49 @@ def test_a_split_that_leaves_no_test_clips_is_refused_by_name(sample_db):
         split(sample_db.subset(keep), "heldout-styles")
 
 
+def test_path_and_animation_keys_in_every_record(records):
+    recs, out = records
+    for r in recs:
+        for key in ("path_distance_ratio", "path_distance_mae_pct", "path_stride_mae_pct",
+                    "path_stride_mae_m", "path_end_point_error_pct", "path_raw_distance_ratio",
+                    "path_raw_distance_mae_pct", "animation_mpjpe_cm",
+                    "animation_foot_skate_cm_s"):
+            assert key in r
+        assert r["path_distance_ratio"] is not None and r["animation_mpjpe_cm"] > 0
+    md = (out / "results.md").read_text()
+    assert "raw root" in md
+
+
+def test_bench_path_figures_are_those_of_reconstructs_animation(sample_db, tmp_path):
+    """One code path: the bench scores the path of the animation ``reconstruct`` writes
+    (the method's output following the shin's path estimator), on the same recording."""
+    from imuloco.app.pipeline import reconstruct_file
+    from imuloco.io.sensorlog import write_generic_csv
+    from imuloco.lab.bench import PATH_CLIP_KEYS, measure
+    from imuloco.methods import get_method
+    from imuloco.methods.training import Example, to_frames
+    from imuloco.paths.metrics import motion_path_errors
+    from imuloco.sensors.multi import read_sensors
+    from imuloco.sensors.simulate import simulate
+
+    k = [lab["name"] for lab in sample_db.labels].index("dataset-2_walk_normal_001")
+    clip, labels = sample_db.clips[k], sample_db.labels[k]
+    train = sample_db.subset([i for i in range(len(sample_db)) if i != k])
+    method = get_method("ridge").fit(train, ["right_ankle"], "phone", 0)
+    csv = tmp_path / "walk.csv"
+    write_generic_csv(simulate(clip, ["right_ankle"], 100.0, "phone", 11), csv)
+    rec, _ = read_sensors(csv, placement="right_ankle")  # as reconstruct imports it
+    bench = measure(method, [Example(clip, to_frames(rec, clip), labels, rec)])["clips"][0]
+    motion, report = reconstruct_file(csv, fitted=method)
+    assert report.to_json()["path"]["source"] == "shank-pivot"  # it followed a path
+    want = motion_path_errors(motion, clip)
+    for key in PATH_CLIP_KEYS:
+        assert bench[f"path_{key}"] == pytest.approx(want[key], rel=1e-9, abs=1e-12), key
+    # and the raw root's figures are another thing: the follower moved the root
+    assert bench["path_raw_distance_ratio"] != pytest.approx(bench["path_distance_ratio"],
+                                                             rel=1e-3)
+
+
 def test_two_sensors_bench_rows_have_the_body_parts(tmp_path):
     """``bench run --placement right_ankle,left_ankle`` (issue 46): every method reads both
     shins (mousas2017's HMM both as one observation), each row has legs, arms and trunk, and

@@ -61,3 +61,32 @@ def test_a_path_without_strides_leaves_the_root_alone(sample_db):
     path = dataclasses.replace(path_of_motion(truth), heading_rad=None, strides=[])
     out = follow(truth, path, lock=False)
     assert np.allclose(out.root, truth.root)
+
+
+@pytest.mark.shared
+@pytest.mark.parametrize("clip", ["dataset-1_walk-back_active_001",
+                                  "dataset-1_walk-left_active_001"])
+@pytest.mark.parametrize("placement", ["right_ankle", "right_foot"])
+def test_walking_backwards_or_sideways_follows_the_path_the_right_way(shared_dir, clip,
+                                                                     placement):
+    """The sensor estimators' heading is a direction of travel (``heading_kind="travel"``),
+    not a facing: the truth's own pose following the estimated path must walk backwards
+    (sideways) along it, facing where the truth faces. Before the fix the root travelled
+    along the body's facing: 176 degrees off on walk-back, 20 on walk-left."""
+    from imuloco.io.bvh import read_bvh
+    from imuloco.ops.heading import wrap_angle
+    from imuloco.paths.follow import estimated_path
+    from imuloco.paths.truth import facing
+    from imuloco.sensors.simulate import simulate
+
+    truth = read_bvh(shared_dir.parent / "bandai-namco-1" / f"{clip}.bvh")
+    path = estimated_path(simulate(truth, [placement], 100.0, "phone", 5), placement)
+    assert path.heading_kind == "travel"
+    anim = follow(truth, path)
+
+    def travel(m: Motion) -> float:
+        v = m.root[-1, [0, 2]] - m.root[0, [0, 2]]
+        return float(np.arctan2(v[0], v[1]))
+
+    assert abs(np.degrees(wrap_angle(travel(anim) - travel(truth)))) < 10.0
+    assert np.degrees(np.abs(wrap_angle(facing(anim) - facing(truth)))).mean() < 6.0

@@ -352,6 +352,41 @@ def test_a_long_pause_restarts_the_model_and_the_walker_stays_where_it_was(fitte
     assert np.linalg.norm((root - before[1])[[0, 2]]) < 1e-9 and abs(yaw - before[2]) < 1e-9
 
 
+def test_the_followed_walker_stands_still_through_a_long_pause(fitted, phone):
+    """A walk, then 15 s of the shank standing still (samples on, no dropout): with the path
+    followed (the default; its estimate inline, so deterministic) the root holds from 5 s into
+    the pause on within 1 mm, 0.3 m at most from where the walk ended, while the model's own
+    root (ridge never saw standing) walks on. The sensor is still from 0.8 s in
+    (STILL_HOLD_S); the last stride, ending at the pause's first mid-stance, is read at 2 s and
+    its correction (the model walked on 1 m past it) blended in by 4 s. Before the still rule
+    the followed root walked on with the model (33 m over a 30 s pause)."""
+    from imuloco.paths.live import STILL_HOLD_S
+
+    times, acc, gyro = phone
+    rng = np.random.default_rng(0)
+    tp = times[-1] + 0.01 * np.arange(1, 1501)
+    still_acc = acc.mean(axis=0) + rng.normal(0, 0.02, (len(tp), 1, 3))  # gravity, inclined
+    still_gyro = rng.normal(0, 0.003, (len(tp), 1, 3))
+    t = np.r_[times, tp]
+    a, g = np.concatenate([acc, still_acc]), np.concatenate([gyro, still_gyro])
+    roots = {}
+    for follow in (True, False):
+        s = LiveSession(fitted, calibrate_s=CALIB_S, follow_path=follow)
+        frames = [f for i in range(len(t)) for f in s.push(t[i], a[i], g[i])]
+        assert s.dropouts == 0
+        ft = np.array([f.time for f in frames])
+        r = np.stack([f.root for f in frames])[:, [0, 2]]
+        roots[follow] = r[ft >= times[-1] + 5.0], r[ft <= times[-1]][-1]
+        if follow:
+            assert s.strides.still() and len(s.strides.read) >= 3  # it walked, then stood
+    assert STILL_HOLD_S < 5.0
+    pause, walked_to = roots[True]
+    held = np.linalg.norm(pause - pause[0], axis=1).max()
+    own = np.linalg.norm(roots[False][0][-1] - roots[False][0][0])
+    assert held < 1e-3 and own > 1.0, (held, own)
+    assert np.linalg.norm(pause[-1] - walked_to) < 0.3
+
+
 def test_a_one_second_dropout_is_recovered_within_one_second(fitted, sample_db):
     """Pose error against the run without the gap <= 1 cm from at most 1 s of stream time after
     the first sample after the gap on (see imuloco.lab.livebench), on three replays."""

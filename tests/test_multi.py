@@ -273,3 +273,35 @@ def test_two_feet_are_read_once_by_their_own_estimator(walk):
     own = FootZupt().estimate(rec, "right_foot")  # it puts the pelvis between the feet itself
     assert len(both.footfalls) == len(own.footfalls)
     np.testing.assert_allclose(both.root_xy, own.root_xy, atol=1e-9)
+
+
+# ---- the shipped shin + watch models --------------------------------------------------------
+def _left_arm_cm(gt, rec) -> float:
+    from imuloco.core.bodymap import resolve_body_map
+    from imuloco.measures import metrics
+
+    parts = resolve_body_map(gt.skeleton.names)
+    cols = [gt.skeleton.names.index(parts[f"left_{p}"]) for p in ("elbow", "wrist")]
+    err = metrics.joint_errors(gt, metrics.align_heading(rec, gt, 0))
+    return float(err[:, cols].mean() * 100)
+
+
+def test_the_shipped_shin_and_watch_model_is_chosen_and_reads_the_watch(walk, pair_rec):
+    """A shin + watch recording gets the shipped pair model (and its mirror for the other
+    side), and that model's left arm follows the watch: the same walk with the watch's signals
+    two seconds late puts the left elbow and wrist further from the truth."""
+    from dataclasses import replace
+
+    from imuloco.app.pipeline import choose_model
+
+    both = choose_model(placement="right_ankle", available=PAIR)
+    assert both.source == "shipped" and both.method.placements_ == PAIR
+    mirror = choose_model(placement="left_ankle", available=["left_ankle", "right_wrist"])
+    assert mirror.method.placements_ == ["left_ankle", "right_wrist"]
+    shift = 200  # 2 s at the simulation's 100 Hz
+    late = replace(pair_rec, acc=pair_rec.acc.copy(), gyro=pair_rec.gyro.copy())
+    for a in (late.acc, late.gyro):
+        a[:, 1] = np.roll(a[:, 1], shift, axis=0)
+    right = _left_arm_cm(walk, both.method.reconstruct(pair_rec))
+    wrong = _left_arm_cm(walk, both.method.reconstruct(late))
+    assert right < 0.8 * wrong, (right, wrong)

@@ -276,6 +276,26 @@ def reconstruct_recording(rec: Recording, method, calibrate: bool = True,
     return motion, info
 
 
+def animate_recording(rec: Recording, method, calibrate: bool = True, pin: bool | None = None,
+                      fallback: bool = True, height: float | None = None
+                      ) -> tuple[Motion, dict[str, Any]]:
+    """The animation ``imuloco reconstruct`` writes of an imported recording:
+    :func:`reconstruct_recording`, scaled to the wearer's ``height`` (metres, None: the
+    model's skeleton; :func:`imuloco.measures.gait.to_height`), its root following the path
+    of the recording's first placement (:func:`imuloco.paths.follow.follow_recording`).
+    ``imuloco bench run`` scores its path figures on this same animation.
+
+    Returns the motion and :func:`reconstruct_recording`'s dict, its ``confidence`` scaled
+    with the skeleton, plus ``path`` (the report's path, None for a placement without an
+    estimator)."""
+    motion, info = reconstruct_recording(rec, method, calibrate, pin, fallback)
+    if height is not None:
+        k = height_scale(motion.skeleton, height)
+        motion, info["confidence"] = to_height(motion, height), info["confidence"].scaled(k)
+    motion, info["path"] = follow_recording(motion, rec, method.placements_[0], height)
+    return motion, info
+
+
 def feet_pinned_by(pin: bool, method) -> str:
     """Who keeps the feet from sliding (the report's ``feet_pinned_by``): ``"pipeline"``
     (``pin``), ``"method"`` (it pins them itself) or ``"none"``."""
@@ -368,12 +388,8 @@ def reconstruct_file(recording_path: str | Path | Sequence[str | Path], model=No
         source.used = source.placement not in ignored
     bar.update()
     bar.set_postfix_str(f"{fitted.name} on {rec.times[-1]:.0f} s")
-    motion, info = reconstruct_recording(rec, fitted, calibrate, pin, fallback)
-    confidence = info["confidence"]
-    if height is not None:
-        k = height_scale(motion.skeleton, height)
-        motion, confidence = to_height(motion, height), confidence.scaled(k)  # lengths
-    motion, path = follow_recording(motion, rec, fitted.placements_[0], height)
+    motion, info = animate_recording(rec, fitted, calibrate, pin, fallback, height)
+    confidence, path = info["confidence"], info["path"]
     report_name = recording_name(recording_path if isinstance(recording_path, (str, Path))
                                  else recording_path[0])
     motion.name = report_name

@@ -47,12 +47,22 @@ Protocol details fixed here (see also :mod:`imuloco.lab.protocols`):
   :mod:`imuloco.lab.confidence` checks and calibrates. Each method runs with one BLAS/OpenMP
   thread (threadpoolctl), like a single core, so that timings compare across machines'
   core counts (torch's own thread pool is the method's business).
-- Path (issue 40): each reconstruction's own path (:func:`imuloco.paths.truth.path_of_motion`)
-  against the truth's (:mod:`imuloco.paths.metrics`): per clip ``path_`` + distance ratio,
-  distance and stride length errors (% and m), end-point error (% of the distance walked);
-  per motion type the ratio's mean and the others' mean absolute value over clips
-  (``path_distance_mae_pct``, ``path_stride_mae_pct``, ``path_stride_mae_m``,
-  ``path_end_point_error_pct``).
+- Path (issue 40): the path (:func:`imuloco.paths.truth.path_of_motion`) of **the animation
+  the user gets** against the truth's (:mod:`imuloco.paths.metrics`): each test clip's
+  simulated recording (the sensor-rate one its signals were resampled from) goes through
+  :func:`imuloco.app.pipeline.animate_recording`, the function ``imuloco reconstruct`` runs
+  after importing a log (calibration, the method, the fallback, the pipeline's foot pinning,
+  the placement's path follower). Per clip ``path_`` + distance ratio, distance and stride
+  length errors (% and m), end-point error (% of the distance walked); per motion type the
+  ratio's mean and the others' mean absolute value over clips (``path_distance_ratio``,
+  ``path_distance_mae_pct``, ``path_stride_mae_pct``, ``path_stride_mae_m``,
+  ``path_end_point_error_pct``). The same figures of the method's raw root
+  (``reconstruct_signals_full``, what these keys measured before: no path follower) are kept
+  as ``path_raw_`` + the same names. The animation's pose beside them, on the frames both
+  have: ``animation_mpjpe_cm`` (its first frame aligned as above) and
+  ``animation_foot_skate_cm_s`` (:func:`imuloco.measures.metrics.foot_skate`, against the
+  truth's ``foot_skate_gt_cm_s``), frame-weighted like the other metrics. A test example
+  without a recording leaves these keys None.
 
 Everything but the timings is deterministic: the same arguments give the same numbers.
 """
@@ -72,6 +82,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 from tqdm.auto import tqdm
 
+from imuloco.app.pipeline import animate_recording
 from imuloco.core.motion import Motion, MotionDatabase
 from imuloco.core.retarget import resampled
 from imuloco.errors import UnknownNameError
@@ -96,11 +107,14 @@ LATENCY_FRAMES = 300
 PATH_CLIP_KEYS = ("distance_ratio", "distance_error_pct", "stride_error_m", "stride_error_pct",
                   "end_point_error_pct")
 # aggregated over clips: summary key -> clip key (the ratio's mean, the others' mean |value|)
-PATH_SUMMARY_KEYS = {"path_distance_ratio": "path_distance_ratio",
-                     "path_distance_mae_pct": "path_distance_error_pct",
-                     "path_stride_mae_pct": "path_stride_error_pct",
-                     "path_stride_mae_m": "path_stride_error_m",
-                     "path_end_point_error_pct": "path_end_point_error_pct"}
+# of the animation (``path_``) and of the method's raw root (``path_raw_``)
+PATH_PREFIXES = ("path_", "path_raw_")
+PATH_SUMMARY_KEYS = {f"{p}{name}": f"{p}{key}" for p in PATH_PREFIXES for name, key in (
+    ("distance_ratio", "distance_ratio"), ("distance_mae_pct", "distance_error_pct"),
+    ("stride_mae_pct", "stride_error_pct"), ("stride_mae_m", "stride_error_m"),
+    ("end_point_error_pct", "end_point_error_pct"))}
+# the animation's pose (the user's), frame-weighted as METRIC_KEYS
+ANIMATION_KEYS = ("animation_mpjpe_cm", "animation_foot_skate_cm_s")
 
 
 DataArg = str | Path | Sequence[str | Path] | None
@@ -157,7 +171,7 @@ def aggregate(clips: list[dict[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {"n_clips": len(clips), "n_frames": int(sum(c["n_frames"]
                                                                       for c in clips))}
     w = np.array([c["n_frames"] for c in clips], dtype=np.float64)
-    for key in metrics.METRIC_KEYS:
+    for key in (*metrics.METRIC_KEYS, *ANIMATION_KEYS):
         v = np.array([c.get(key) for c in clips], dtype=np.float64)  # None: nan
         ok = np.isfinite(v)
         out[key] = float(np.average(v[ok], weights=w[ok])) if ok.any() else None
@@ -165,7 +179,7 @@ def aggregate(clips: list[dict[str, Any]]) -> dict[str, Any]:
     for name, key in PATH_SUMMARY_KEYS.items():
         v = np.array([c.get(key) for c in clips], dtype=np.float64)
         v = v[np.isfinite(v)]
-        ratio = key == "path_distance_ratio"
+        ratio = key.endswith("distance_ratio")
         out[name] = (float(np.mean(v if ratio else np.abs(v))) if len(v) else None)
     return out
 
@@ -259,7 +273,8 @@ def measure(method, test: list[Example], progress: bool = False, name: str = "",
             curves[ex.labels["name"]] = np.sqrt((err[:, 1:] ** 2).mean(axis=1))
             actual = curves[ex.labels["name"]] / metrics.CM
         clips.append({"name": ex.labels["name"], "motion_type": ex.labels.get("content"),
-                      "n_frames": gt.num_frames, **values, **_path_values(rec, gt)})
+                      "n_frames": gt.num_frames, **values, **animation_values(method, ex),
+                      **_path_values(rec, gt, "path_raw_")})
         if full.error_m is not None:
             rows = _confidence_rows(full, actual, ex.labels)
             if retargeted is not None:
@@ -272,15 +287,35 @@ def measure(method, test: list[Example], progress: bool = False, name: str = "",
 
 
 
-def _path_values(rec: Motion, gt: Motion) -> dict[str, float | None]:
+def animation_values(method, ex: Example) -> dict[str, float | None]:
+    """The figures of the animation ``imuloco reconstruct`` would write from ``ex``'s
+    recording with the fitted ``method`` (:func:`imuloco.app.pipeline.animate_recording`):
+    its path against the truth's (``path_`` + :data:`PATH_CLIP_KEYS`) and
+    :data:`ANIMATION_KEYS`; all None for an example without a recording."""
+    none = {**{f"path_{k}": None for k in PATH_CLIP_KEYS}, **dict.fromkeys(ANIMATION_KEYS)}
+    if ex.recording is None:
+        return none
+    gt = ex.motion
+    anim, _ = animate_recording(ex.recording, method)
+    n = min(gt.num_frames, anim.num_frames)
+    gt_n, anim_n = gt.slice(0, n), anim.slice(0, n)
+    if gt.skeleton.names == anim.skeleton.names:
+        pose = metrics.evaluate(gt_n, metrics.align_heading(anim_n, gt_n, 0))
+    else:
+        pose = metrics.evaluate_parts(gt_n, anim_n)
+    return {**_path_values(anim, gt), "animation_mpjpe_cm": pose["mpjpe_cm"],
+            "animation_foot_skate_cm_s": pose["foot_skate_cm_s"]}
+
+
+def _path_values(rec: Motion, gt: Motion, prefix: str = "path_") -> dict[str, float | None]:
     """The reconstruction's path against the truth's (:func:`imuloco.paths.metrics.
-    path_errors`), keys ``path_`` + :data:`PATH_CLIP_KEYS` (None where undefined: a clip
+    path_errors`), keys ``prefix`` + :data:`PATH_CLIP_KEYS` (None where undefined: a clip
     without strides, or too short for gait phases)."""
     try:
         errs = motion_path_errors(rec, gt)
     except (ValueError, KeyError):  # a clip under two frames, a skeleton without feet
-        return {f"path_{k}": None for k in PATH_CLIP_KEYS}
-    return {f"path_{k}": (float(errs[k]) if np.isfinite(errs[k]) else None)
+        return {f"{prefix}{k}": None for k in PATH_CLIP_KEYS}
+    return {f"{prefix}{k}": (float(errs[k]) if np.isfinite(errs[k]) else None)
             for k in PATH_CLIP_KEYS}
 
 
@@ -434,7 +469,7 @@ def _over_seeds(per_seed: list[dict[str, Any]]) -> dict[str, Any]:
     """Mean of each metric over seeds, its spread (``<key>_std``, ddof 1) and the runs'
     MPJPE; counts from the first run (the test clips are the same)."""
     out = dict(per_seed[0])
-    for key in (*metrics.METRIC_KEYS, *PATH_SUMMARY_KEYS):
+    for key in (*metrics.METRIC_KEYS, *ANIMATION_KEYS, *PATH_SUMMARY_KEYS):
         v = [r[key] for r in per_seed if r.get(key) is not None]
         out[key] = float(np.mean(v)) if v else None
         out[f"{key}_std"] = float(np.std(v, ddof=1)) if len(v) > 1 else None

@@ -26,14 +26,21 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("root_speed_err_cm_s", "speed err cm/s", "{:.1f}"),
     ("path_err_cm", "path err cm", "{:.1f}"),
 )
-# the reconstruction's path against the truth's (issue 40), mean absolute errors over clips
+# the animation's path against the truth's (issue 40), mean absolute errors over clips, and
+# the animation's pose (MPJPE, skate)
 PATH_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("path_distance_ratio", "distance ratio", "{:.2f}"),
     ("path_distance_mae_pct", "distance MAE %", "{:.1f}"),
     ("path_stride_mae_pct", "stride MAE %", "{:.1f}"),
     ("path_stride_mae_m", "stride MAE m", "{:.3f}"),
     ("path_end_point_error_pct", "end-point err %", "{:.1f}"),
+    ("animation_mpjpe_cm", "MPJPE cm", "{:.2f}"),
+    ("animation_foot_skate_cm_s", "skate cm/s", "{:.1f}"),
+    ("foot_skate_gt_cm_s", "truth's skate cm/s", "{:.1f}"),
 )
+# the same of the method's raw root (no path follower)
+RAW_PATH_COLUMNS: tuple[tuple[str, str, str], ...] = tuple(
+    (key.replace("path_", "path_raw_", 1), title, fmt) for key, title, fmt in PATH_COLUMNS[:5])
 # cross-dataset: against the ground truth retargeted onto the training skeleton
 RETARGETED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("mpjpe_retargeted_cm", "MPJPE cm", "{:.2f}"),
@@ -157,12 +164,17 @@ def write_report(
     if any(r.get("path_distance_ratio") is not None for r in records):
         lines += [
             "## The path: where the body went", "",
-            ("The reconstruction's own path (pelvis averaged over a step, strides between its "
-             "feet's mid-stances) against the ground truth's: the distance ratio's mean, mean "
-             "absolute errors of the distance walked and the mean stride length per clip, "
-             "and the end-point error in per cent of the distance walked."), "",
+            ("The path of the animation `imuloco reconstruct` writes (the method's output "
+             "following the placement's path estimator) — pelvis averaged over a step, "
+             "strides between its feet's mid-stances — against the ground truth's: the "
+             "distance ratio's mean, mean absolute errors of the distance walked and the mean "
+             "stride length per clip, and the end-point error in per cent of the distance "
+             "walked; the animation's MPJPE and foot skate beside the truth's skate."), "",
             table(records, PATH_COLUMNS, (("method", "method"),
-                                          ("motion_type", "motion type"))), ""]
+                                          ("motion_type", "motion type"))), "",
+            "The same of the method's raw root (before the path follower):", "",
+            table(records, RAW_PATH_COLUMNS, (("method", "method"),
+                                              ("motion_type", "motion type"))), ""]
     lines += group_section(records)
     if any(r.get("mpjpe_retargeted_cm") is not None for r in records):
         lines += [

@@ -29,7 +29,7 @@ TEST_SEED_OFFSET = 1_000_003  # test recordings never share a seed with training
 # share of clips a model holds out (by name hash) for its validation curve: the ``learned``
 # method's default ``validation`` and :func:`held_out_clips`'s default share
 VALIDATION_SHARE = 0.05
-_cache: dict[tuple, tuple[Motion, np.ndarray, float]] | None = None
+_cache: dict[tuple, tuple[Motion, np.ndarray, float, Recording]] | None = None
 _saved = [0.0]  # seconds of simulation the cache has saved so far
 
 
@@ -79,11 +79,15 @@ class Example:
 
     signals : ndarray, shape (T, 6 S): per sensor acc x,y,z (m/s^2) then gyro x,y,z (rad/s),
         one row per motion frame.
+    recording : the simulated recording at the sensor's rate the signals were resampled
+        from (:func:`synthesize`), what ``imuloco reconstruct`` would read; None where the
+        signals came otherwise.
     """
 
     motion: Motion
     signals: np.ndarray
     labels: dict[str, str]
+    recording: Recording | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -181,20 +185,21 @@ def synthesize(
     progress: bool = False,
 ) -> list[Example]:
     """Simulate ``placements`` on every clip (at ``rate`` Hz with ``noise``) and resample the
-    signals to the clip's frames. Each clip's seed derives from its name and ``seed``."""
+    signals to the clip's frames (each example keeps its recording too). Each clip's seed
+    derives from its name and ``seed``."""
     out = []
     for motion, labels in tqdm(list(db), desc="simulating sensors", disable=not progress,
                                unit="clip"):
         key: tuple[Any, ...] = (id(motion), tuple(placements), noise,
                                 clip_seed(labels["name"], seed), rate)
         if _cache is not None and key in _cache:
-            signals, seconds = _cache[key][1:]
+            signals, seconds, rec = _cache[key][1:]
             _saved[0] += seconds
         else:
             t0 = time.perf_counter()
             rec = simulate(motion, placements, rate, noise, clip_seed(labels["name"], seed))
             signals = to_frames(rec, motion)
             if _cache is not None:  # the motion kept alive keeps its id unique
-                _cache[key] = (motion, signals, time.perf_counter() - t0)
-        out.append(Example(motion, signals, labels))
+                _cache[key] = (motion, signals, time.perf_counter() - t0, rec)
+        out.append(Example(motion, signals, labels, rec))
     return out

@@ -45,10 +45,21 @@ class BodyPath:
 
     times_s : (T,) seconds; root_xy : (T, 2) the pelvis' horizontal position in metres in a floor
     frame whose x axis is the walker's initial heading (y to the left, right-handed, Y up as the
-    rest of imuloco), origin at the start; heading_rad : (T,) the body's facing yaw in that frame
-    (the hip line's normal, as the truth's :func:`imuloco.paths.truth.path_of_motion` reads it;
-    the direction of walking when walking forward; the follower turns the body to it), or None
-    where the estimator does not know it (then only distances are trusted);
+    rest of imuloco), origin at the start; heading_rad : (T,) a yaw in that frame, or None
+    where the estimator does not know it (then only distances are trusted); which yaw,
+    ``heading_kind`` says:
+
+    - ``"facing"``: the body's facing (the hip line's normal), as the truth's
+      :func:`imuloco.paths.truth.path_of_motion` reads it; the floor's x axis is the initial
+      facing. The follower turns the hips to it.
+    - ``"travel"``: the direction the pelvis travels (the path's own tangent), the floor's x
+      axis the initial direction of travel: what every sensor estimator measures (a limb's
+      path, or a trunk's yaw along which it walks). It is the facing only when walking
+      forward: walking backwards they are 180 degrees apart, side-stepping 90, and no
+      estimator tells these apart (each calibration assumes forward walking). The follower
+      turns the body so that *the motion's own* direction of travel follows it, keeping the
+      motion's own facing against it (:func:`imuloco.paths.follow.motion_heading`).
+
     footfalls, strides : as above (one foot's or both feet's, as the sensor sees them);
     source : the estimator's name ("foot-zupt", "shank-pivot", "lower-back-steps", ...);
     note : what the figures can and cannot be trusted for (shown to users).
@@ -60,6 +71,7 @@ class BodyPath:
     strides: list[Stride]
     source: str
     note: str
+    heading_kind: str = "facing"  # "facing" | "travel" (the docstring)
 
     def distance_m(self) -> float:
         """Length of ``root_xy``'s polyline, metres."""
@@ -80,7 +92,8 @@ class BodyPath:
     def to_json(self) -> dict:
         """Summary + strides, for the report: ``source``, ``note``, ``duration_s``,
         ``distance_m``, ``end_xy``, ``strides`` (count), ``stride_length_m`` (mean),
-        ``speed_mps`` (distance over duration), ``heading_known``, ``footfalls`` and
+        ``speed_mps`` (distance over duration), ``heading_known``, ``heading_kind``,
+        ``footfalls`` and
         ``stride_rows`` (one dict per footfall / stride)."""
         dur = float(self.times_s[-1] - self.times_s[0]) if len(self.times_s) > 1 else 0.0
         lengths = [s.length_m for s in self.strides if np.isfinite(s.length_m)]
@@ -94,6 +107,7 @@ class BodyPath:
             "stride_length_m": round(float(np.mean(lengths)), 4) if lengths else None,
             "speed_mps": round(dist / dur, 4) if dur > 0 else None,
             "heading_known": self.heading_rad is not None,
+            "heading_kind": self.heading_kind,
             "footfalls": [{"foot": f.foot, "time_s": round(f.time_s, 4),
                            "xy": [round(float(v), 4) for v in f.xy],
                            "confidence": round(f.confidence, 3)} for f in self.footfalls],

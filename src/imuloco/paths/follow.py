@@ -6,10 +6,16 @@ The rule (:func:`follow`):
 - where the path knows its heading (``heading_rad`` not None: foot ZUPT, shank pivot, lower-back
   steps, the truth), the root's horizontal position is the path's ``root_xy`` at each frame,
   carried into the motion's world frame (origin the motion's first root position, x axis its
-  initial facing), and the whole body is turned about the vertical, frame by frame, so that
-  its hips face the path's heading (:func:`turn_to_path`: a reconstruction
+  initial heading), and the whole body is turned about the vertical, frame by frame, so that
+  its heading follows the path's (:func:`turn_to_path`: a reconstruction
   whose heading drifts, 34 degrees over a 45 s walk for ``learned``, otherwise walked
-  sideways along the path, its planted feet sliding, and lost its footfalls);
+  sideways along the path, its planted feet sliding, and lost its footfalls). The heading is
+  of the path's kind (:func:`motion_heading`): the hips' facing for a ``"facing"`` path (the
+  truth's), the direction of travel for a ``"travel"`` one (the sensor estimators'), whose
+  body keeps the motion's own facing against its travel: walking backwards or side-stepping,
+  the animation walks backwards or sideways along the path, as the learned pose does, rather
+  than forwards (bandai-namco-1's walk-back with the truth's pose and the shank's path: the
+  root travelled 176 degrees off the truth's);
 - where it knows only distances (stride lengths: shank pivot, lower-back steps), the motion
   keeps its own direction and each stride's horizontal root displacement is rescaled so that
   its length is the path's (one gain per stride of the foot with the most strides: the path's
@@ -27,23 +33,53 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 from imuloco.core.motion import Motion
 from imuloco.core.recording import Recording
 from imuloco.methods.postprocess import lock_feet
+from imuloco.ops.heading import wrap_angle
 from imuloco.ops.rotations import about_y, qmul
 from imuloco.paths.base import BodyPath, Stride, to_floor
+from imuloco.paths.geometry import MIN_WALK_SPEED, smooth_over
 from imuloco.paths.registry import ESTIMATORS, estimate_path
 from imuloco.paths.truth import facing, path_of_motion
 from imuloco.phases.contacts import FEET, foot_contacts
 
 MAX_GAIN = 4.0  # a stride's gain is clipped to [1/MAX_GAIN, MAX_GAIN] (a still motion's stride)
+TRAVEL_S = 1.0  # the motion's travel: its root averaged over about a stride (the sway out)
+OFFSET_S = 2.0  # its travel against its facing: a running median over two strides
 
 
-def floor_frame(motion: Motion) -> tuple[np.ndarray, float]:
-    """The origin (3,) and initial heading (radians) of ``motion``'s floor frame, as
+def motion_heading(motion: Motion, kind: str = "facing") -> np.ndarray:
+    """``motion``'s heading (T,), radians about +Y (unwrapped), of a path's ``heading_kind``:
+    ``"facing"``, the hips' (:func:`imuloco.paths.truth.facing`); ``"travel"``, its direction
+    of travel: the facing plus the motion's own travel against it (the root averaged over
+    TRAVEL_S, its direction minus the facing, a running median over OFFSET_S; held where the
+    root moves slower than MIN_WALK_SPEED, 0 for a motion that never moves)."""
+    f = facing(motion)
+    if kind == "facing":
+        return f
+    if kind != "travel":
+        raise ValueError(f"heading_kind must be 'facing' or 'travel', got {kind!r}")
+    xz = smooth_over(motion.root[:, [2, 0]], motion.fps, TRAVEL_S)  # (Z, X): yaw from +Z
+    v = np.gradient(xz, axis=0) * motion.fps if len(xz) > 1 else np.zeros_like(xz)
+    moving = np.linalg.norm(v, axis=1) >= MIN_WALK_SPEED
+    if not moving.any():
+        return f
+    offset = np.unwrap(wrap_angle(np.arctan2(v[:, 1], v[:, 0]) - f))
+    held = np.where(moving, np.arange(len(f)), 0)
+    np.maximum.accumulate(held, out=held)
+    held[:int(np.argmax(moving))] = int(np.argmax(moving))
+    offset = median_filter(offset[held], max(1, round(OFFSET_S * motion.fps)), mode="nearest")
+    return f + offset
+
+
+def floor_frame(motion: Motion, kind: str = "facing") -> tuple[np.ndarray, float]:
+    """The origin (3,) and initial heading (radians, :func:`motion_heading` of ``kind``) of
+    ``motion``'s floor frame; of kind ``"facing"`` as
     :func:`imuloco.paths.truth.path_of_motion` reads them."""
-    return motion.root[0].copy(), float(facing(motion)[0])
+    return motion.root[0].copy(), float(motion_heading(motion, kind)[0])
 
 
 def from_floor(xy: np.ndarray, origin: np.ndarray, heading0: float) -> np.ndarray:
@@ -85,11 +121,12 @@ def stride_gains(own_xy: np.ndarray, times: np.ndarray, path: BodyPath) -> np.nd
 
 def turn_to_path(motion: Motion, path: BodyPath, heading0: float) -> Motion:
     """``motion`` turned about the vertical at each frame (its root rotation, hence the whole
-    body about the root) so that its hips face ``path``'s ``heading_rad`` at that time (a
+    body about the root) so that its heading of ``path``'s kind (:func:`motion_heading`: its
+    hips' facing, or its direction of travel) is ``path``'s ``heading_rad`` at that time (a
     floor-frame angle, of the floor frame whose x axis is the world yaw ``heading0``)."""
     want = np.interp(motion.times, np.asarray(path.times_s, float),
                      np.unwrap(np.asarray(path.heading_rad, float)))
-    turn = about_y(want + heading0 - facing(motion))
+    turn = about_y(want + heading0 - motion_heading(motion, path.heading_kind))
     rotations = motion.rotations.copy()
     rotations[:, 0] = qmul(turn, rotations[:, 0])
     return Motion(motion.skeleton, rotations, motion.root, motion.fps, motion.name)
@@ -104,7 +141,7 @@ def follow(motion: Motion, path: BodyPath, lock: bool = True,
     piece of a longer motion (None: ``motion``'s own, the path's start moved to its start)."""
     if motion.num_frames < 2 or len(path.times_s) < 2:
         return motion
-    origin, heading0 = floor_frame(motion) if frame is None else frame
+    origin, heading0 = floor_frame(motion, path.heading_kind) if frame is None else frame
     times = motion.times
     if path.heading_rad is not None:
         pt = np.asarray(path.times_s, float)
@@ -204,7 +241,7 @@ class PieceFollower:
         local = dataclasses.replace(self.path, times_s=self.path.times_s - t0, strides=shift)
         if self.path.heading_rad is not None:
             if self._frame is None:
-                self._frame = floor_frame(piece)
+                self._frame = floor_frame(piece, self.path.heading_kind)
             moved = follow(piece, local, frame=self._frame)
         else:
             root = piece.root.copy()

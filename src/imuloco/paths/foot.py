@@ -118,4 +118,5 @@ class FootZupt:
             footfalls += footfalls_at(f.split("_")[0], tr[1], xy - origin, tr[2], 1.0)
         footfalls.sort(key=lambda f: f.time_s)
         return BodyPath(times, root_xy, heading, footfalls,
-                        strides_from_footfalls(footfalls), self.name, NOTE.format(pelvis=pelvis))
+                        strides_from_footfalls(footfalls), self.name, NOTE.format(pelvis=pelvis),
+                        "travel")

@@ -20,6 +20,12 @@ Two pieces, both fed in time order and holding bounded state:
   MAX_CORRECTION_MPS on average: no jump; at most ``1.5 |error| / (blend fps)`` more in
   one frame).
 
+While the sensor is still (its gyroscope below STILL_RAD_S for STILL_HOLD_S: standing, not a
+walking stance) the root holds where it is, whatever the model's own root does: the offline
+path stands there too, and a model that never saw standing walks on (ridge on the bundled
+sample: 34 m over a 30 s pause after a walk; with the path followed it walked 33 m before
+this rule, 0 after it).
+
 The live avatar so covers the distance the offline path does (up to the stride still under
 way at the end); the pose above the root is the model's.
 """
@@ -47,6 +53,8 @@ MAX_CORRECTION_MPS = 0.5  # ... or longer: a correction moves the root at most t
 GAIN_STRIDES = 2  # the gain is that of the last strides together (one stride's own
 #                   displacement depends on where its footfalls were found: 0.1-0.2 s jitter)
 MIN_OWN_M = 0.05  # the model moved less over a stride: its gain is not defined (kept)
+STILL_RAD_S = 0.2  # the sensor still: its gyroscope's norm below this (the shank pivot's)
+STILL_HOLD_S = 0.8  # ... for this long: longer than a foot's flat phase walking slowly
 
 
 class StrideStream:
@@ -75,12 +83,19 @@ class StrideStream:
         self.runs = 0  # estimates run
         self.read: deque[tuple[Stride, float]] = deque(maxlen=1000)  # (stride, read at, s)
         self._due: float | None = None  # stream time of the next estimate
+        self._still_since: float | None = None  # the first sample of the still run under way
+        self._newest = -math.inf
         self._pool = ThreadPoolExecutor(1, "imuloco-live-path") if background else None
         self._job: Future | None = None
 
     def push(self, t: float, acc: np.ndarray, gyro: np.ndarray) -> None:
         """One sample: t seconds (after the previous), acc (3,) m/s^2, gyro (3,) rad/s."""
         self.samples.append((t, np.concatenate([acc, gyro])))
+        self._newest = t
+        if not np.linalg.norm(gyro) < STILL_RAD_S:  # moving (or NaN)
+            self._still_since = None
+        elif self._still_since is None:
+            self._still_since = t
         while self.samples[0][0] < t - self.window_s:
             self.samples.popleft()
         if self._due is None:
@@ -131,10 +146,16 @@ class StrideStream:
             self.last_end = s.end_s
         return out
 
+    def still(self) -> bool:
+        """Whether the sensor has been still for STILL_HOLD_S up to the newest sample (the
+        module docstring; False before any sample)."""
+        return self._still_since is not None and self._newest - self._still_since >= STILL_HOLD_S
+
     def reset(self) -> None:
         """Forget the samples (after a dropout: a window across the gap is not a walk)."""
         self.samples.clear()
         self._due = None
+        self._still_since = None
 
     def close(self) -> None:
         if self._pool is not None:
@@ -162,17 +183,20 @@ class RootFollower:
         self._blend = blend_s  # its ramp's length, seconds
         self._read: deque[tuple[float, float, float]] = deque(maxlen=GAIN_STRIDES)
 
-    def step(self, t: float, root_xz: np.ndarray) -> np.ndarray:
-        """The followed root (2,) (X, Z) of the model's ``root_xz`` (2,) at time ``t``."""
+    def step(self, t: float, root_xz: np.ndarray, still: bool = False) -> np.ndarray:
+        """The followed root (2,) (X, Z) of the model's ``root_xz`` (2,) at time ``t``;
+        ``still``: the sensor is still (:meth:`StrideStream.still`), the root holds (but for
+        a correction being blended in)."""
         root_xz = np.asarray(root_xz, float)
         d = np.zeros(2) if self._prev is None else root_xz - self._prev
         self._prev = root_xz.copy()
-        self.offset += (self.gain - 1.0) * d
+        gain = 0.0 if still else self.gain
+        self.offset += (gain - 1.0) * d
         if self._ramp < 1.0:
             r = min(1.0, self._ramp + 1.0 / (self._blend * self.fps))
             self.offset += self._pending * (_smoothstep(r) - _smoothstep(self._ramp))
             self._ramp = r
-        self.frames.append([t, root_xz.copy(), d, self.gain])
+        self.frames.append([t, root_xz.copy(), d, gain])
         return root_xz + self.offset
 
     def add(self, stride: Stride) -> None:
@@ -196,6 +220,8 @@ class RootFollower:
         first = int(np.searchsorted(times, self._read[0][0]))
         error = np.zeros(2)
         for f in list(self.frames)[first + 1:]:  # the steps since the strides' start
+            if f[3] == 0.0:  # held still (gains are at least 1 / MAX_GAIN otherwise)
+                continue
             error += (gain - f[3]) * f[2]
             f[3] = gain
         self._pending = self._pending * (1.0 - _smoothstep(self._ramp)) + error

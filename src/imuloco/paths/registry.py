@@ -69,4 +69,4 @@ def fuse_paths(paths: list[BodyPath], placements: list[str]) -> BodyPath:
                     sorted((s for p in paths for s in p.strides), key=lambda s: s.start_s),
                     paths[0].source,
                     f"{paths[0].note} Averaged over the {len(paths)} sensors at "
-                    f"{', '.join(placements)}.")
+                    f"{', '.join(placements)}.", paths[0].heading_kind)

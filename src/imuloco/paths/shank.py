@@ -152,4 +152,4 @@ class ShankPivot:
         conf = np.minimum(conf, np.concatenate([conf[1:], [1.0]]))  # a footfall ends two
         footfalls = footfalls_at(foot, times, xy - origin, mids, conf)
         return BodyPath(times, root - origin, heading, footfalls,
-                        strides_from_footfalls(footfalls), self.name, NOTE)
+                        strides_from_footfalls(footfalls), self.name, NOTE, "travel")

@@ -402,7 +402,7 @@ class LiveSession:
             rot, root = rot.copy(), qrot(self._turn, root) + self._shift
             rot[0] = qmul(self._turn, rot[0])
             if self.follower is not None:
-                root[[0, 2]] = self.follower.step(tf, root[[0, 2]])
+                root[[0, 2]] = self.follower.step(tf, root[[0, 2]], self.strides.still())
             self._recent.append((tf, root, float(_yaw(rot[0]))))
             pos = fk(rot, root, sk.offsets, sk.parents)[1]
             out.append(Frame(k - d, tf, t, rot, root, pos,  # a duck-typed stream may lack them
