@@ -241,3 +241,18 @@ def test_bench_path_figures_are_those_of_reconstructs_animation(sample_db, tmp_p
     # and the raw root's figures are another thing: the follower moved the root
     assert bench["path_raw_distance_ratio"] != pytest.approx(bench["path_distance_ratio"],
                                                              rel=1e-3)
+
+
+def test_two_sensors_bench_rows_have_the_body_parts(tmp_path):
+    """``bench run --placement right_ankle,left_ankle`` (issue 46): every method reads both
+    shins (mousas2017's HMM both as one observation), each row has legs, arms and trunk, and
+    results.md sets them against the mean pose."""
+    recs = run_bench(["mean", "ridge", "mousas2017"], out=tmp_path,
+                     **{**QUICK, "placements": ["right_ankle", "left_ankle"]})
+    rows = {r["method"]: r for r in recs if r["motion_type"] == "all"}
+    for r in rows.values():
+        assert r["placements"] == ["right_ankle", "left_ankle"]
+        assert all(r[f"{g}_cm"] > 0 for g in ("legs", "arms", "trunk"))
+    for m in ("ridge", "mousas2017"):
+        assert rows[m]["legs_cm"] < 0.8 * rows["mean"]["legs_cm"], (m, rows[m]["legs_cm"])
+    assert "| mousas2017 | all |" in (tmp_path / "results.md").read_text()

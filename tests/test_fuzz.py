@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import pytest
 from click.testing import CliRunner
 
 from imuloco.cli import cli
@@ -104,3 +105,48 @@ def test_the_output_fuzzer_sees_a_replaced_fifo_as_garbage(tmp_path, monkeypatch
     monkeypatch.setattr(atomic, "_check_kind", lambda path: None)
     outcome, detail = judge("outputs", [spec])
     assert outcome == "garbage accepted" and "replaced" in detail, detail
+
+
+@pytest.fixture(scope="module")
+def watch_seeds(sample_db, tmp_path_factory):
+    from imuloco.lab.fuzz_watch import watch_seeds
+
+    walk = sample_db.where(content="walk").clips[0]
+    return watch_seeds(walk, tmp_path_factory.mktemp("watch"))
+
+
+def _written(folder, files) -> list:
+    paths = []
+    for name, data in files:
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_bytes(data)
+        paths.append(folder / name)
+    return paths
+
+
+def test_fuzzed_watch_exports_and_sensor_pairs_end_cleanly(tmp_path, watch_seeds):
+    """A second sensor (issue 46): Sensor Logger exports with the watch's WristMotion.csv and
+    ``--sensor`` pairs on clocks of their own, mutated, are read or refused with the library's
+    own error, none implausible or accepted with a wrong clock offset (judged in this
+    process: the time limit is the bench's, ``imuloco bench fuzz N --readers watch``)."""
+    from imuloco.lab.fuzz import cases, judge
+
+    outcomes = []
+    for i, case in enumerate(cases("watch", watch_seeds, 40, seed=2)):
+        outcome, detail = judge("watch", _written(tmp_path / f"case{i}", case.files))
+        assert outcome in ("clean", "accepted"), (case.mutation, outcome, detail)
+        outcomes.append(outcome)
+    assert outcomes.count("clean") > 5 and outcomes.count("accepted") > 5
+
+
+def test_the_watch_fuzzer_sees_a_wrong_clock_offset_as_garbage(tmp_path, watch_seeds):
+    """The pair's judge: a reading accepted with the watch's clock off by more than a frame
+    from the truth its folder names is garbage (as the old first-jolt rule's 2.37 s was)."""
+    from imuloco.lab.fuzz import judge
+    from imuloco.lab.fuzz_watch import SEED_OFFSET_S
+
+    pair = [(name.replace(f"{SEED_OFFSET_S:+.3f}", "+0.500"), data)
+            for name, data in watch_seeds[2].items()]
+    outcome, detail = judge("watch", _written(tmp_path, pair))
+    assert outcome == "garbage accepted" and "true offset is +0.500" in detail, detail
+    assert judge("watch", _written(tmp_path, watch_seeds[2].items()))[0] == "accepted"

@@ -357,6 +357,28 @@ def test_recording_gaps_reach_the_model_as_missing(fitted):
     assert np.all(np.isfinite(out.rotations))
 
 
+@pytest.mark.parametrize("second", ["left_ankle", "left_wrist"])
+def test_two_sensors_are_one_joint_observation(sample_db, second):
+    """The paper reads one ankle; given two sensors, the frame states' Gaussians are over
+    both sensors' 12 channels together (eq. 2 with y of both): the second sensor is read
+    (its signal, shifted by half a second, changes the poses) and the reconstruction still
+    beats the mean pose."""
+    placements = ["right_ankle", second]
+    names = [lab["name"] for lab in sample_db.labels]
+    test_i = names.index("dataset-2_walk_normal_001")
+    train = sample_db.subset([i for i in range(len(sample_db)) if i != test_i])
+    model = get_method("mousas2017").fit(train, placements, "phone", seed=0)
+    mean = get_method("mean").fit(train, placements, "phone", seed=0)
+    test = synthesize(sample_db.subset([test_i]), placements, "phone", TEST_SEED_OFFSET)[0]
+    assert model.states_.mu_y.shape[1] == 12  # both sensors, one Gaussian
+    rec = model.reconstruct_signals(test.signals)
+    err = mpjpe(test.motion, rec)
+    assert err < 0.8 * mpjpe(test.motion, mean.reconstruct_signals(test.signals)), err
+    moved = test.signals.copy()
+    moved[:, 6:] = np.roll(moved[:, 6:], 15, axis=0)
+    assert mpjpe(rec, model.reconstruct_signals(moved)) > 0.1 * err
+
+
 def test_save_load_round_trip(fitted, tmp_path):
     model, _, test = fitted
     path = model.save(tmp_path / "m.npz")

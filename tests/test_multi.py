@@ -106,6 +106,52 @@ def test_misaligned_clocks_are_found_within_a_frame(tmp_path, walk, offset):
     assert np.median(np.abs(merged.acc[100:-100, 1] - truth.acc[k, 1])) < 0.5
 
 
+@pytest.fixture(scope="module")
+def run(sample_db):
+    return next(c for c in sample_db.clips if c.name == "dataset-2_run_normal_001")
+
+
+def _stomped_files(tmp_path, motion, clocks, stomps=STOMP_AT_S, wrist_stomps=None):
+    """One file per sensor of PAIR after a stand with two stomps (the wrist's at
+    ``wrist_stomps`` if given), each device's clock ``clocks[placement]`` s behind."""
+    late = max(0.0, *clocks.values())  # the stand and stomps after the late device started
+    still = still_start(motion, STOMP_LEAD_S + late)
+    rec = simulate(still, PAIR, noise="phone", seed=3, stomps=[late + t for t in stomps])
+    if wrist_stomps is not None:
+        wrist = simulate(still, PAIR, noise="phone", seed=3,
+                         stomps=[late + t for t in wrist_stomps])
+        rec.acc[:, 1] = wrist.acc[:, 1]
+    return write_sensor_files(rec, tmp_path, clocks)
+
+
+@pytest.mark.parametrize("clocks, offset", [({"left_wrist": 2.0}, 2.0),
+                                            ({"right_ankle": 1.6}, -1.6)])
+def test_stomps_before_a_run_align_either_device_starting_first(tmp_path, run, clocks, offset):
+    """A run starting right after the stomps (its steps jolt more than the stand's noise
+    everywhere: the stomps must be told from them), the watch or the phone started late."""
+    files = _stomped_files(tmp_path, run, clocks)
+    _, report = read_sensors(files[0], [("left_wrist", files[1])])
+    assert abs(report.sensors[1].offset_s - offset) < FRAME_S
+    assert report.sensors[1].correlation > 0.9
+
+
+def test_clocks_without_stomps_are_refused(tmp_path, run):
+    rec = simulate(still_start(run, STOMP_LEAD_S + 1.0), PAIR, noise="phone", seed=3)
+    files = write_sensor_files(rec, tmp_path, {"left_wrist": 1.0})
+    with pytest.raises(FormatError, match="could not be aligned.*no two stomps found.*stomp "
+                                          "twice"):
+        read_sensors(files[0], [("left_wrist", files[1])])
+
+
+def test_stomps_spaced_apart_differently_are_refused(tmp_path, walk):
+    """Two stomps on each sensor, but not the same two (0.7 s apart on the shin, 1.1 s on
+    the wrist): no offset makes both agree."""
+    files = _stomped_files(tmp_path, walk, {"left_wrist": 0.5}, wrist_stomps=(0.5, 1.6))
+    with pytest.raises(FormatError, match=r"stomps are 0.7\d s apart in the first file, "
+                                          r"1.1\d s"):
+        read_sensors(files[0], [("left_wrist", files[1])])
+
+
 def _unix_file(path, rec: Recording, start: float, stop: float):
     keep = (rec.times >= start) & (rec.times <= stop)
     part = Recording(rec.times[keep] + UNIX, rec.acc[keep], rec.gyro[keep], rec.placements)

@@ -24,6 +24,7 @@ from imuloco.io.database import (
 from imuloco.lab.bench import run_bench
 from imuloco.lab.protocols import folds
 from imuloco.measures.metrics import (
+    GROUP_RETARGETED_KEYS,
     METRIC_KEYS,
     RETARGETED_KEYS,
     evaluate_parts,
@@ -109,7 +110,7 @@ def test_evaluate_parts_compares_skeletons_that_differ(sample):
     assert values["mpjpe_cm"] < 1e-6 and values["path_err_cm"] < 1e-6
     assert values["angle_deg"] is None and values["dpv"] is None
     assert values["jitter"] == pytest.approx(values["jitter_gt"], rel=1e-6)
-    assert all(values[k] is None for k in RETARGETED_KEYS)  # no retargeted truth given
+    assert all(values[k] is None for k in (*RETARGETED_KEYS, *GROUP_RETARGETED_KEYS))
 
 
 def longer_armed(c: Motion) -> Motion:
@@ -136,6 +137,11 @@ def test_evaluate_parts_also_scores_against_the_retargeted_truth(sample):
     assert perfect["mpjpe_cm"] > 0.5  # the other body's proportions: a floor above zero
     assert perfect["mpjpe_retargeted_cm"] < 1e-6
     assert perfect["upper_retargeted_cm"] < 1e-6 and perfect["lower_retargeted_cm"] < 1e-6
+    # legs, arms, trunk too: the long arms' floor shows against the own truth only
+    assert perfect["arms_cm"] > 1.0 and perfect["legs_cm"] < 1e-6
+    assert max(perfect[f"{g}_retargeted_cm"] for g in ("legs", "arms", "trunk")) < 1e-6
+    for g in ("legs", "arms", "trunk"):
+        assert values[f"{g}_cm"] == pytest.approx(1.3 * values[f"{g}_retargeted_cm"], rel=1e-6)
 
 
 def test_evaluate_parts_curves_are_the_rms_errors_its_metrics_average(sample):

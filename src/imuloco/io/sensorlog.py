@@ -782,6 +782,7 @@ WATCH_PLACEMENT = "left_wrist"  # where the watch is read (a watch is usually wo
 _WATCH_COLUMNS = ["time", "accelerationX", "accelerationY", "accelerationZ",
                   "gravityX", "gravityY", "gravityZ",
                   "rotationRateX", "rotationRateY", "rotationRateZ"]
+GRAVITY_SIZE = (0.8, 1.2)  # the watch's gravity magnitude, in its unit (Core Motion's is 1 g)
 
 
 def read_wrist_motion(ex: Export) -> list[Stream]:
@@ -795,14 +796,19 @@ def read_wrist_motion(ex: Export) -> list[Stream]:
     is their sum; with the setting off it has the iOS sign (the opposite of Android's and
     imuloco's) and is negated. Which of the two the file holds is read from its gravity's
     median magnitude (1 in g, 9.81 in m/s^2): the unit and the sign come with the one setting,
-    so the watch needs no Metadata.csv.
+    so the watch needs no Metadata.csv. Gravity whose median size is not
+    :data:`GRAVITY_SIZE` times 1 g is refused.
     """
     header, data, lines = ex.table(WATCH_FILE)
     path = ex.label(WATCH_FILE)
     idx = _columns(path, header, _WATCH_COLUMNS)
     t = data[:, idx[0]] * 1e-9
     user, gravity, rate = data[:, idx[1:4]], data[:, idx[4:7]], data[:, idx[7:10]]
-    in_g = float(np.median(np.linalg.norm(gravity, axis=1))) < math.sqrt(9.80665)
+    size = float(np.median(np.linalg.norm(gravity, axis=1)))
+    in_g = size < math.sqrt(9.80665)
+    if not GRAVITY_SIZE[0] <= size / (1.0 if in_g else 9.80665) <= GRAVITY_SIZE[1]:
+        raise FormatError(path, None, f"gravityX..Z: median magnitude {size:.3g}; expected "
+                                      "about 1 (g) or 9.81 (m/s^2): Core Motion's gravity")
     acc = -(user + gravity) * 9.80665 if in_g else user + gravity
     return [Stream(path, "acc", t, acc, "m/s^2", WATCH_PLACEMENT, lines,
                    "ios (WristMotion.csv in g)" if in_g else "standardised (WristMotion.csv)"),

@@ -3,8 +3,9 @@
 ``imuloco bench --fuzz N`` runs :func:`run_fuzz`: for each reader (BVH, ASF/AMC, sensor-log
 tables, :func:`~imuloco.sensors.reallog.read_log`, model files, the real-data folders of
 :func:`~imuloco.io.realimu.read_trials`: :mod:`imuloco.lab.fuzz_real`, Xsens text exports
-read by ``read_log``: :mod:`imuloco.lab.fuzz_xsens`; one row each in :data:`READER_TABLE`) it
-builds small valid files from the bundled sample (:func:`seed_files`), derives N inputs from
+read by ``read_log``: :mod:`imuloco.lab.fuzz_xsens`, a second sensor (a Sensor Logger
+export's watch, ``--sensor`` files on clocks of their own): :mod:`imuloco.lab.fuzz_watch`;
+one row each in :data:`READER_TABLE`) it builds small valid files from the bundled sample (:func:`seed_files`), derives N inputs from
 them by random edits (bytes, lines, cells: :mod:`imuloco.lab.mutations`, the engine the
 readers' tests use too) and by the structured attacks of issue 18 (a timestamp jumping by days,
 rows a nanosecond apart, cells of 1e308, ``Frame Time`` of 1000 s, 20,000 nested joints, ASF units of
@@ -82,6 +83,7 @@ from imuloco.lab.fuzz_structure import (
     write_outputs,
     zip_member_attack,
 )
+from imuloco.lab.fuzz_watch import read_watch, watch_attack, watch_garbage, watch_seeds
 from imuloco.lab.fuzz_xsens import xsens_attack, xsens_seeds
 from imuloco.lab.mutations import ATTACK_NUMBERS, Files, claim_size, mutate, npy, unzip, zip_files
 from imuloco.methods import get_method, load_model, method_class
@@ -141,6 +143,7 @@ def seed_files(work: Path) -> dict[str, list[Files]]:
         "outputs": output_seeds(),
         "exports": export_seeds(rec.times, rec.acc[:, 0], rec.gyro[:, 0]),
         "live": live_seeds(rec.times, rec.acc[:, 0], rec.gyro[:, 0]),
+        "watch": watch_seeds(clip, work),
     }
 
 
@@ -536,6 +539,8 @@ READER_TABLE = {
                       export_garbage, export_attack),
     "live": Reader("live server messages and requests (loopback)", play, live_garbage,
                    live_attack),
+    "watch": Reader("a second sensor: Sensor Logger's watch, `--sensor` clocks (`read_sensors`)",
+                    read_watch, watch_garbage, watch_attack),
 }
 READERS = tuple(READER_TABLE)
 READER_TITLES = {name: r.title for name, r in READER_TABLE.items()}

@@ -46,6 +46,9 @@ RETARGETED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("mpjpe_retargeted_cm", "MPJPE cm", "{:.2f}"),
     ("upper_retargeted_cm", "upper cm", "{:.2f}"),
     ("lower_retargeted_cm", "lower cm", "{:.2f}"),
+    ("legs_retargeted_cm", "legs cm", "{:.2f}"),
+    ("arms_retargeted_cm", "arms cm", "{:.2f}"),
+    ("trunk_retargeted_cm", "trunk cm", "{:.2f}"),
 )
 # the body-part groups (legs, arms, trunk) of imuloco.core.bodymap.PART_GROUPS
 GROUP_COLUMNS: tuple[tuple[str, str, str], ...] = (

@@ -314,10 +314,12 @@ RETARGETED_KEYS = ("mpjpe_retargeted_cm", "upper_retargeted_cm", "lower_retarget
 # mean position error of each group of :data:`imuloco.core.bodymap.PART_GROUPS`' canonical
 # parts (heading frame at the pelvis, cm): comparable across skeletons and against the mean pose
 GROUP_KEYS = tuple(f"{g}_cm" for g in PART_GROUPS)
+# cross-dataset only: the same groups against the ground truth retargeted (as RETARGETED_KEYS)
+GROUP_RETARGETED_KEYS = tuple(f"{g}_retargeted_cm" for g in PART_GROUPS)
 METRIC_KEYS = ("mpjpe_cm", "rmse_cm", "upper_cm", "lower_cm", "upper_rmse_cm",
                "lower_rmse_cm", "angle_deg", "dpv", "jitter",
                "jitter_gt", "foot_skate_cm_s", "foot_skate_gt_cm_s", "root_speed_err_cm_s",
-               "path_err_cm", *RETARGETED_KEYS, *GROUP_KEYS)
+               "path_err_cm", *RETARGETED_KEYS, *GROUP_KEYS, *GROUP_RETARGETED_KEYS)
 
 
 def group_errors(err: np.ndarray, index: dict[str, int]) -> dict[str, float]:
@@ -442,8 +444,9 @@ def evaluate_parts(gt: Motion, rec: Motion, retargeted: Motion | None = None
 
     Bodies of other proportions put a floor under these errors: the ground truth itself,
     retargeted onto the reconstruction's skeleton, is not at zero. ``retargeted`` (that
-    motion) adds :data:`RETARGETED_KEYS`, the same part errors against it, whose floor is
-    zero: the reconstruction's own error, without the rigs' differences.
+    motion) adds :data:`RETARGETED_KEYS` and :data:`GROUP_RETARGETED_KEYS`, the same part
+    errors against it, whose floor is zero: the reconstruction's own error, without the
+    rigs' differences.
     """
     return evaluate_parts_curves(gt, rec, retargeted)[0]
 
@@ -468,10 +471,13 @@ def evaluate_parts_curves(gt: Motion, rec: Motion, retargeted: Motion | None = N
         return tuple(float(e[:, i].mean() * CM) for i in (body, upper, lower))
 
     short = gt.num_frames < 4
-    actual, against, actual_retargeted = curve(err, body), dict.fromkeys(RETARGETED_KEYS), None
+    actual, actual_retargeted = curve(err, body), None
+    against = dict.fromkeys((*RETARGETED_KEYS, *GROUP_RETARGETED_KEYS))
     if retargeted is not None:
         err_retargeted = part_errors(retargeted, rec)[0]
         against = dict(zip(RETARGETED_KEYS, means(err_retargeted)))
+        against.update({f"{g[:-3]}_retargeted_cm": v
+                        for g, v in group_errors(err_retargeted, k).items()})
         actual_retargeted = curve(err_retargeted, body)
     mpjpe_cm, upper_cm, lower_cm = means(err)
     values = {

@@ -6,11 +6,12 @@ a Sensor Logger export with its watch) and each further file at its placement
 
 - **timestamps**: when both files carry absolute (Unix) times (phones, Sensor Logger, most
   apps), they are taken as one clock (devices synchronised by the network, to milliseconds);
-- **xcorr** otherwise (a device counting from its own start): the offset that best matches the
-  two sensors' acceleration magnitudes over the first :data:`XCORR_WINDOW_S` seconds, by
-  cross-correlation (:func:`align_by_xcorr`). The rule the user follows: stand still, stomp
-  (or clap, for wrist sensors) once or twice at the start; the jolt reaches every sensor at
-  once and gives the correlation one sharp peak. Offsets up to :data:`MAX_OFFSET_S` are found.
+- **xcorr** otherwise (a device counting from its own start), by the rule the user follows:
+  *start every device, stand still, stomp twice, then move*. The jolt of a stomp reaches every
+  sensor at once; on each sensor the two stomps are the first two jolts after a still stretch
+  (:func:`_stomps`), their spacings must agree, and the cross-correlation of both sensors'
+  jolts over the stomps refines the offset the first stomps give (:func:`align_by_xcorr`).
+  Offsets up to :data:`MAX_OFFSET_S` are found, either device starting first.
 
 The sensors must then record together :data:`imuloco.sensors.reallog.MIN_OVERLAP` of the
 shortest one's span (:func:`imuloco.sensors.reallog.check_overlap`), or the recording is
@@ -24,6 +25,7 @@ import logging
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from scipy.signal import correlate
@@ -44,12 +46,24 @@ from imuloco.sensors.resample import Gap
 log = logging.getLogger(__name__)
 
 UNIX_AFTER_S = 1e8  # a file whose clock reads more (1973 on) carries Unix time
-XCORR_WINDOW_S = 5.0  # seconds from a sensor's start that hold the first stomp
-JOLT_TIMES = 10.0  # a stomp's jolt stands this many times out of the still stand's noise
-REFINE_S = 0.25  # the first stomps give the offset to within this; the correlation refines it
-STOMP_WINDOW_S = 2.0  # seconds of jolts compared, from the first stomp on
+XCORR_WINDOW_S = 5.0  # seconds from the later sensor's start that hold the two stomps
+QUIET_S = 0.25  # the stand: its quietest stretch this long gives the noise; a stomp follows one
+JOLT_TIMES = 10.0  # a stomp's jolt stands this many times out of the stand's noise (RMS)
+NOISE_FLOOR = 0.01  # m/s^2 a sample: the least noise assumed (a noiseless simulation has none)
+ONE_JOLT_S = 0.15  # jolts closer than this are one stomp
+SPACING_S = (0.3, 2.0)  # the two stomps are this far apart, seconds (deliberate stomps)
+SPACING_TOL_S = 0.05  # their spacing agrees on both sensors within this
+REFINE_S = 0.1  # the first stomps give the offset to within this; the correlation refines it
 MAX_OFFSET_S = 10.0  # largest clock offset searched, seconds
-MIN_CORRELATION = 0.3  # a weaker peak is no match: refused, asking for a stomp at the start
+MIN_CORRELATION = 0.6  # a weaker peak is no match: refused, asking for a stomp at the start
+
+
+class Alignment(NamedTuple):
+    """Where ``other``'s clock sits on ``ref``'s (:func:`align_by_xcorr`)."""
+
+    shift_s: float  # seconds added to other's times (from its start) to put them on ref's
+    correlation: float  # normalised cross-correlation of both sensors' jolts there (1: same)
+    problem: str | None = None  # why there is no alignment (shift NaN), else None
 
 
 def parse_sensor(text: str) -> tuple[str, Path]:
@@ -64,49 +78,51 @@ def parse_sensor(text: str) -> tuple[str, Path]:
 
 
 def _jolts(rec: Recording, k: int) -> np.ndarray:
-    """The change of sensor ``k``'s acceleration magnitude from sample to sample, m/s^2,
-    shape (T - 1,): a stomp's jolt changes it within a few samples on every sensor at once,
-    while the limbs' swing changes it slowly."""
+    """The change of sensor ``k``'s acceleration magnitude from sample to sample (the norm
+    high-passed by a first difference), m/s^2, shape (T - 1,): a stomp's jolt changes it
+    within a few samples on every sensor at once, while the limbs' swing changes it slowly."""
     return np.diff(np.linalg.norm(rec.acc[:, k], axis=-1))
 
 
-def _first_jolt(jolts: np.ndarray, n: int) -> int | None:
-    """Index of the first of the first ``n`` samples of ``jolts`` beyond :data:`JOLT_TIMES`
-    times their median size (the still stand's noise): the first stomp; None if none."""
-    head = np.abs(jolts[:n])
-    big = np.flatnonzero(head > JOLT_TIMES * max(float(np.median(head)), 1e-6))
-    return int(big[0]) if len(big) else None
+def _stomps(jolts: np.ndarray, n: int, dt: float) -> tuple[int, int] | str:
+    """The onsets (sample indices) of the two stomps among the first ``n`` samples of
+    ``jolts``, shape (T - 1,), or why they were not found.
+
+    The noise is the jolts' RMS over the quietest :data:`QUIET_S` (the stand; the median of
+    the whole head would be the motion's when it starts early and is vigorous, as a run's
+    is); a jolt stands :data:`JOLT_TIMES` times out of it. Jolts closer than
+    :data:`ONE_JOLT_S` are one event; the stomps are the first two events at most
+    :data:`SPACING_S` apart of which the first follows :data:`QUIET_S` of stand."""
+    head = jolts[:n]
+    q = max(round(QUIET_S / dt), 1)
+    if len(head) < 2 * q:
+        return f"shorter than {2 * QUIET_S:g} s"
+    power = np.convolve(head * head, np.ones(q) / q, mode="valid")  # moving mean square
+    noise = max(float(np.sqrt(power.min())), NOISE_FLOOR)
+    big = np.flatnonzero(np.abs(head) > JOLT_TIMES * noise)
+    if len(big) == 0:
+        return "no jolt stands out of the stand's noise"
+    onsets = big[np.concatenate([[True], np.diff(big) * dt > ONE_JOLT_S])]
+    quiet_before = np.concatenate([[onsets[0] >= q], np.diff(onsets) >= q])
+    for i in range(len(onsets) - 1):
+        gap = (onsets[i + 1] - onsets[i]) * dt
+        if quiet_before[i] and SPACING_S[0] <= gap <= SPACING_S[1]:
+            return int(onsets[i]), int(onsets[i + 1])
+    return (f"no two jolts {SPACING_S[0]:g}-{SPACING_S[1]:g} s apart after {QUIET_S:g} s "
+            "of standing still")
 
 
-def align_by_xcorr(ref: Recording, other: Recording, k_ref: int = 0, k_other: int = 0,
-                   window_s: float = XCORR_WINDOW_S, max_offset_s: float = MAX_OFFSET_S
-                   ) -> tuple[float, float]:
-    """The seconds to add to ``other``'s times to put them on ``ref``'s, and the normalised
-    cross-correlation there (1: the same jolts on both); NaN and 0 when a sensor shows no
-    stomp.
-
-    Both recordings are uniformly sampled at the same rate (:func:`imuloco.sensors.reallog.
-    read_log` resamples them). On each sensor (``k_ref``, ``k_other``) the first stomp is the
-    first jolt (:func:`_jolts`) within the first ``window_s`` seconds standing out of the
-    still stand's noise (:func:`_first_jolt`); the two stomps give the offset to within
-    :data:`REFINE_S`, and the cross-correlation of the jolts over :data:`STOMP_WINDOW_S`
-    from there refines it (normalised by the two stretches' energies; the peak refined
-    between samples by a parabola through it and its neighbours).
-    """
-    dt = float(np.median(np.diff(ref.times)))
-    a, b = _jolts(ref, k_ref), _jolts(other, k_other)
-    n = round(window_s / dt)
-    ia, ib = _first_jolt(a, n + round(max_offset_s / dt)), _first_jolt(b, n)
-    if ia is None or ib is None:
-        return float("nan"), 0.0
-    m = round(REFINE_S / dt)
-    w = round(STOMP_WINDOW_S / dt)
-    lo = max(ib - m, 0)
-    bw = b[lo:lo + w]  # other's stomps, from a little before the first
-    start = ia - (ib - lo) - m  # ref's index matching bw[0] at lag -m
+def _refine(a: np.ndarray, b: np.ndarray, ia: int, b0: int, b1: int, m: int
+            ) -> tuple[float, float]:
+    """The lag (samples, fractional) within ``-m..m`` of ``a[ia + j]`` matching ``b[b0 + j]``
+    best over ``b[b0:b1]``, and the normalised cross-correlation there (by both stretches'
+    energies; the peak refined between samples by a parabola through it and its
+    neighbours)."""
+    bw = b[b0:b1]
+    start = ia - m
     pad = max(-start, 0)
-    aw = np.pad(a, (pad, w + 2 * m))[start + pad:start + pad + len(bw) + 2 * m]
-    c = correlate(aw, bw, mode="valid", method="fft")  # lags -m .. m around the stomps'
+    aw = np.pad(a, (pad, len(bw) + 2 * m))[start + pad:start + pad + len(bw) + 2 * m]
+    c = correlate(aw, bw, mode="valid", method="fft")  # lags -m .. m
     energy = np.concatenate([[0.0], np.cumsum(aw * aw)])
     local = energy[len(bw):len(bw) + len(c)] - energy[:len(c)]
     c = c / np.sqrt(np.maximum(local, 1e-12) * max(float(np.sum(bw * bw)), 1e-12))
@@ -116,10 +132,43 @@ def align_by_xcorr(ref: Recording, other: Recording, k_ref: int = 0, k_other: in
         y0, y1, y2 = c[i - 1], c[i], c[i + 1]
         den = y0 - 2 * y1 + y2
         frac = 0.5 * (y0 - y2) / den if den < 0 else 0.0
-    lag = (ia - ib + i - m + frac) * dt + ref.times[0] - other.times[0]
-    if abs(lag) > max_offset_s:
-        return float("nan"), 0.0
-    return float(lag), float(c[i])
+    return i - m + frac, float(c[i])
+
+
+def align_by_xcorr(ref: Recording, other: Recording, k_ref: int = 0, k_other: int = 0,
+                   window_s: float = XCORR_WINDOW_S, max_offset_s: float = MAX_OFFSET_S
+                   ) -> Alignment:
+    """Where ``other``'s clock sits on ``ref``'s, by the two stomps at the start (the rule:
+    stand still, stomp twice, then move).
+
+    Both recordings are uniformly sampled at the same rate (:func:`imuloco.sensors.reallog.
+    read_log` resamples them). On each sensor (``k_ref``, ``k_other``) the two stomps are
+    found in the jolts (:func:`_jolts`) of its first ``window_s + max_offset_s`` seconds
+    (either device may have started first) by :func:`_stomps`; their spacings must agree
+    within :data:`SPACING_TOL_S` (a lone jolt or a step taken for a stomp does not), the
+    first stomps give the offset, and the cross-correlation of the jolts over both stomps
+    refines it within :data:`REFINE_S` (:func:`_refine`). An offset beyond
+    ``max_offset_s`` is none.
+    """
+    dt = float(np.median(np.diff(ref.times)))
+    a, b = _jolts(ref, k_ref), _jolts(other, k_other)
+    n = round((window_s + max_offset_s) / dt)
+    sa, sb = _stomps(a, n, dt), _stomps(b, n, dt)
+    for found, which in ((sa, "the first file"), (sb, "this file")):
+        if isinstance(found, str):
+            return Alignment(float("nan"), 0.0, f"no two stomps found in {which}: {found}")
+    (a0, a1), (b0, b1) = sa, sb
+    if abs((a1 - a0) - (b1 - b0)) * dt > SPACING_TOL_S:
+        return Alignment(float("nan"), 0.0, f"the two stomps are {(a1 - a0) * dt:.2f} s apart "
+                         f"in the first file, {(b1 - b0) * dt:.2f} s in this one")
+    m = max(round(REFINE_S / dt), 1)
+    lo, hi = max(b0 - m, 0), min(b1 + 2 * m, len(b))  # both stomps, a little either side
+    lag, corr = _refine(a, b, a0 - (b0 - lo), lo, hi, m)
+    shift = (a0 - b0 + lag) * dt + ref.times[0] - other.times[0]
+    if abs(shift) > max_offset_s:
+        return Alignment(float("nan"), corr, f"the stomps are {shift:+.1f} s apart, beyond "
+                         f"+-{max_offset_s:g} s")
+    return Alignment(float(shift), corr)
 
 
 def _merge(rec: Recording, report: LogReport, extra: Recording, extra_report: LogReport,
@@ -136,14 +185,16 @@ def _merge(rec: Recording, report: LogReport, extra: Recording, extra_report: Lo
         shift = extra_report.start_time - report.start_time  # extra's time 0 on rec's time line
         offset = 0.0
     else:
-        shift, corr = align_by_xcorr(rec, extra)
+        shift, corr, problem = align_by_xcorr(rec, extra)
         offset = shift + report.start_time - extra_report.start_time
-        if not corr >= MIN_CORRELATION:
+        if problem is None and not corr >= MIN_CORRELATION:
+            problem = (f"the jolts of the two stomps correlate at most {corr:.2f} (at "
+                       f"{offset:+.3f} s; expected at least {MIN_CORRELATION})")
+        if problem is not None:
             raise FormatError(file, None, f"its clock could not be aligned with "
-                              f"{report.files[0]}'s: the acceleration magnitudes correlate at "
-                              f"most {corr:.2f} (at {offset:+.3f} s; expected at least "
-                              f"{MIN_CORRELATION}): record with the clocks of one phone, or "
-                              "stand still and stomp twice at the start of the recording")
+                              f"{report.files[0]}'s: {problem}: record with the clocks of one "
+                              "phone, or start every device, stand still, stomp twice, then "
+                              "move")
     spans = {**{p: (0.0, float(rec.times[-1])) for p in rec.placements},
              placement: (shift, shift + float(extra.times[-1]))}
     check_overlap(spans, {**{p: report.files[0] for p in rec.placements},
